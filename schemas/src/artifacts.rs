@@ -1,0 +1,536 @@
+//! The per-stage artifacts (SPEC sections 3 and 4): inputs handed over by the model-driven
+//! steps, and what each stage writes. Field names carry their units.
+
+use std::collections::BTreeMap;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::llm::TaskInfo;
+use crate::units::{PositionCm, SizeCm, ZoneCm};
+
+/// Schema id of `coarse/lift.json`.
+pub const LIFT_SCHEMA: &str = "mesa.lift/1";
+/// Schema id of `coarse/retrieval.json`.
+pub const RETRIEVAL_SCHEMA: &str = "mesa.retrieval/1";
+/// Schema id of `qa/check.json`.
+pub const CHECK_SCHEMA: &str = "mesa.check/1";
+/// Schema id of `graph/graph.json`.
+pub const GRAPH_SCHEMA: &str = "mesa.graph/1";
+/// Schema id of each line of `tasks/tasks.jsonl`.
+pub const TASKS_SCHEMA: &str = "mesa.tasks/1";
+/// Schema id of `records/split.json`.
+pub const SPLIT_SCHEMA: &str = "mesa.split/1";
+/// Schema id of the runner's done / failed markers.
+pub const MARKER_SCHEMA: &str = "mesa.marker/1";
+
+// ---------------------------------------------------------------------------------------------
+// Inputs handed over by the model-driven steps.
+
+/// `input/camera.json`: pinhole intrinsics, or only a horizontal field of view.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(untagged)]
+pub enum CameraJson {
+    /// Full pinhole intrinsics in pixels (OpenCV convention).
+    Intrinsics {
+        /// Image width in pixels.
+        width: u32,
+        /// Image height in pixels.
+        height: u32,
+        /// Focal length along x in pixels.
+        fx: f64,
+        /// Focal length along y in pixels.
+        fy: f64,
+        /// Principal point x in pixels.
+        cx: f64,
+        /// Principal point y in pixels.
+        cy: f64,
+        /// Affine calibration `depth_m = scale · value + shift` when the depth map is a
+        /// relative (disparity-like) map.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        depth_calibration: Option<DepthCalibration>,
+    },
+    /// Only a horizontal field of view (generated photos have no intrinsics).
+    Fov {
+        /// Image width in pixels.
+        width: u32,
+        /// Image height in pixels.
+        height: u32,
+        /// Horizontal field of view in degrees.
+        fov_x_deg: f64,
+        /// Affine calibration of a relative depth map, see above.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        depth_calibration: Option<DepthCalibration>,
+    },
+}
+
+/// How a relative depth map becomes metres.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DepthCalibration {
+    /// `disparity` (depth_m = 1 / (scale · value + shift)) or `depth` (depth_m = scale · value
+    /// + shift).
+    pub kind: CalibrationKind,
+    /// Multiplier applied to the stored value.
+    pub scale: f64,
+    /// Offset added after scaling.
+    pub shift: f64,
+}
+
+/// What a relative depth map stores.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum CalibrationKind {
+    /// Inverse depth up to an affine map.
+    Disparity,
+    /// Depth up to an affine map.
+    Depth,
+}
+
+/// `input/instances.json`: the instances of a scene's photo.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct InstancesJson {
+    /// One entry per mask id.
+    pub instances: Vec<InstanceEntry>,
+}
+
+/// One instance of `instances.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct InstanceEntry {
+    /// The mask id: label value in `masks.png`, or the file `masks/<id>.png`.
+    pub id: u32,
+    /// A short label, like `mug`.
+    pub label: String,
+    /// A description of the instance (the retrieval query).
+    #[serde(default)]
+    pub description: String,
+    /// True for the table itself (the support surface).
+    #[serde(default)]
+    pub support: bool,
+    /// A COCO RLE mask (`{"size": [h, w], "counts": ...}`), instead of a mask image.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rle: Option<serde_json::Value>,
+    /// A precomputed query embedding for the `features` text encoder.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub embedding: Option<Vec<f32>>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// lift
+
+/// `coarse/lift.json`: the table frame, the placement zone and one box per instance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LiftArtifact {
+    /// `mesa.lift/1`.
+    pub schema: String,
+    /// The scene id, like `office_table_0001`.
+    pub scene_id: String,
+    /// The camera used: resolved intrinsics in pixels.
+    pub camera: ResolvedCamera,
+    /// Rigid transform taking camera-frame points (metres) to the table frame (metres),
+    /// row-major 4×4.
+    pub table_from_camera: [[f64; 4]; 4],
+    /// The fitted table plane.
+    pub plane: PlaneFit,
+    /// The item placement zone [x_min, x_max, y_min, y_max] in cm.
+    #[serde(rename = "item_placement_zone")]
+    pub zone_cm: ZoneCm,
+    /// One entry per non-support instance, in instance-id order.
+    pub instances: Vec<LiftedInstance>,
+}
+
+/// Intrinsics after resolving a FOV-only camera.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ResolvedCamera {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Focal lengths and principal point in pixels.
+    pub fx: f64,
+    /// Focal length along y in pixels.
+    pub fy: f64,
+    /// Principal point x in pixels.
+    pub cx: f64,
+    /// Principal point y in pixels.
+    pub cy: f64,
+    /// `intrinsics` (from camera.json) or `fov` (derived from a field of view).
+    pub source: String,
+}
+
+/// The RANSAC table plane.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PlaneFit {
+    /// Unit normal in the camera frame, pointing toward the camera side.
+    pub normal_in_camera: [f64; 3],
+    /// Plane offset d in metres (n·p + d = 0).
+    pub offset_m: f64,
+    /// `support` (the table instance's points) or `background`.
+    pub source: String,
+    /// Points within the inlier threshold.
+    pub inliers: u64,
+    /// Inliers / points considered.
+    pub inlier_fraction: f64,
+    /// Root-mean-square distance of the inliers to the plane, in metres.
+    pub rmse_m: f64,
+}
+
+/// One lifted instance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LiftedInstance {
+    /// The instance name given to it, like `mug_0`.
+    pub instance: String,
+    /// Its id in `instances.json`.
+    pub mask_id: u32,
+    /// Its label.
+    pub label: String,
+    /// Its description.
+    pub description: String,
+    /// Box centre in the table frame, cm.
+    pub center_cm: PositionCm,
+    /// Box extents (x, y, z) in the table frame, cm.
+    pub size_cm: SizeCm,
+    /// Estimated yaw in degrees, when the lift estimated one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub yaw_deg: Option<f64>,
+    /// The point cloud file, relative to the scene folder.
+    pub points: String,
+    /// How much of the mask produced points.
+    pub stats: LiftStats,
+}
+
+/// Per-instance statistics of the lift.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LiftStats {
+    /// Pixels in the mask.
+    pub mask_px: u64,
+    /// Mask pixels with a valid depth.
+    pub valid_depth_px: u64,
+    /// valid_depth_px / mask_px.
+    pub valid_depth_fraction: f64,
+    /// Pixels left after erosion (with valid depth).
+    pub eroded_px: u64,
+    /// Points removed as outliers.
+    pub points_removed_outliers: u64,
+    /// Points kept in the cloud.
+    pub points_kept: u64,
+}
+
+// ---------------------------------------------------------------------------------------------
+// retrieve
+
+/// `coarse/retrieval.json`: the candidates of every instance, with their scores.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RetrievalArtifact {
+    /// `mesa.retrieval/1`.
+    pub schema: String,
+    /// The scene id.
+    pub scene_id: String,
+    /// The text encoder used: `lexical` or `features`.
+    pub encoder: String,
+    /// Per instance, in instance order.
+    pub instances: Vec<RetrievedInstance>,
+}
+
+/// The retrieval of one instance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RetrievedInstance {
+    /// The instance name.
+    pub instance: String,
+    /// The query text (the instance description).
+    pub query: String,
+    /// Target [w, d, h] in cm.
+    pub target_size_cm: SizeCm,
+    /// Candidates in final-score order.
+    pub candidates: Vec<RetrievalCandidate>,
+    /// The chosen asset uid; absent when nothing passed the filters.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chosen: Option<String>,
+    /// True when the top 5 were all filtered out and a further candidate was taken.
+    pub fallback: bool,
+}
+
+/// One candidate asset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RetrievalCandidate {
+    /// Asset uid.
+    pub uid: String,
+    /// Cosine of the text embeddings.
+    pub text_score: f64,
+    /// Cosine of the size vectors.
+    pub size_score: f64,
+    /// 0.9 · text + 0.1 · size.
+    pub final_score: f64,
+    /// Why the filters rejected it (`onTable false`, `mark_deletion`, `is_composite`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rejected: Option<String>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// check
+
+/// `qa/check.json`: physics QA of one layout.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CheckArtifact {
+    /// `mesa.check/1`.
+    pub schema: String,
+    /// The scene id.
+    pub scene_id: String,
+    /// The layout checked, relative to the scene folder.
+    pub layout: String,
+    /// Penetration depth above which a pair collides, mm.
+    pub penetration_tolerance_mm: f64,
+    /// Gap below which an object counts as supported, mm.
+    pub floating_tolerance_mm: f64,
+    /// Colliding pairs.
+    pub collisions: Vec<CollisionPair>,
+    /// Floating objects.
+    pub floating: Vec<FloatingObject>,
+    /// Objects outside the zone, inside the restricted zone, or below the table.
+    pub zone_violations: Vec<ZoneViolation>,
+    /// Number of object pairs, n·(n-1)/2.
+    pub pairs_total: u64,
+    /// Colliding pairs / all pairs (the paper's collision rate); 0 when there are no pairs.
+    pub collision_rate: f64,
+    /// Pairs closer than 5 cm (MesaTask's released rule, for comparison only).
+    pub mesatask_rule_pairs: u64,
+}
+
+/// Two objects that interpenetrate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CollisionPair {
+    /// First instance (sorted by name).
+    pub a: String,
+    /// Second instance.
+    pub b: String,
+    /// Penetration depth in mm.
+    pub depth_mm: f64,
+}
+
+/// An object with nothing close enough below it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FloatingObject {
+    /// The instance.
+    pub instance: String,
+    /// Gap to the nearest support below, mm.
+    pub gap_mm: f64,
+}
+
+/// An object where it may not be.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ZoneViolation {
+    /// The instance.
+    pub instance: String,
+    /// `outside_zone`, `in_restricted_zone` or `below_table`.
+    pub kind: String,
+    /// How far, in cm.
+    pub amount_cm: f64,
+}
+
+// ---------------------------------------------------------------------------------------------
+// graph
+
+/// `graph/graph.json`: the scene graph with the numbers that decided each edge.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GraphArtifact {
+    /// `mesa.graph/1`.
+    pub schema: String,
+    /// The scene id.
+    pub scene_id: String,
+    /// The layout the graph was extracted from, relative to the scene folder.
+    pub layout: String,
+    /// One node per object, in layout order.
+    pub nodes: Vec<GraphNode>,
+    /// Edges in output order.
+    pub edges: Vec<GraphEdge>,
+}
+
+/// A node: where an object is and where it faces.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GraphNode {
+    /// The instance.
+    pub instance: String,
+    /// Nine-grid cell, like `front_left` or `center`.
+    pub is_at: String,
+    /// One of eight directions, like `front_right`.
+    pub face_to: String,
+}
+
+/// An edge `(subject, relation, object)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GraphEdge {
+    /// Subject instance.
+    pub subject: String,
+    /// `in`, `above`, `left of`, `right of`, `in front of` or `behind`.
+    pub relation: String,
+    /// Object instance.
+    pub object: String,
+    /// The numbers that decided the edge (distances in cm, overlap ratios).
+    pub numbers: BTreeMap<String, f64>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// tasks and records
+
+/// One line of `tasks/tasks.jsonl`: a task with its reasoning text.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TaskRecord {
+    /// `mesa.tasks/1`.
+    pub schema: String,
+    /// The scene id.
+    pub scene_id: String,
+    /// Index of the task within the scene, from 0.
+    pub task_index: u32,
+    /// `template` for the built-in offline writer, else `llm:<model>`.
+    pub generator: String,
+    /// The table description the tasks were written from.
+    pub table_description: String,
+    /// The task info (the model's input).
+    pub task_info: TaskInfo,
+    /// The reasoning text (the first part of the model output).
+    pub reasoning: String,
+}
+
+/// An SFT record in LLaMA-Factory's alpaca form (`records/sft.json` is a list of these).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SftRecord {
+    /// The layout-generation prompt.
+    pub instruction: String,
+    /// The task info JSON.
+    pub input: String,
+    /// The model output text.
+    pub output: String,
+}
+
+/// A DPO record in LLaMA-Factory's alpaca preference form (`records/dpo.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DpoRecord {
+    /// The layout-generation prompt.
+    pub instruction: String,
+    /// The task info JSON.
+    pub input: String,
+    /// The preferred output.
+    pub chosen: String,
+    /// The corrupted output.
+    pub rejected: String,
+}
+
+/// A chat message of TRL's conversational format.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ChatMessage {
+    /// `system`, `user` or `assistant`.
+    pub role: String,
+    /// The message text.
+    pub content: String,
+}
+
+/// A line of `records/trl_sft.jsonl`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TrlSftRecord {
+    /// User turn then assistant turn.
+    pub messages: Vec<ChatMessage>,
+}
+
+/// A line of `records/trl_dpo.jsonl` (TRL's conversational preference format).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TrlDpoRecord {
+    /// The user turn.
+    pub prompt: Vec<ChatMessage>,
+    /// The preferred assistant turn.
+    pub chosen: Vec<ChatMessage>,
+    /// The rejected assistant turn.
+    pub rejected: Vec<ChatMessage>,
+}
+
+/// An entry of LLaMA-Factory's `dataset_info.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct DatasetInfoEntry {
+    /// The data file, relative to `dataset_info.json`.
+    pub file_name: String,
+    /// `alpaca` or `sharegpt`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub formatting: Option<String>,
+    /// True for preference (DPO) data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ranking: Option<bool>,
+    /// Column mapping.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub columns: Option<BTreeMap<String, String>>,
+}
+
+/// `records/split.json`: which scenes are train, dpo or test.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SplitArtifact {
+    /// `mesa.split/1`.
+    pub schema: String,
+    /// Ratios by split name.
+    pub ratios: BTreeMap<String, f64>,
+    /// Split name by scene id.
+    pub scenes: BTreeMap<String, String>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// runner
+
+/// A done or failed marker under `.mesa/markers/<stage>/<table_type>/<scene_id>.json`.
+///
+/// It holds no time stamp, so the same work gives the same marker bytes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RunMarker {
+    /// `mesa.marker/1`.
+    pub schema: String,
+    /// The stage.
+    pub stage: String,
+    /// `<table_type>/<scene_id>`.
+    pub scene: String,
+    /// `done` or `failed`.
+    pub status: MarkerStatus,
+    /// The mesa version that wrote it.
+    pub mesa_version: String,
+    /// SHA-256 of the stage's resolved configuration section.
+    pub config_digest: String,
+    /// SHA-256 of each input file, by path relative to the scene folder.
+    pub inputs: BTreeMap<String, String>,
+    /// SHA-256 of each output file, by path relative to the scene folder (done only).
+    #[serde(default)]
+    pub outputs: BTreeMap<String, String>,
+    /// Warnings the stage reported for this scene.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
+    /// The error chain, outermost first (failed only).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub error: Vec<String>,
+}
+
+/// The state a marker records.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum MarkerStatus {
+    /// All outputs written.
+    Done,
+    /// The scene failed; no output of this run was written.
+    Failed,
+}

@@ -1,0 +1,130 @@
+//! Reading and writing JSON the way mesa needs it.
+//!
+//! Reading is lenient about one thing only: Python's `json.dump` writes `NaN`, `Infinity` and
+//! `-Infinity`, which strict JSON parsers reject with a syntax error that hides the real problem.
+//! [`parse_lenient`] turns those tokens into a sentinel string so that validation can report
+//! "is NaN (expected a finite number)" at the exact JSON path. Writing always produces sorted
+//! keys (serde_json's map is a `BTreeMap` in this build; a test pins it), two-space indentation
+//! and a trailing newline, so the same value always gives the same bytes.
+
+use serde::Serialize;
+use serde_json::Value;
+
+/// Prefix of the string that stands in for a non-finite number read from a file.
+pub const NONFINITE_PREFIX: &str = "\u{1}mesa:nonfinite:";
+
+/// If `value` is the stand-in for a non-finite number, its spelling in the file (`NaN`, ...).
+pub fn nonfinite_token(value: &Value) -> Option<&str> {
+    value.as_str()?.strip_prefix(NONFINITE_PREFIX)
+}
+
+/// Parses JSON text, accepting the non-finite tokens `NaN`, `Infinity` and `-Infinity` outside
+/// strings (they become sentinel strings, see [`nonfinite_token`]).
+pub fn parse_lenient(text: &str) -> Result<Value, serde_json::Error> {
+    match serde_json::from_str(text) {
+        Ok(value) => Ok(value),
+        Err(strict_error) => {
+            let Some(rewritten) = rewrite_nonfinite(text) else {
+                return Err(strict_error);
+            };
+            serde_json::from_str(&rewritten)
+        }
+    }
+}
+
+/// Replaces bare non-finite tokens with sentinel strings; `None` when there are none.
+fn rewrite_nonfinite(text: &str) -> Option<String> {
+    const TOKENS: [&str; 3] = ["-Infinity", "Infinity", "NaN"];
+    let bytes = text.as_bytes();
+    let mut out = String::with_capacity(text.len() + 32);
+    let mut in_string = false;
+    let mut escaped = false;
+    let mut changed = false;
+    let mut i = 0;
+    while i < bytes.len() {
+        let c = bytes[i];
+        if in_string {
+            if escaped {
+                escaped = false;
+            } else if c == b'\\' {
+                escaped = true;
+            } else if c == b'"' {
+                in_string = false;
+            }
+        } else if c == b'"' {
+            in_string = true;
+        } else if let Some(token) = TOKENS.iter().find(|t| text[i..].starts_with(**t)) {
+            // The prefix starts with a control character, which must be escaped in JSON text.
+            out.push_str("\"\\u0001");
+            out.push_str(&NONFINITE_PREFIX[1..]);
+            out.push_str(token);
+            out.push('"');
+            i += token.len();
+            changed = true;
+            continue;
+        }
+        // Copy one UTF-8 character.
+        let len = utf8_len(c);
+        out.push_str(&text[i..i + len]);
+        i += len;
+    }
+    changed.then_some(out)
+}
+
+fn utf8_len(first: u8) -> usize {
+    match first {
+        0x00..=0x7f => 1,
+        0xc0..=0xdf => 2,
+        0xe0..=0xef => 3,
+        _ => 4,
+    }
+}
+
+/// Serialises `value` with sorted keys, two-space indentation and a trailing newline.
+pub fn to_sorted_pretty<T: Serialize + ?Sized>(value: &T) -> Result<Vec<u8>, serde_json::Error> {
+    // Going through `Value` sorts struct fields too, not only maps.
+    let value = serde_json::to_value(value)?;
+    let mut bytes = serde_json::to_vec_pretty(&value)?;
+    bytes.push(b'\n');
+    Ok(bytes)
+}
+
+/// Serialises `value` on one line with sorted keys (for JSON Lines), without a newline.
+pub fn to_sorted_line<T: Serialize + ?Sized>(value: &T) -> Result<String, serde_json::Error> {
+    let value = serde_json::to_value(value)?;
+    serde_json::to_string(&value)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nonfinite_tokens_become_sentinels_outside_strings_only() {
+        let value = parse_lenient(r#"{"a": NaN, "b": [-Infinity, Infinity], "c": "NaN \" NaN"}"#)
+            .expect("lenient parse");
+        assert_eq!(nonfinite_token(&value["a"]), Some("NaN"));
+        assert_eq!(nonfinite_token(&value["b"][0]), Some("-Infinity"));
+        assert_eq!(nonfinite_token(&value["b"][1]), Some("Infinity"));
+        assert_eq!(value["c"], "NaN \" NaN");
+    }
+
+    #[test]
+    fn syntax_errors_stay_errors() {
+        assert!(parse_lenient(r#"{"a": NaN,}"#).is_err());
+        assert!(parse_lenient(r#"{"a": Nan}"#).is_err());
+    }
+
+    #[test]
+    fn output_keys_are_sorted() {
+        #[derive(Serialize)]
+        struct S {
+            zeta: u8,
+            alpha: u8,
+        }
+        let text = String::from_utf8(to_sorted_pretty(&S { zeta: 1, alpha: 2 }).expect("ser"))
+            .expect("utf8");
+        assert!(text.find("alpha").expect("alpha") < text.find("zeta").expect("zeta"));
+        assert!(text.ends_with("}\n"));
+    }
+}

@@ -1,0 +1,321 @@
+//! The registry of artifact kinds: name, schema id, file form, JSON Schema and semantic checks.
+
+use std::sync::OnceLock;
+
+use schemars::JsonSchema;
+use serde::de::DeserializeOwned;
+use serde_json::Value;
+
+use crate::artifacts::*;
+use crate::layout::{DatasetLayout, LAYOUT_SCHEMA};
+use crate::llm::{GalleryRecord, LlmLayout, TaskInfo};
+use crate::validate::{nonfinite_problems, validate_against, Problem};
+
+/// How a kind's file is laid out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FileForm {
+    /// One JSON document.
+    Json,
+    /// One JSON document per non-empty line.
+    JsonLines,
+}
+
+/// An artifact kind.
+pub struct Kind {
+    /// Short name, used by `mesa validate --kind` and for the schema file name.
+    pub name: &'static str,
+    /// The `schema` id its files carry; `None` for official formats, which carry none.
+    pub schema_id: Option<&'static str>,
+    /// One document or JSON Lines.
+    pub form: FileForm,
+    /// What the kind is, for `--help` and the docs.
+    pub summary: &'static str,
+    generate: fn() -> Value,
+    semantic: fn(&Value) -> Vec<Problem>,
+}
+
+impl std::fmt::Debug for Kind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Kind").field("name", &self.name).finish()
+    }
+}
+
+fn schema_of<T: JsonSchema>() -> Value {
+    schemars::schema_for!(T).to_value()
+}
+
+fn no_semantics(_: &Value) -> Vec<Problem> {
+    Vec::new()
+}
+
+fn typed<T: DeserializeOwned>(value: &Value, check: impl Fn(&T) -> Vec<Problem>) -> Vec<Problem> {
+    match serde_json::from_value::<T>(value.clone()) {
+        Ok(typed) => check(&typed),
+        // The structural walk already reported why; nothing more to say here.
+        Err(_) => Vec::new(),
+    }
+}
+
+/// Every kind mesa knows.
+pub fn kinds() -> &'static [Kind] {
+    static KINDS: OnceLock<Vec<Kind>> = OnceLock::new();
+    KINDS.get_or_init(|| {
+        vec![
+            Kind {
+                name: "layout",
+                schema_id: Some(LAYOUT_SCHEMA),
+                form: FileForm::Json,
+                summary:
+                    "dataset layout (coarse/, refined/, qa/ layout.json; MesaTask-10K layout.json)",
+                generate: schema_of::<DatasetLayout>,
+                semantic: |v| typed(v, DatasetLayout::problems),
+            },
+            Kind {
+                name: "llm-layout",
+                schema_id: None,
+                form: FileForm::Json,
+                summary: "LLM layout (the model's output JSON: cm, z_rotation in degrees)",
+                generate: schema_of::<LlmLayout>,
+                semantic: |v| typed(v, LlmLayout::problems),
+            },
+            Kind {
+                name: "task-info",
+                schema_id: None,
+                form: FileForm::Json,
+                summary: "task info (the model's input JSON)",
+                generate: schema_of::<TaskInfo>,
+                semantic: |v| typed(v, TaskInfo::problems),
+            },
+            Kind {
+                name: "gallery-record",
+                schema_id: None,
+                form: FileForm::Json,
+                summary: "a published MesaTask record (prompt, task, reasoning, graph, layout)",
+                generate: schema_of::<GalleryRecord>,
+                semantic: |v| {
+                    typed(v, |r: &GalleryRecord| match r.scene_layout_json.resolve() {
+                        Ok(layout) => prefix(layout.problems(), "$.scene_layout_json"),
+                        Err(e) => vec![Problem::new(
+                            "$.scene_layout_json",
+                            format!("does not parse as an LLM layout: {e}"),
+                            "an LLM layout, inline or as a JSON string",
+                        )],
+                    })
+                },
+            },
+            Kind {
+                name: "camera",
+                schema_id: None,
+                form: FileForm::Json,
+                summary: "input/camera.json (intrinsics or a field of view)",
+                generate: schema_of::<CameraJson>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "instances",
+                schema_id: None,
+                form: FileForm::Json,
+                summary: "input/instances.json (labels and descriptions by mask id)",
+                generate: schema_of::<InstancesJson>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "lift",
+                schema_id: Some(LIFT_SCHEMA),
+                form: FileForm::Json,
+                summary: "coarse/lift.json (table frame, zone, per-instance boxes)",
+                generate: schema_of::<LiftArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "retrieval",
+                schema_id: Some(RETRIEVAL_SCHEMA),
+                form: FileForm::Json,
+                summary: "coarse/retrieval.json (candidates and scores per instance)",
+                generate: schema_of::<RetrievalArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "check",
+                schema_id: Some(CHECK_SCHEMA),
+                form: FileForm::Json,
+                summary: "qa/check.json (collisions, floating, zone violations)",
+                generate: schema_of::<CheckArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "graph",
+                schema_id: Some(GRAPH_SCHEMA),
+                form: FileForm::Json,
+                summary: "graph/graph.json (nodes and edges with their numbers)",
+                generate: schema_of::<GraphArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "tasks",
+                schema_id: Some(TASKS_SCHEMA),
+                form: FileForm::JsonLines,
+                summary: "tasks/tasks.jsonl (one task with its reasoning per line)",
+                generate: schema_of::<TaskRecord>,
+                semantic: |v| {
+                    typed(v, |t: &TaskRecord| {
+                        prefix(t.task_info.problems(), "$.task_info")
+                    })
+                },
+            },
+            Kind {
+                name: "sft",
+                schema_id: None,
+                form: FileForm::Json,
+                summary: "records/sft.json (LLaMA-Factory alpaca records)",
+                generate: schema_of::<Vec<SftRecord>>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "dpo",
+                schema_id: None,
+                form: FileForm::Json,
+                summary: "records/dpo.json (LLaMA-Factory alpaca preference records)",
+                generate: schema_of::<Vec<DpoRecord>>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "trl-sft",
+                schema_id: None,
+                form: FileForm::JsonLines,
+                summary: "records/trl_sft.jsonl (TRL conversational SFT)",
+                generate: schema_of::<TrlSftRecord>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "trl-dpo",
+                schema_id: None,
+                form: FileForm::JsonLines,
+                summary: "records/trl_dpo.jsonl (TRL conversational preference)",
+                generate: schema_of::<TrlDpoRecord>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "dataset-info",
+                schema_id: None,
+                form: FileForm::Json,
+                summary: "records/dataset_info.json (LLaMA-Factory dataset registry)",
+                generate: schema_of::<std::collections::BTreeMap<String, DatasetInfoEntry>>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "split",
+                schema_id: Some(SPLIT_SCHEMA),
+                form: FileForm::Json,
+                summary: "records/split.json (train / dpo / test by scene)",
+                generate: schema_of::<SplitArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "marker",
+                schema_id: Some(MARKER_SCHEMA),
+                form: FileForm::Json,
+                summary: ".mesa/markers/... (the runner's done / failed markers)",
+                generate: schema_of::<RunMarker>,
+                semantic: no_semantics,
+            },
+        ]
+    })
+}
+
+fn prefix(problems: Vec<Problem>, at: &str) -> Vec<Problem> {
+    problems
+        .into_iter()
+        .map(|mut p| {
+            p.path = p.path.replacen('$', at, 1);
+            p
+        })
+        .collect()
+}
+
+impl Kind {
+    /// Looks a kind up by name.
+    pub fn by_name(name: &str) -> Option<&'static Kind> {
+        kinds().iter().find(|k| k.name == name)
+    }
+
+    /// Looks a kind up by the `schema` id its files carry.
+    pub fn by_schema_id(id: &str) -> Option<&'static Kind> {
+        kinds().iter().find(|k| k.schema_id == Some(id))
+    }
+
+    /// The kind's JSON Schema, generated from its Rust type (the `schema` field pinned to the
+    /// kind's id).
+    pub fn json_schema(&self) -> &'static Value {
+        static CACHE: OnceLock<Vec<(&'static str, Value)>> = OnceLock::new();
+        let cache = CACHE.get_or_init(|| {
+            kinds()
+                .iter()
+                .map(|k| {
+                    let mut schema = (k.generate)();
+                    if let Some(id) = k.schema_id {
+                        if let Some(field) = schema.pointer_mut("/properties/schema") {
+                            field["const"] = Value::String(id.to_owned());
+                        }
+                        schema["$id"] = Value::String(format!("https://mesa.dev/schemas/{id}"));
+                    }
+                    (k.name, schema)
+                })
+                .collect()
+        });
+        &cache
+            .iter()
+            .find(|(name, _)| *name == self.name)
+            .expect("every kind is in the cache")
+            .1
+    }
+
+    /// Validates one JSON document of this kind: non-finite numbers, the JSON Schema, then the
+    /// semantic checks (only when the structure is sound, so each problem is reported once).
+    pub fn validate_value(&self, value: &Value) -> Vec<Problem> {
+        let mut problems = Vec::new();
+        nonfinite_problems(value, "$", &mut problems);
+        validate_against(self.json_schema(), value, "$", &mut problems);
+        if problems.is_empty() {
+            problems.extend((self.semantic)(value));
+        }
+        problems
+    }
+}
+
+/// Finds the kind of a document from its `schema` field.
+pub fn kind_of_document(value: &Value) -> Result<&'static Kind, Problem> {
+    let Some(schema) = value.get("schema") else {
+        return Err(Problem::new(
+            "$",
+            "has no \"schema\" field",
+            "a mesa artifact with \"schema\": \"mesa.<kind>/<n>\", or pass --kind for an \
+             official file (layout, llm-layout, task-info, gallery-record, camera, instances, \
+             sft, dpo, trl-sft, trl-dpo, dataset-info)",
+        ));
+    };
+    let Some(id) = schema.as_str() else {
+        return Err(Problem::new(
+            "$.schema",
+            crate::validate::describe(schema),
+            "a string \"mesa.<kind>/<n>\"",
+        ));
+    };
+    if let Some(kind) = Kind::by_schema_id(id) {
+        return Ok(kind);
+    }
+    let known: Vec<&str> = kinds().iter().filter_map(|k| k.schema_id).collect();
+    let family = id.split('/').next().unwrap_or(id);
+    if let Some(current) = known.iter().find(|k| k.split('/').next() == Some(family)) {
+        return Err(Problem::new(
+            "$.schema",
+            format!("unsupported version \"{id}\""),
+            format!("\"{current}\" (this mesa reads that version)"),
+        ));
+    }
+    Err(Problem::new(
+        "$.schema",
+        format!("unknown schema \"{id}\""),
+        format!("one of {}", known.join(", ")),
+    ))
+}

@@ -1,0 +1,438 @@
+//! Validation of artifacts against their JSON Schemas, reporting **every** problem.
+//!
+//! The schemas are generated from the Rust types (so they cannot drift from what mesa reads);
+//! this module walks a schema and a value together, as `gltf-json`'s validation does, and
+//! collects one [`Problem`] per violation with its JSON path. Semantic checks that a JSON Schema
+//! cannot express (duplicate instances, ordered zones, unit quaternions) run afterwards on the
+//! typed value, when the structure is sound.
+
+use std::fmt;
+
+use serde_json::{Map, Value};
+
+use crate::json::nonfinite_token;
+
+/// One problem found in an artifact.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    /// JSON path of the offending value, like `$.objects[2].size`.
+    pub path: String,
+    /// What is wrong.
+    pub problem: String,
+    /// What was expected.
+    pub expected: String,
+}
+
+impl Problem {
+    /// A problem at `path`.
+    pub fn new(
+        path: impl Into<String>,
+        problem: impl Into<String>,
+        expected: impl Into<String>,
+    ) -> Self {
+        Self {
+            path: path.into(),
+            problem: problem.into(),
+            expected: expected.into(),
+        }
+    }
+}
+
+impl fmt::Display for Problem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}: {} (expected {})",
+            self.path, self.problem, self.expected
+        )
+    }
+}
+
+/// Appends a key to a JSON path, quoting keys that are not identifiers.
+pub fn path_key(path: &str, key: &str) -> String {
+    let plain = !key.is_empty()
+        && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && !key.starts_with(|c: char| c.is_ascii_digit());
+    if plain {
+        format!("{path}.{key}")
+    } else {
+        format!("{path}[{}]", Value::String(key.to_owned()))
+    }
+}
+
+/// Reports every non-finite number (read by [`crate::json::parse_lenient`]) in `value`.
+pub fn nonfinite_problems(value: &Value, path: &str, out: &mut Vec<Problem>) {
+    match value {
+        Value::Array(items) => {
+            for (i, item) in items.iter().enumerate() {
+                nonfinite_problems(item, &format!("{path}[{i}]"), out);
+            }
+        }
+        Value::Object(map) => {
+            for (key, item) in map {
+                nonfinite_problems(item, &path_key(path, key), out);
+            }
+        }
+        _ => {
+            if let Some(token) = nonfinite_token(value) {
+                out.push(Problem::new(path, format!("is {token}"), "a finite number"));
+            }
+        }
+    }
+}
+
+/// Validates `value` against a generated JSON Schema (`root`), appending problems to `out`.
+pub fn validate_against(root: &Value, value: &Value, path: &str, out: &mut Vec<Problem>) {
+    Walker { root }.walk(root, value, path, out);
+}
+
+struct Walker<'a> {
+    root: &'a Value,
+}
+
+impl<'a> Walker<'a> {
+    fn resolve(&self, schema: &'a Value) -> &'a Value {
+        let mut schema = schema;
+        // Follow local references (`#/$defs/Name`); a cycle cannot occur in generated schemas
+        // without an intermediate object, so a small bound is enough.
+        for _ in 0..16 {
+            let Some(reference) = schema.get("$ref").and_then(Value::as_str) else {
+                break;
+            };
+            let Some(pointer) = reference.strip_prefix('#') else {
+                break;
+            };
+            match self.root.pointer(pointer) {
+                Some(target) => schema = target,
+                None => break,
+            }
+        }
+        schema
+    }
+
+    fn walk(&self, schema: &'a Value, value: &Value, path: &str, out: &mut Vec<Problem>) {
+        // Non-finite numbers are reported once, by `nonfinite_problems`.
+        if nonfinite_token(value).is_some() {
+            return;
+        }
+        let own_description = schema.get("description").and_then(Value::as_str);
+        let schema = self.resolve(schema);
+        let schema = match schema {
+            Value::Bool(true) => return,
+            Value::Bool(false) => {
+                out.push(Problem::new(path, "is not allowed here", "nothing"));
+                return;
+            }
+            Value::Object(map) => map,
+            _ => return,
+        };
+        let expected = expectation(schema, own_description);
+
+        if let Some(branches) = schema
+            .get("anyOf")
+            .or_else(|| schema.get("oneOf"))
+            .and_then(Value::as_array)
+        {
+            self.walk_alternatives(branches, value, path, &expected, out);
+        }
+        if let Some(all) = schema.get("allOf").and_then(Value::as_array) {
+            for branch in all {
+                self.walk(branch, value, path, out);
+            }
+        }
+        if let Some(types) = schema.get("type") {
+            if !type_matches(types, value) {
+                out.push(Problem::new(path, describe(value), expected));
+                return;
+            }
+        }
+        if let Some(constant) = schema.get("const") {
+            if constant != value {
+                out.push(Problem::new(path, describe(value), constant.to_string()));
+                return;
+            }
+        }
+        if let Some(options) = schema.get("enum").and_then(Value::as_array) {
+            if !options.contains(value) {
+                let list: Vec<String> = options.iter().map(Value::to_string).collect();
+                out.push(Problem::new(
+                    path,
+                    describe(value),
+                    format!("one of {}", list.join(", ")),
+                ));
+                return;
+            }
+        }
+        match value {
+            Value::Object(map) => self.walk_object(schema, map, path, out),
+            Value::Array(items) => self.walk_array(schema, items, path, &expected, out),
+            Value::Number(number) => {
+                if let Some(x) = number.as_f64() {
+                    check_bounds(schema, x, path, &expected, out);
+                }
+            }
+            Value::String(text) => {
+                if let Some(min) = schema.get("minLength").and_then(Value::as_u64) {
+                    if (text.chars().count() as u64) < min {
+                        out.push(Problem::new(
+                            path,
+                            format!("is {} characters long", text.chars().count()),
+                            format!("at least {min} characters: {expected}"),
+                        ));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn walk_alternatives(
+        &self,
+        branches: &'a [Value],
+        value: &Value,
+        path: &str,
+        expected: &str,
+        out: &mut Vec<Problem>,
+    ) {
+        let mut attempts = Vec::with_capacity(branches.len());
+        for branch in branches {
+            let mut problems = Vec::new();
+            self.walk(branch, value, path, &mut problems);
+            if problems.is_empty() {
+                return;
+            }
+            attempts.push((branch, problems));
+        }
+        // Report the branches whose top-level type fits the value; when exactly one does, its
+        // problems are the useful ones (an `Option<T>` that holds a bad T, say).
+        let fitting: Vec<_> = attempts
+            .into_iter()
+            .filter(|(branch, _)| {
+                let branch = self.resolve(branch);
+                branch.get("type").is_none_or(|t| type_matches(t, value))
+            })
+            .collect();
+        if fitting.len() == 1 {
+            out.extend(fitting.into_iter().flat_map(|(_, problems)| problems));
+        } else {
+            let forms: Vec<String> = branches
+                .iter()
+                .map(|b| {
+                    let resolved = self.resolve(b);
+                    expectation(
+                        resolved.as_object().unwrap_or(&Map::new()),
+                        b.get("description").and_then(Value::as_str),
+                    )
+                })
+                .collect();
+            let expected = if forms.iter().all(String::is_empty) {
+                expected.to_owned()
+            } else {
+                format!("one of: {}", forms.join("; or "))
+            };
+            out.push(Problem::new(
+                path,
+                format!("{} matching none of the allowed forms", describe(value)),
+                expected,
+            ));
+        }
+    }
+
+    fn walk_object(
+        &self,
+        schema: &'a Map<String, Value>,
+        map: &Map<String, Value>,
+        path: &str,
+        out: &mut Vec<Problem>,
+    ) {
+        let properties = schema.get("properties").and_then(Value::as_object);
+        if let Some(required) = schema.get("required").and_then(Value::as_array) {
+            for key in required.iter().filter_map(Value::as_str) {
+                if !map.contains_key(key) {
+                    let expected = properties
+                        .and_then(|p| p.get(key))
+                        .map(|s| {
+                            let own = s.get("description").and_then(Value::as_str);
+                            let resolved = self.resolve(s);
+                            expectation(resolved.as_object().unwrap_or(&Map::new()), own)
+                        })
+                        .unwrap_or_default();
+                    let expected = if expected.is_empty() {
+                        format!("a \"{key}\" key")
+                    } else {
+                        expected
+                    };
+                    out.push(Problem::new(
+                        path_key(path, key),
+                        format!("missing required key \"{key}\""),
+                        expected,
+                    ));
+                }
+            }
+        }
+        for (key, item) in map {
+            let item_path = path_key(path, key);
+            if let Some(property) = properties.and_then(|p| p.get(key)) {
+                self.walk(property, item, &item_path, out);
+            } else {
+                match schema.get("additionalProperties") {
+                    Some(Value::Bool(false)) => {
+                        let known: Vec<&str> = properties
+                            .map(|p| p.keys().map(String::as_str).collect())
+                            .unwrap_or_default();
+                        out.push(Problem::new(
+                            item_path,
+                            format!("unknown key \"{key}\""),
+                            format!("only the keys {}", known.join(", ")),
+                        ));
+                    }
+                    Some(extra @ Value::Object(_)) => self.walk(extra, item, &item_path, out),
+                    _ => {}
+                }
+            }
+        }
+    }
+
+    fn walk_array(
+        &self,
+        schema: &'a Map<String, Value>,
+        items: &[Value],
+        path: &str,
+        expected: &str,
+        out: &mut Vec<Problem>,
+    ) {
+        let min = schema.get("minItems").and_then(Value::as_u64);
+        let max = schema.get("maxItems").and_then(Value::as_u64);
+        let count = items.len() as u64;
+        let count_ok = min.is_none_or(|m| count >= m) && max.is_none_or(|m| count <= m);
+        if !count_ok {
+            let wanted = match (min, max) {
+                (Some(a), Some(b)) if a == b => format!("exactly {a} items"),
+                (Some(a), Some(b)) => format!("{a} to {b} items"),
+                (Some(a), None) => format!("at least {a} items"),
+                (None, Some(b)) => format!("at most {b} items"),
+                (None, None) => unreachable!("count_ok is true without bounds"),
+            };
+            let wanted = if expected.is_empty() {
+                wanted
+            } else {
+                format!("{wanted}: {expected}")
+            };
+            out.push(Problem::new(path, format!("has {count} items"), wanted));
+        }
+        let prefix = schema.get("prefixItems").and_then(Value::as_array);
+        for (i, item) in items.iter().enumerate() {
+            let item_schema = prefix
+                .and_then(|p| p.get(i))
+                .or_else(|| schema.get("items"));
+            if let Some(item_schema) = item_schema {
+                self.walk(item_schema, item, &format!("{path}[{i}]"), out);
+            }
+        }
+    }
+}
+
+fn check_bounds(
+    schema: &Map<String, Value>,
+    x: f64,
+    path: &str,
+    expected: &str,
+    out: &mut Vec<Problem>,
+) {
+    let bound = |key: &str| schema.get(key).and_then(Value::as_f64);
+    let mut violated = None;
+    if let Some(m) = bound("minimum") {
+        if x < m {
+            violated = Some(format!("a number >= {m}"));
+        }
+    }
+    if let Some(m) = bound("exclusiveMinimum") {
+        if x <= m {
+            violated = Some(format!("a number > {m}"));
+        }
+    }
+    if let Some(m) = bound("maximum") {
+        if x > m {
+            violated = Some(format!("a number <= {m}"));
+        }
+    }
+    if let Some(m) = bound("exclusiveMaximum") {
+        if x >= m {
+            violated = Some(format!("a number < {m}"));
+        }
+    }
+    if let Some(wanted) = violated {
+        let wanted = if expected.is_empty() {
+            wanted
+        } else {
+            format!("{wanted}: {expected}")
+        };
+        out.push(Problem::new(path, format!("is {x}"), wanted));
+    }
+}
+
+fn type_matches(types: &Value, value: &Value) -> bool {
+    let one = |t: &str| match t {
+        "null" => value.is_null(),
+        "boolean" => value.is_boolean(),
+        "object" => value.is_object(),
+        "array" => value.is_array(),
+        "string" => value.is_string(),
+        "number" => value.is_number(),
+        "integer" => value
+            .as_f64()
+            .is_some_and(|x| x.fract() == 0.0 && value.is_number()),
+        _ => true,
+    };
+    match types {
+        Value::String(t) => one(t),
+        Value::Array(list) => list.iter().filter_map(Value::as_str).any(one),
+        _ => true,
+    }
+}
+
+/// What a schema expects, in words: its description, else its type.
+fn expectation(schema: &Map<String, Value>, own_description: Option<&str>) -> String {
+    let description = own_description.or_else(|| schema.get("description").and_then(Value::as_str));
+    if let Some(description) = description {
+        // The first sentence or line is the summary.
+        let line = description.lines().next().unwrap_or(description).trim();
+        return line.trim_end_matches('.').to_owned();
+    }
+    match schema.get("type") {
+        Some(Value::String(t)) => article(t),
+        Some(Value::Array(list)) => list
+            .iter()
+            .filter_map(Value::as_str)
+            .filter(|t| *t != "null")
+            .map(article)
+            .collect::<Vec<_>>()
+            .join(" or "),
+        _ => String::new(),
+    }
+}
+
+fn article(t: &str) -> String {
+    match t {
+        "integer" => "an integer".to_owned(),
+        "object" => "an object".to_owned(),
+        "array" => "an array".to_owned(),
+        other => format!("a {other}"),
+    }
+}
+
+/// Describes a value in a problem message: `is a string "abc"`, `is -3`, `is null`.
+pub fn describe(value: &Value) -> String {
+    match value {
+        Value::Null => "is null".to_owned(),
+        Value::Bool(b) => format!("is the boolean {b}"),
+        Value::Number(n) => format!("is the number {n}"),
+        Value::String(s) => {
+            let shown: String = s.chars().take(40).collect();
+            let ellipsis = if s.chars().count() > 40 { "..." } else { "" };
+            format!("is a string \"{shown}{ellipsis}\"")
+        }
+        Value::Array(items) => format!("is an array of {} items", items.len()),
+        Value::Object(_) => "is an object".to_owned(),
+    }
+}
