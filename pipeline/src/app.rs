@@ -274,7 +274,11 @@ fn validate(args: ValidateArgs) -> anyhow::Result<ExitCode> {
             Ok(bytes) => match String::from_utf8(bytes) {
                 Ok(text) => text,
                 Err(_) => {
-                    writeln!(out, "{}: $: is not UTF-8 text (expected JSON)", file.display())?;
+                    writeln!(
+                        out,
+                        "{}: $: is not UTF-8 text (expected JSON)",
+                        file.display()
+                    )?;
                     problems += 1;
                     bad_files += 1;
                     continue;
@@ -314,12 +318,9 @@ fn validate(args: ValidateArgs) -> anyhow::Result<ExitCode> {
                 Some(line) if jsonl => {
                     writeln!(out, "{}:{line}: {}", file.display(), located.problem)?
                 }
-                Some(line) => writeln!(
-                    out,
-                    "{}: {} (line {line})",
-                    file.display(),
-                    located.problem
-                )?,
+                Some(line) => {
+                    writeln!(out, "{}: {} (line {line})", file.display(), located.problem)?
+                }
                 None => writeln!(out, "{}: {}", file.display(), located.problem)?,
             }
         }
@@ -344,27 +345,44 @@ fn convert(args: ConvertArgs) -> anyhow::Result<ExitCode> {
             return Ok(ExitCode::from(EXIT_FAILED));
         }
     };
+    const REORDERED: &str = "objects reordered by descending footprint w·d (the input had \
+                             another order, which the scene graph's layout order follows; \
+                             --keep-order keeps it)";
     let (bytes, warnings) = match (layout, args.to) {
         (AnyLayout::Dataset(dataset), LayoutForm::Llm) => {
-            let converted = llm_from_dataset(&dataset);
+            let mut converted = llm_from_dataset(&dataset);
+            if !args.keep_order && converted.layout.sort_objects() {
+                converted.warnings.push(REORDERED.to_owned());
+            }
             (llm_bytes(&converted.layout)?, converted.warnings)
         }
         (AnyLayout::Llm(llm), LayoutForm::Dataset) => {
-            let converted = dataset_from_llm(&llm);
+            let mut converted = dataset_from_llm(&llm);
+            if !args.keep_order && converted.layout.sort_objects() {
+                converted.warnings.push(REORDERED.to_owned());
+            }
             (to_sorted_pretty(&converted.layout)?, converted.warnings)
         }
         (AnyLayout::Llm(mut llm), LayoutForm::Llm) => {
-            llm.sort_objects();
+            let reordered = !args.keep_order && llm.sort_objects();
             (
                 llm_bytes(&llm)?,
-                vec!["the input is already an LLM layout: objects sorted only".to_owned()],
+                if reordered {
+                    vec![REORDERED.to_owned()]
+                } else {
+                    vec![]
+                },
             )
         }
         (AnyLayout::Dataset(mut dataset), LayoutForm::Dataset) => {
-            dataset.sort_objects();
+            let reordered = !args.keep_order && dataset.sort_objects();
             (
                 to_sorted_pretty(&dataset)?,
-                vec!["the input is already a dataset layout: objects sorted only".to_owned()],
+                if reordered {
+                    vec![REORDERED.to_owned()]
+                } else {
+                    vec![]
+                },
             )
         }
     };

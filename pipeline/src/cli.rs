@@ -148,6 +148,10 @@ pub struct ConvertArgs {
     /// Where to write (default: standard output).
     #[arg(short, long, value_name = "FILE")]
     pub output: Option<PathBuf>,
+    /// Keep the input's object order instead of sorting by descending footprint w·d (the
+    /// scene graph's "layout order" depends on it).
+    #[arg(long)]
+    pub keep_order: bool,
 }
 
 /// `mesa parse-output`.

@@ -513,10 +513,7 @@ pub fn scene_state(
 
 fn check_output_path(rel: &str) -> anyhow::Result<()> {
     let path = Path::new(rel);
-    let ok = !rel.is_empty()
-        && path
-            .components()
-            .all(|c| matches!(c, Component::Normal(_)));
+    let ok = !rel.is_empty() && path.components().all(|c| matches!(c, Component::Normal(_)));
     anyhow::ensure!(
         ok,
         "internal error: stage output path \"{rel}\" is not a relative path inside the scene"
@@ -605,7 +602,10 @@ pub fn process_scene(
                     warnings: output.warnings,
                 },
                 Err(e) => SceneOutcome::Failed {
-                    error: vec![format!("{}: cannot write marker: {e}", marker_file.display())],
+                    error: vec![format!(
+                        "{}: cannot write marker: {e}",
+                        marker_file.display()
+                    )],
                 },
             }
         }
@@ -662,7 +662,10 @@ fn fail(
     marker.error = error.clone();
     if let Err(e) = write_marker(marker_file, &marker) {
         let mut error = error;
-        error.push(format!("{}: cannot write marker: {e}", marker_file.display()));
+        error.push(format!(
+            "{}: cannot write marker: {e}",
+            marker_file.display()
+        ));
         return SceneOutcome::Failed { error };
     }
     SceneOutcome::Failed { error }
