@@ -3,7 +3,7 @@
 //! - [`runner`]: scene discovery, sharding, skip-done markers, atomic writes, parallelism,
 //!   progress and summaries, for any [`runner::SceneStage`];
 //! - [`stages`]: the per-scene stages registered for `mesa run`;
-//! - [`config`]: `mesa.toml`;
+//! - [`config`]: the `mesa.toml` configuration;
 //! - [`cli`] (clap types) and [`app`] (what each subcommand does);
 //! - [`fsio`]: atomic writes and digests; [`layouts`]: reading a layout of any form.
 
