@@ -38,6 +38,8 @@ pub enum Command {
     Convert(ConvertArgs),
     /// Parse a model output text (reasoning, scene graph, marker, layout JSON).
     ParseOutput(ParseOutputArgs),
+    /// Depth maps and instance masks → point clouds, the table frame, and object boxes.
+    Lift(StageArgs),
 }
 
 /// Flags shared by every per-scene stage.
