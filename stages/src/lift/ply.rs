@@ -1,8 +1,11 @@
 //! Binary little-endian PLY point clouds (xyz float32 + rgb uchar), as Open3D and trimesh read
 //! them.
 
+/// A point with its colour: xyz in metres, rgb.
+pub type ColoredPoint = ([f32; 3], [u8; 3]);
+
 /// Writes points with colours as a binary little-endian PLY.
-pub fn write_ply(points: &[([f32; 3], [u8; 3])], comment: &str) -> Vec<u8> {
+pub fn write_ply(points: &[ColoredPoint], comment: &str) -> Vec<u8> {
     let header = format!(
         "ply\nformat binary_little_endian 1.0\ncomment {}\nelement vertex {}\n\
          property float x\nproperty float y\nproperty float z\n\
@@ -22,7 +25,7 @@ pub fn write_ply(points: &[([f32; 3], [u8; 3])], comment: &str) -> Vec<u8> {
 }
 
 /// Reads back what [`write_ply`] writes (for tests and tools).
-pub fn read_ply(bytes: &[u8]) -> Result<Vec<([f32; 3], [u8; 3])>, String> {
+pub fn read_ply(bytes: &[u8]) -> Result<Vec<ColoredPoint>, String> {
     let end = b"end_header\n";
     let at = bytes
         .windows(end.len())
