@@ -412,8 +412,12 @@ pub fn read_masks(
     let label = input.join("masks.png");
     let folder = input.join("masks");
     let rle_count = instances.iter().filter(|i| i.rle.is_some()).count();
+    // An empty masks/ folder is not a mask source.
+    let folder_has_masks = std::fs::read_dir(&folder).is_ok_and(|mut entries| {
+        entries.any(|e| e.is_ok_and(|e| e.path().extension().is_some_and(|x| x == "png")))
+    });
     let sources =
-        usize::from(label.exists()) + usize::from(folder.is_dir()) + usize::from(rle_count > 0);
+        usize::from(label.exists()) + usize::from(folder_has_masks) + usize::from(rle_count > 0);
     if sources > 1 {
         return Err(LiftError::input(
             input,
@@ -463,7 +467,7 @@ pub fn read_masks(
                 "add it to instances.json, or set its pixels to 0 (background)",
             ));
         }
-    } else if folder.is_dir() {
+    } else if folder_has_masks {
         source = folder.display().to_string();
         let mut files: Vec<PathBuf> = std::fs::read_dir(&folder)
             .map_err(|e| LiftError::input(&folder, "$", e.to_string(), "a readable folder"))?

@@ -64,6 +64,8 @@ pub struct LiftConfig {
     pub plane_max_points: u32,
     /// The plane must explain at least this fraction of the points it is fitted on.
     pub plane_min_inlier_fraction: f64,
+    /// Fewest table (or background) points with valid depth to fit a plane on.
+    pub plane_min_points: u32,
     /// Percentile (0-50) of the table points that bounds the placement zone on each side.
     pub zone_percentile: f64,
     /// Fewest points an instance may keep after filtering.
@@ -82,6 +84,7 @@ impl Default for LiftConfig {
             plane_iterations: 400,
             plane_max_points: 20_000,
             plane_min_inlier_fraction: 0.3,
+            plane_min_points: 500,
             zone_percentile: 0.5,
             min_points: 10,
         }
@@ -524,11 +527,12 @@ pub fn fit_plane(
     config: &LiftConfig,
     source: &str,
 ) -> Result<Plane, LiftError> {
-    if points.len() < 3 {
+    if points.len() < (config.plane_min_points as usize).max(3) {
         return Err(LiftError::NoPlane(format!(
-            "only {} {source} points with valid depth (expected thousands: mark the table as \
+            "only {} {source} points with valid depth (expected at least {}: mark the table as \
              an instance with \"support\": true, or check the depth map)",
-            points.len()
+            points.len(),
+            config.plane_min_points
         )));
     }
     let stride = points
