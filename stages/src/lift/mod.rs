@@ -24,6 +24,7 @@
 pub mod inputs;
 pub mod ply;
 pub mod rle;
+pub mod synthetic;
 
 use std::path::{Path, PathBuf};
 
@@ -193,8 +194,11 @@ pub fn lift_scene(
         s.dedup();
         (s, "support")
     };
+    // The plane and the zone's percentiles need a few hundred thousand points at most.
+    const PLANE_PIXELS: usize = 200_000;
     let plane_points: Vec<Vector3<f64>> = plane_pixels
         .iter()
+        .step_by(plane_pixels.len().div_ceil(PLANE_PIXELS).max(1))
         .filter_map(|&p| back_project(&depth, &k, p))
         .collect();
     let plane = fit_plane(&plane_points, scene_id, seed, config, source)?;
@@ -435,38 +439,51 @@ fn remove_outliers(
     config: &LiftConfig,
 ) -> (Vec<(u32, Vector3<f64>)>, usize) {
     let w = depth.width;
-    let r = config.outlier_window_px as i64;
-    let members: std::collections::HashSet<u32> = pixels.iter().copied().collect();
     let points: Vec<(u32, Vector3<f64>)> = pixels
         .iter()
         .filter_map(|&p| back_project(depth, k, p).map(|x| (p, x)))
         .collect();
-    let index: std::collections::HashMap<u32, usize> = points
-        .iter()
-        .enumerate()
-        .map(|(i, (p, _))| (*p, i))
-        .collect();
+    if points.is_empty() {
+        return (points, 0);
+    }
+    // A dense grid over the instance's bounding box: pixel → index into `points`.
+    let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
+    for (p, _) in &points {
+        let (u, v) = (*p as usize % w, *p as usize / w);
+        u0 = u0.min(u);
+        v0 = v0.min(v);
+        u1 = u1.max(u);
+        v1 = v1.max(v);
+    }
+    let (bw, bh) = (u1 - u0 + 1, v1 - v0 + 1);
+    let mut grid = vec![u32::MAX; bw * bh];
+    for (i, (p, _)) in points.iter().enumerate() {
+        let (u, v) = (*p as usize % w - u0, *p as usize / w - v0);
+        grid[v * bw + u] = i as u32;
+    }
+    let r = config.outlier_window_px as isize;
     let mut scores = Vec::with_capacity(points.len());
     for &(p, x) in &points {
-        let (u, v) = ((p as usize % w) as i64, (p as usize / w) as i64);
+        let (u, v) = (
+            (p as usize % w - u0) as isize,
+            (p as usize / w - v0) as isize,
+        );
         let footprint = (x.z / k.fx).max(1e-9);
         let mut sum = 0.0;
         let mut count = 0usize;
         for dv in -r..=r {
+            let nv = v + dv;
+            if nv < 0 || nv >= bh as isize {
+                continue;
+            }
             for du in -r..=r {
-                if du == 0 && dv == 0 {
+                let nu = u + du;
+                if (du == 0 && dv == 0) || nu < 0 || nu >= bw as isize {
                     continue;
                 }
-                let (nu, nv) = (u + du, v + dv);
-                if nu < 0 || nv < 0 || nu >= w as i64 || nv >= depth.height as i64 {
-                    continue;
-                }
-                let q = (nv as usize * w + nu as usize) as u32;
-                if !members.contains(&q) {
-                    continue;
-                }
-                if let Some(&j) = index.get(&q) {
-                    sum += (points[j].1 - x).norm() / footprint;
+                let j = grid[nv as usize * bw + nu as usize];
+                if j != u32::MAX {
+                    sum += (points[j as usize].1 - x).norm();
                     count += 1;
                 }
             }
@@ -474,7 +491,7 @@ fn remove_outliers(
         scores.push(if count == 0 {
             f64::INFINITY
         } else {
-            sum / count as f64
+            sum / count as f64 / footprint
         });
     }
     let finite: Vec<f64> = scores.iter().copied().filter(|s| s.is_finite()).collect();
@@ -541,6 +558,12 @@ pub fn fit_plane(
     let sample: Vec<Vector3<f64>> = points.iter().step_by(stride).copied().collect();
     let mut rng = scene_rng(scene_id, seed);
     let threshold = config.plane_threshold_m;
+    // Hypotheses are scored on an evenly spread subset; the winner is refined on the sample.
+    let scoring: Vec<Vector3<f64>> = sample
+        .iter()
+        .step_by(sample.len().div_ceil(2000))
+        .copied()
+        .collect();
     let mut best: Option<(usize, Vector3<f64>, f64)> = None;
     for _ in 0..config.plane_iterations {
         let i = rng.random_range(0..sample.len());
