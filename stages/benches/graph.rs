@@ -90,6 +90,7 @@ fn bench_graph(c: &mut Criterion) {
         .collect();
     let mut group = c.benchmark_group("graph");
     group.sample_size(10);
+    group.measurement_time(std::time::Duration::from_secs(10));
     group.throughput(Throughput::Elements(SCENES as u64));
     group.bench_function("10000 scenes x 15 objects, one thread", |b| {
         b.iter_batched(
