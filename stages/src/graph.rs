@@ -43,10 +43,13 @@ use std::collections::BTreeMap;
 use std::fmt;
 
 use mesa_schemas::artifacts::{GraphArtifact, GraphEdge, GraphNode, GraphSpacing, GRAPH_SCHEMA};
-use mesa_schemas::convert::{category_of_instance, yaw_deg_of};
+use mesa_schemas::convert::{category_of_instance, yaw_deg_of, TILT_EPSILON_DEG};
 use mesa_schemas::json::{parse_lenient, NONFINITE_PREFIX};
 use mesa_schemas::kinds::Kind;
-use mesa_schemas::{DatasetLayout, LlmLayout, Problem};
+use mesa_schemas::rotation::tilt_deg_from_quat_xyzw;
+
+use crate::annotations::Annotations;
+use mesa_schemas::{DatasetLayout, LlmLayout, Problem, LAYOUT_SCHEMA};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -196,6 +199,50 @@ pub fn keyword_containers(scene: &GraphScene, options: &GraphOptions) -> Vec<boo
         .iter()
         .map(|o| is_keyword_container(&o.instance, &options.container_keywords))
         .collect()
+}
+
+/// Container flags of a scene's objects, with the objects the keyword rule had to decide.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ContainerFlags {
+    /// One flag per object, in layout order.
+    pub flags: Vec<bool>,
+    /// The objects without a usable annotation, each with why (`mug_0 (no retrieved_uid)`);
+    /// the keyword rule decided for them.
+    pub by_keyword: Vec<String>,
+}
+
+/// The container flag of every object: the asset annotation's `isContainer` (or objathor
+/// `receptacle`) of its `retrieved_uid` when there is one, else the keyword rule (SCENE_GRAPH.md).
+/// `retrieved_uids` is in layout order (empty strings for objects without an asset).
+pub fn annotated_containers(
+    scene: &GraphScene,
+    retrieved_uids: &[String],
+    annotations: Option<&Annotations>,
+    options: &GraphOptions,
+) -> ContainerFlags {
+    let mut by_keyword = Vec::new();
+    let flags = scene
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(i, object)| {
+            let uid = retrieved_uids.get(i).map(String::as_str).unwrap_or("");
+            let why = match annotations {
+                _ if uid.is_empty() => "no retrieved_uid".to_owned(),
+                None => "no annotations file".to_owned(),
+                Some(annotations) => match annotations.get(uid) {
+                    None => format!("asset {uid} is not annotated"),
+                    Some(annotation) => match annotation.is_container {
+                        Some(flag) => return flag,
+                        None => format!("the annotation of {uid} has no isContainer"),
+                    },
+                },
+            };
+            by_keyword.push(format!("{} ({why})", object.instance));
+            is_keyword_container(&object.instance, &options.container_keywords)
+        })
+        .collect();
+    ContainerFlags { flags, by_keyword }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -422,6 +469,8 @@ pub struct LoadedLayout {
     pub form: LayoutForm,
     /// The `retrieved_uid` of each object (dataset layouts only; empty strings otherwise).
     pub retrieved_uids: Vec<String>,
+    /// What the graph leaves out, one line per object (a tilted object counts by its yaw).
+    pub warnings: Vec<String>,
 }
 
 /// Why a layout file could not be read for the graph: every problem, with its JSON path.
@@ -441,10 +490,8 @@ fn render_problems(problems: &[Problem]) -> String {
 }
 
 /// Reads the text of a dataset layout, an LLM layout or a published record (recognised by
-/// shape: a `scene_layout_json` field makes a record; a `schema` field or objects with a
-/// `rotation` make a dataset layout; otherwise an LLM layout), validates it, and returns the
-/// scene with objects in the file's order. Problems name the JSON path and, for objects, the
-/// instance.
+/// shape, see [`layout_form_of`]), validates it, and returns the scene with objects in the
+/// file's order. Problems name the JSON path and, for objects, the instance.
 pub fn read_layout_text(text: &str) -> Result<LoadedLayout, LayoutReadError> {
     let fail = |problems: Vec<Problem>| LayoutReadError { problems };
     let value = parse_lenient(text).map_err(|e| {
@@ -495,15 +542,10 @@ pub fn read_layout_text(text: &str) -> Result<LoadedLayout, LayoutReadError> {
             retrieved_uids: vec![String::new(); layout.objects.len()],
             scene: GraphScene::from_llm(&layout),
             form: LayoutForm::GalleryRecord,
+            warnings: Vec::new(),
         });
     }
-    let dataset = top.contains_key("schema")
-        || top
-            .get("objects")
-            .and_then(Value::as_array)
-            .and_then(|objects| objects.first())
-            .and_then(Value::as_object)
-            .is_some_and(|o| o.contains_key("rotation") || o.contains_key("retrieved_uid"));
+    let dataset = layout_form_of(&value) == LayoutForm::Dataset;
     let kind = if dataset { "layout" } else { "llm-layout" };
     let problems = validate_kind(kind, &value);
     if !problems.is_empty() {
@@ -511,6 +553,21 @@ pub fn read_layout_text(text: &str) -> Result<LoadedLayout, LayoutReadError> {
     }
     if dataset {
         let layout: DatasetLayout = typed(&value)?;
+        let warnings = layout
+            .objects
+            .iter()
+            .filter_map(|o| {
+                let tilt_deg = tilt_deg_from_quat_xyzw(o.rotation.0);
+                (tilt_deg > TILT_EPSILON_DEG).then(|| {
+                    format!(
+                        "{}: rotation is tilted by {tilt_deg:.3}°; the graph uses its footprint \
+                         turned by its yaw {:.3}° only",
+                        o.instance,
+                        yaw_deg_of(o)
+                    )
+                })
+            })
+            .collect();
         Ok(LoadedLayout {
             retrieved_uids: layout
                 .objects
@@ -519,6 +576,7 @@ pub fn read_layout_text(text: &str) -> Result<LoadedLayout, LayoutReadError> {
                 .collect(),
             scene: GraphScene::from_dataset(&layout),
             form: LayoutForm::Dataset,
+            warnings,
         })
     } else {
         let layout: LlmLayout = typed(&value)?;
@@ -526,7 +584,33 @@ pub fn read_layout_text(text: &str) -> Result<LoadedLayout, LayoutReadError> {
             retrieved_uids: vec![String::new(); layout.objects.len()],
             scene: GraphScene::from_llm(&layout),
             form: LayoutForm::Llm,
+            warnings: Vec::new(),
         })
+    }
+}
+
+/// The form of a layout document, by the same rules as `mesa convert`: a `scene_layout_json`
+/// field makes a published record; `"schema": "mesa.layout/1"`, or a first object with
+/// `rotation` or `retrieved_uid`, a dataset layout; a first object with `z_rotation`, or a
+/// `sink_zone`, an LLM layout; anything else is read as a dataset layout.
+pub fn layout_form_of(value: &Value) -> LayoutForm {
+    if value.get("scene_layout_json").is_some() {
+        return LayoutForm::GalleryRecord;
+    }
+    if value.get("schema").and_then(Value::as_str) == Some(LAYOUT_SCHEMA) {
+        return LayoutForm::Dataset;
+    }
+    let first = value
+        .get("objects")
+        .and_then(Value::as_array)
+        .and_then(|objects| objects.first());
+    match first {
+        Some(o) if o.get("rotation").is_some() || o.get("retrieved_uid").is_some() => {
+            LayoutForm::Dataset
+        }
+        Some(o) if o.get("z_rotation").is_some() => LayoutForm::Llm,
+        _ if value.get("sink_zone").is_some() => LayoutForm::Llm,
+        _ => LayoutForm::Dataset,
     }
 }
 
@@ -1924,6 +2008,47 @@ mod tests {
     }
 
     #[test]
+    fn annotations_decide_containers_and_keywords_fill_in() {
+        use crate::annotations::AssetAnnotation;
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("tray_0", [50.0, 50.0, 2.0], [40.0, 30.0, 4.0], 0.0),
+                obj("bowl_0", [20.0, 50.0, 4.0], [12.0, 12.0, 8.0], 0.0),
+                obj("mug_0", [80.0, 50.0, 5.0], [8.0, 8.0, 10.0], 0.0),
+                obj("cup_0", [80.0, 20.0, 5.0], [8.0, 8.0, 10.0], 0.0),
+                obj("box_0", [20.0, 20.0, 5.0], [8.0, 8.0, 10.0], 0.0),
+            ],
+        );
+        let mut annotations = Annotations::default();
+        let flag = |is_container| AssetAnnotation {
+            is_container,
+            ..AssetAnnotation::default()
+        };
+        annotations.insert("tray-uid", flag(Some(true)));
+        annotations.insert("bowl-uid", flag(Some(false)));
+        annotations.insert("mug-uid", flag(None));
+        let uids: Vec<String> = ["tray-uid", "bowl-uid", "mug-uid", "", "box-uid"]
+            .map(String::from)
+            .to_vec();
+        let options = GraphOptions::default();
+        let flags = annotated_containers(&s, &uids, Some(&annotations), &options);
+        // The annotation overrides the keywords both ways; the rest fall back to them.
+        assert_eq!(flags.flags, [true, false, true, true, true]);
+        assert_eq!(
+            flags.by_keyword,
+            [
+                "mug_0 (the annotation of mug-uid has no isContainer)",
+                "cup_0 (no retrieved_uid)",
+                "box_0 (asset box-uid is not annotated)",
+            ]
+        );
+        let none = annotated_containers(&s, &uids, None, &options);
+        assert_eq!(none.flags, keyword_containers(&s, &options));
+        assert_eq!(none.by_keyword[0], "tray_0 (no annotations file)");
+    }
+
+    #[test]
     fn keyword_rule_matches_whole_categories_and_suffixes() {
         let keywords = GraphOptions::default().container_keywords;
         for yes in [
@@ -2212,8 +2337,8 @@ mod tests {
             ],
         };
         let mut dataset = dataset_from_llm(&llm).layout;
-        // dataset_from_llm sorts (book first); put the pen first again, as a file may.
-        dataset.objects.swap(0, 1);
+        // Put the pen (the smaller footprint) first, as a file may, whatever the conversion did.
+        dataset.objects.sort_by(|a, b| b.instance.cmp(&a.instance));
         let s = GraphScene::from_dataset(&dataset);
         assert_eq!(s, GraphScene::from_llm(&llm));
         assert_eq!(
@@ -2447,7 +2572,28 @@ mod tests {
         let loaded = read_layout_text(dataset).expect("a dataset layout");
         assert_eq!(loaded.form, LayoutForm::Dataset);
         assert_eq!(loaded.retrieved_uids, ["abc"]);
+        assert!(loaded.warnings.is_empty());
         assert_abs_diff_eq!(loaded.scene.objects[0].yaw_deg, 90.0, epsilon = 1e-9);
+        // A mug lying on its side (90° about x): its yaw is 0, and the reader says so.
+        let tilted = dataset.replace(
+            "[0, 0, 0.7071067811865476, 0.7071067811865476]",
+            "[0.7071067811865476, 0, 0, 0.7071067811865476]",
+        );
+        let loaded = read_layout_text(&tilted).expect("a tilted dataset layout");
+        assert_eq!(
+            loaded.warnings,
+            [
+                "mug_0: rotation is tilted by 90.000°; the graph uses its footprint turned by its \
+              yaw 0.000° only"
+            ]
+        );
+        // Shapes: an empty layout with a sink is an LLM layout, without one a dataset layout.
+        let empty_llm = serde_json::json!({
+            "item_placement_zone": [0, 1, 0, 1], "sink_zone": [0, 1, 0, 1], "objects": []
+        });
+        assert_eq!(layout_form_of(&empty_llm), LayoutForm::Llm);
+        let empty = serde_json::json!({"item_placement_zone": [0, 1, 0, 1], "objects": []});
+        assert_eq!(layout_form_of(&empty), LayoutForm::Dataset);
     }
 
     #[test]
