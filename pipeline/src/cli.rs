@@ -38,6 +38,9 @@ pub enum Command {
     Convert(ConvertArgs),
     /// Parse a model output text (reasoning, scene graph, marker, layout JSON).
     ParseOutput(ParseOutputArgs),
+    /// Extract the scene graph of every scene (graph/graph.json and graph/graph.txt), or print
+    /// the triplets of one layout file with --layout.
+    Graph(GraphArgs),
 }
 
 /// Flags shared by every per-scene stage.
@@ -152,6 +155,28 @@ pub struct ConvertArgs {
     /// scene graph's "layout order" depends on it).
     #[arg(long)]
     pub keep_order: bool,
+}
+
+/// `mesa graph`.
+#[derive(Debug, Args)]
+#[command(group = clap::ArgGroup::new("source").required(true).args(["dataset", "layout"]))]
+pub struct GraphArgs {
+    /// The runner flags (a DATASET, or --layout FILE instead).
+    #[command(flatten)]
+    pub stage: Option<StageArgs>,
+    /// Print the triplet lines of one layout file instead: a dataset layout, an LLM layout, or
+    /// a published MesaTask record (its scene_layout_json), recognised by shape.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["scenes", "jobs", "shard", "force", "config", "progress"])]
+    pub layout: Option<PathBuf>,
+    /// With --layout: the containers, comma-separated, by instance (`bowl_0`) or category
+    /// (`bowl`: every bowl); "" means no object is a container. Without it, the keyword rule
+    /// decides ([graph] container_keywords).
+    #[arg(long, value_name = "A,B,...", conflicts_with = "dataset")]
+    pub containers: Option<String>,
+    /// Also write `(a, b, c, are equally spaced along, x|y)` (overrides [graph]
+    /// equally_spaced).
+    #[arg(long)]
+    pub equally_spaced: bool,
 }
 
 /// `mesa parse-output`.

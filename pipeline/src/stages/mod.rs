@@ -3,7 +3,9 @@
 
 use crate::runner::SceneStage;
 
+pub mod graph;
+
 /// Every per-scene stage, in the order `mesa run` runs them.
 pub fn pipeline_stages() -> Vec<Box<dyn SceneStage>> {
-    vec![]
+    vec![Box::new(graph::GraphStage::new())]
 }
