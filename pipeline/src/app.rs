@@ -43,6 +43,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Validate(args) => validate(args),
         Command::Convert(args) => convert(args),
         Command::ParseOutput(args) => parse_output(args),
+        Command::Lift(args) => run_one(&crate::stages::lift::Lift, &resolve(&args, cli.quiet)?),
         Command::Graph(args) => graph(args, cli.quiet),
     }
 }

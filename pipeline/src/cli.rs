@@ -38,6 +38,8 @@ pub enum Command {
     Convert(ConvertArgs),
     /// Parse a model output text (reasoning, scene graph, marker, layout JSON).
     ParseOutput(ParseOutputArgs),
+    /// Depth maps and instance masks → point clouds, the table frame, and object boxes.
+    Lift(StageArgs),
     /// Extract the scene graph of every scene (graph/graph.json and graph/graph.txt), or print
     /// the triplets of one layout file with --layout.
     Graph(GraphArgs),

@@ -20,6 +20,8 @@ pub const CONFIG_FILE: &str = "mesa.toml";
 pub struct Config {
     /// How stages run: threads, seed, progress display.
     pub run: RunConfig,
+    /// `mesa lift`: depth and masks to point clouds, the table frame and boxes.
+    pub lift: mesa_stages::lift::LiftConfig,
     /// `mesa graph`: the rule-based scene graph (SCENE_GRAPH.md).
     pub graph: mesa_stages::graph::GraphConfig,
 }

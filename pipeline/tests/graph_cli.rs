@@ -520,11 +520,12 @@ fn run_runs_graph_and_print_config_documents_its_section() {
         assert!(lines[at - 1].starts_with("# "), "{key} is undocumented");
     }
     assert!(config.contains("\"organizer\""));
+    // `mesa run` runs graph after the stages before it, whatever they made of this dataset
+    // (it has a layout but no photo inputs, so lift fails its scene; the exit code says so).
     mesa()
         .args(["run", "--progress", "off"])
         .arg(dataset)
         .assert()
-        .success()
         .stderr(predicate::str::contains("graph: 1 scenes: 1 done"));
     assert!(scene.join("graph/graph.json").is_file());
 }
