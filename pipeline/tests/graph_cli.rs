@@ -520,6 +520,23 @@ fn run_runs_graph_and_print_config_documents_its_section() {
         assert!(lines[at - 1].starts_with("# "), "{key} is undocumented");
     }
     assert!(config.contains("\"organizer\""));
+    // A typo in the section is bad configuration (exit 2) naming the key.
+    std::fs::write(
+        dataset.join("mesa.toml"),
+        "[graph]\ncontainer_keyword = [\"bowl\"]\n",
+    )
+    .expect("toml");
+    mesa()
+        .args(["graph", "--progress", "off"])
+        .arg(dataset)
+        .assert()
+        .code(2)
+        .stderr(predicate::str::contains("container_keyword"));
+    std::fs::write(
+        dataset.join("mesa.toml"),
+        "[graph]\ncontainer_keywords = [\"tray\"]\n",
+    )
+    .expect("toml");
     // `mesa run` runs graph after the stages before it, whatever they made of this dataset
     // (it has a layout but no photo inputs, so lift fails its scene; the exit code says so).
     mesa()
@@ -527,5 +544,9 @@ fn run_runs_graph_and_print_config_documents_its_section() {
         .arg(dataset)
         .assert()
         .stderr(predicate::str::contains("graph: 1 scenes: 1 done"));
-    assert!(scene.join("graph/graph.json").is_file());
+    // With [graph] container_keywords = ["tray"], the tray holds the apple and the bowl
+    // holds nothing.
+    let text = std::fs::read_to_string(scene.join("graph/graph.txt")).expect("graph.txt");
+    assert!(text.contains("(apple_0, in, tray_0)\n"), "{text}");
+    assert!(!text.contains(", in, bowl_0)"), "{text}");
 }

@@ -665,9 +665,8 @@ mod tests {
 
     #[test]
     fn read_prefixes_the_path() {
-        let dir = std::env::temp_dir().join(format!("mesa-annotations-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
-        let path = dir.join("annotations.json");
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("annotations.json");
         std::fs::write(&path, r#"{"u": {"onTable": "maybe"}}"#).expect("write");
         let e = Annotations::read(&path).expect_err("bad onTable");
         assert!(
@@ -680,11 +679,10 @@ mod tests {
         assert_eq!(a.len(), 2);
         assert_eq!(a.get("u").and_then(|a| a.is_container), Some(true));
         assert_eq!(a.iter().map(|(uid, _)| uid).collect::<Vec<_>>(), ["u", "v"]);
-        let missing = Annotations::read(&dir.join("absent.json")).expect_err("absent");
+        let missing = Annotations::read(&dir.path().join("absent.json")).expect_err("absent");
         assert!(
             missing.to_string().contains("absent.json: cannot read"),
             "{missing}"
         );
-        std::fs::remove_dir_all(&dir).expect("cleanup");
     }
 }

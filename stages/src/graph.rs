@@ -325,6 +325,8 @@ impl GraphScene {
                 problem: format!("has a non-finite bound [{x_min}, {x_max}, {y_min}, {y_max}]"),
             });
         }
+        // SCENE_GRAPH.md gives a fraction of 0.5 when W or D is 0 (kept in `zone_fraction`);
+        // issue 8 makes an empty zone an error instead, so that rule is never reached here.
         if x_max <= x_min || y_max <= y_min {
             return Err(GraphError::Zone {
                 problem: format!("is empty [{x_min}, {x_max}, {y_min}, {y_max}]"),
