@@ -171,8 +171,8 @@ pub struct GraphArgs {
     #[arg(long, value_name = "FILE", conflicts_with_all = ["scenes", "jobs", "shard", "force", "config", "progress"])]
     pub layout: Option<PathBuf>,
     /// With --layout: the containers, comma-separated, by instance (`bowl_0`) or category
-    /// (`bowl`: every bowl); "" means no object is a container. Without it, the keyword rule
-    /// decides ([graph] container_keywords).
+    /// (`bowl`: every bowl); "" means no object is a container. Without it, the default
+    /// keyword rule of SCENE_GRAPH.md decides (bowl, basket, box, cup, mug, ...; not tray).
     #[arg(long, value_name = "A,B,...", conflicts_with = "dataset")]
     pub containers: Option<String>,
     /// Also write `(a, b, c, are equally spaced along, x|y)` (overrides [graph]
