@@ -5,7 +5,9 @@
 //! - [`lift`]: depth and masks to point clouds, the table frame and boxes (SPEC 5.1).
 //! - [`annotations`]: the asset annotations (`assets/annotations.json`, SPEC 5.2).
 //! - [`graph`]: the rule-based scene graph (SPEC 5.7, `SCENE_GRAPH.md`).
+//! - [`glb_read`]: library assets (GLB) read into triangles, Draco included (SPEC 5.2).
 
 pub mod annotations;
+pub mod glb_read;
 pub mod graph;
 pub mod lift;
