@@ -8,6 +8,8 @@
 //! - [`glb_read`]: library assets (GLB) read into triangles, Draco included (SPEC 5.2).
 
 pub mod annotations;
+pub mod assets;
 pub mod glb_read;
 pub mod graph;
 pub mod lift;
+pub mod text;
