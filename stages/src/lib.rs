@@ -12,4 +12,6 @@ pub mod assets;
 pub mod glb_read;
 pub mod graph;
 pub mod lift;
+pub mod place;
+pub mod retrieve;
 pub mod text;
