@@ -2,24 +2,13 @@
 //! SLURM_ARRAY_* variables set as Slurm sets them) writes exactly the bytes of one run, and a
 //! resubmitted array skips everything.
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+mod common;
+
+use common::{gallery, snapshot};
+
+use std::path::Path;
 
 use assert_cmd::Command;
-
-fn gallery() -> Vec<PathBuf> {
-    let shared = std::env::var_os("MESA_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
-    let dir = shared.join("realdata/layouts/mesatask_gallery");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
-        .map(|e| e.expect("entry").path())
-        .filter(|p| p.extension().is_some_and(|e| e == "json"))
-        .collect();
-    files.sort();
-    files
-}
 
 /// A dataset of 14 scenes whose refined layouts are the published layouts (twice over).
 fn dataset(dir: &Path) {
@@ -36,28 +25,6 @@ fn dataset(dir: &Path) {
             .assert()
             .success();
     }
-}
-
-fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
-        for entry in std::fs::read_dir(dir).expect("read dir") {
-            let path = entry.expect("entry").path();
-            if path.is_dir() {
-                walk(root, &path, out);
-            } else {
-                let rel = path
-                    .strip_prefix(root)
-                    .expect("prefix")
-                    .to_string_lossy()
-                    .into_owned();
-                out.insert(rel, std::fs::read(&path).expect("read"));
-            }
-        }
-    }
-    let mut out = BTreeMap::new();
-    walk(dir, &dir.join("scenes"), &mut out);
-    walk(dir, &dir.join(".mesa/markers"), &mut out);
-    out
 }
 
 fn graph(dir: &Path, slurm: Option<(usize, usize, usize)>) -> String {
