@@ -529,14 +529,17 @@ fn remove_outliers(
     (kept, removed)
 }
 
+/// A back-projected pixel: its row-major index and its camera-frame point (metres).
+type PixelPoint = (u32, Vector3<f64>);
+
 /// The connectivity rule of the module docs: returns the kept points, their grid (same box)
 /// and how many points were dropped.
 fn keep_main_components(
-    points: Vec<(u32, Vector3<f64>)>,
+    points: Vec<PixelPoint>,
     grid: Vec<u32>,
     bw: usize,
     config: &LiftConfig,
-) -> (Vec<(u32, Vector3<f64>)>, Vec<u32>, usize) {
+) -> (Vec<PixelPoint>, Vec<u32>, usize) {
     let n = points.len();
     let mut parent: Vec<u32> = (0..n as u32).collect();
     fn find(parent: &mut [u32], mut i: u32) -> u32 {
