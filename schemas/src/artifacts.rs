@@ -266,7 +266,7 @@ pub struct AssetRecord {
     /// A short code for the reason: a glTF-Validator code for a damaged container
     /// (`GLB_LENGTH_MISMATCH`, ...), else `not_glb`, `gltf1`, `json`, `version`, `invalid_gltf`,
     /// `unsupported_extension`, `external_uri`, `data`, `draco`, `no_mesh`, `zero_size_axis`,
-    /// `internal`.
+    /// `io` (the file cannot be read), `internal`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason_code: Option<String>,
     /// Whether `annotations.json` has an entry for it.

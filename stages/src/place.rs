@@ -15,7 +15,9 @@
 //! - **on** the objects under it otherwise: the bottom is the highest top among the placed
 //!   objects under it (objects are placed from the lowest bottom up, so those are final).
 //!
-//! "Under" means: the footprints overlap and the other object's lifted bottom is lower.
+//! "Under" means: the other object's lifted bottom is lower, and the footprints overlap both as
+//! lifted (the photo's evidence that one stands on the other) and as placed (so that the
+//! placed object does rest on it).
 //! Rotation: identity, or the lift's yaw when it estimated one (the box is then taken as
 //! oriented by that yaw).
 
@@ -136,6 +138,10 @@ pub fn place_objects(items: &[PlacementInput], config: &PlaceConfig) -> Vec<Plac
             .total_cmp(&lifted_bottom(*b))
             .then_with(|| items[*a].instance.cmp(&items[*b].instance))
     });
+    let lifted_halves: Vec<[f64; 2]> = items
+        .iter()
+        .map(|item| half_footprint(item.target_size_m, item.yaw_deg))
+        .collect();
     let mut placed: Vec<Option<Placement>> = vec![None; items.len()];
     let mut halves = vec![[0.0; 2]; items.len()];
     for &i in &order {
@@ -150,7 +156,9 @@ pub fn place_objects(items: &[PlacementInput], config: &PlaceConfig) -> Vec<Plac
             .take_while(|j| *j != i)
             .filter(|j| lifted_bottom(*j) < bottom_lifted)
             .filter(|j| {
-                footprints_overlap(center, halves[i], items[*j].target_center_m, halves[*j])
+                let other = items[*j].target_center_m;
+                footprints_overlap(center, lifted_halves[i], other, lifted_halves[*j])
+                    && footprints_overlap(center, halves[i], other, halves[*j])
             })
             .collect();
         let (bottom, support) = if bottom_lifted <= snap {

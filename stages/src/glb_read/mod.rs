@@ -129,7 +129,10 @@ pub enum GlbError {
         problem: String,
     },
     /// Nothing to place.
-    #[error("no triangle mesh: {detail}")]
+    #[error(
+        "no triangle mesh: {detail} (expected a node of the scene placing a mesh of triangles: \
+         export the object's mesh, not only empties, lights or cameras)"
+    )]
     NoMesh {
         /// Why there is none.
         detail: String,

@@ -459,9 +459,10 @@ fn a_scene_without_mesh_nodes_has_no_mesh() {
         "scenes": [{"nodes": [0]}]
     });
     let e = error_of(&b.glb(doc));
-    assert_eq!(
-        e.to_string(),
-        "no triangle mesh: no node of the scene places any of its 1 meshes"
+    assert!(
+        e.to_string()
+            .starts_with("no triangle mesh: no node of the scene places any of its 1 meshes"),
+        "{e}"
     );
 }
 
