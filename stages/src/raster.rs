@@ -110,9 +110,13 @@ impl Texture {
         let y = uv[1] as f64 * h as f64 - 0.5;
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        let pow2 = (w & (w - 1)) == 0 && (h & (h - 1)) == 0;
         let texel = |xi: i64, yi: i64| -> [f32; 3] {
-            let xi = xi.rem_euclid(w) as usize;
-            let yi = yi.rem_euclid(h) as usize;
+            let (xi, yi) = if pow2 {
+                ((xi & (w - 1)) as usize, (yi & (h - 1)) as usize)
+            } else {
+                (xi.rem_euclid(w) as usize, yi.rem_euclid(h) as usize)
+            };
             let o = (yi * self.width as usize + xi) * 4;
             [
                 lut[self.rgba[o] as usize],
@@ -407,16 +411,47 @@ fn raster_triangle(
     let inv_area = 1.0 / area;
     let perspective = matches!(projection, Projection::Perspective(_));
     let inv_z: [f64; 3] = std::array::from_fn(|i| 1.0 / v[i].p[2]);
-    let edge = |a: [f64; 2], b: [f64; 2], px: f64, py: f64| {
-        (b[0] - a[0]) * (py - a[1]) - (b[1] - a[1]) * (px - a[0])
+    // Barycentric l_k(x, y) = (a_k x + b_k y + c_k) / area for the edge opposite corner k.
+    let coefficients = |p: [f64; 2], q: [f64; 2]| {
+        let a = -(q[1] - p[1]) * inv_area;
+        let b = (q[0] - p[0]) * inv_area;
+        let c = (-(q[0] - p[0]) * p[1] + (q[1] - p[1]) * p[0]) * inv_area;
+        (a, b, c)
     };
+    let edges = [
+        coefficients(screen[1], screen[2]),
+        coefficients(screen[2], screen[0]),
+        coefficients(screen[0], screen[1]),
+    ];
+    let with_attributes = !buffer.item.is_empty();
     for y in y_start..=y_end {
         let py = y as f64;
-        for x in x_start..=x_end {
+        // The span of x where every barycentric is non-negative.
+        let (mut lo, mut hi) = (x_start as f64, x_end as f64);
+        let mut empty = false;
+        let mut row = [(0.0, 0.0); 3];
+        for (k, &(a, b, c)) in edges.iter().enumerate() {
+            let offset = b * py + c;
+            row[k] = (a, offset);
+            if a > 0.0 {
+                lo = lo.max(-offset / a);
+            } else if a < 0.0 {
+                hi = hi.min(-offset / a);
+            } else if offset < 0.0 {
+                empty = true;
+            }
+        }
+        if empty || lo > hi + 1.0 {
+            continue;
+        }
+        // One pixel of slack each side; the exact test below decides.
+        let x_lo = ((lo.ceil() as i64) - 1).max(x_start);
+        let x_hi = ((hi.floor() as i64) + 1).min(x_end);
+        for x in x_lo..=x_hi {
             let px = x as f64;
-            let l0 = edge(screen[1], screen[2], px, py) * inv_area;
-            let l1 = edge(screen[2], screen[0], px, py) * inv_area;
-            let l2 = edge(screen[0], screen[1], px, py) * inv_area;
+            let l0 = row[0].0 * px + row[0].1;
+            let l1 = row[1].0 * px + row[1].1;
+            let l2 = row[2].0 * px + row[2].1;
             if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
                 continue;
             }
@@ -437,12 +472,14 @@ fn raster_triangle(
             let depth32 = depth as f32;
             if depth32 < buffer.depth_m[o] {
                 buffer.depth_m[o] = depth32;
-                buffer.item[o] = item;
-                buffer.triangle[o] = triangle;
-                let b: [f64; 3] = std::array::from_fn(|k| {
-                    mu[0] * v[0].bary[k] + mu[1] * v[1].bary[k] + mu[2] * v[2].bary[k]
-                });
-                buffer.barycentric[o] = [b[1] as f32, b[2] as f32];
+                if with_attributes {
+                    buffer.item[o] = item;
+                    buffer.triangle[o] = triangle;
+                    let b: [f64; 3] = std::array::from_fn(|k| {
+                        mu[0] * v[0].bary[k] + mu[1] * v[1].bary[k] + mu[2] * v[2].bary[k]
+                    });
+                    buffer.barycentric[o] = [b[1] as f32, b[2] as f32];
+                }
             }
         }
     }
@@ -497,7 +534,15 @@ impl ShadowMap {
         let extent = (bounds.max[0] - bounds.min[0]).max(bounds.max[1] - bounds.min[1]);
         let texel = (extent / size_px.max(1) as f64).max(1e-6);
         let (x0, y0) = (bounds.min[0], bounds.min[1]);
-        let mut buffer = VisibilityBuffer::new(size_px, size_px);
+        // Depth only: no item, triangle or barycentric planes.
+        let mut buffer = VisibilityBuffer {
+            width: size_px,
+            height: size_px,
+            depth_m: vec![f32::INFINITY; size_px as usize * size_px as usize],
+            item: Vec::new(),
+            triangle: Vec::new(),
+            barycentric: Vec::new(),
+        };
         rasterize_into(
             &mut buffer,
             Projection::Orthographic { x0, y0, texel },
@@ -514,39 +559,32 @@ impl ShadowMap {
         }
     }
 
-    /// Fraction of light reaching `p_world` (3×3 percentage-closer filtering).
+    /// Fraction of light reaching `p_world` (percentage-closer filtering over the 2×2 texels
+    /// around it, bilinearly weighted).
     fn light_fraction(&self, p_world: [f64; 3], normal_world: [f64; 3]) -> f32 {
         // Offset along the normal and a depth bias keep surfaces from shadowing themselves.
         let p = add3(p_world, scale3(normal_world, 1.5 * self.texel));
         let q = self.light_from_world.apply_point(p);
-        let sx = (q[0] - self.x0) / self.texel;
-        let sy = (q[1] - self.y0) / self.texel;
+        let sx = (q[0] - self.x0) / self.texel - 0.5;
+        let sy = (q[1] - self.y0) / self.texel - 0.5;
         let size = self.buffer.width as i64;
-        let (cx, cy) = (sx.round() as i64, sy.round() as i64);
-        if cx < 0 || cy < 0 || cx >= size || cy >= size {
+        let (x0, y0) = (sx.floor() as i64, sy.floor() as i64);
+        if x0 < 0 || y0 < 0 || x0 + 1 >= size || y0 + 1 >= size {
             return 1.0;
         }
-        let bias = 2.0 * self.texel + 1e-3;
-        let mut lit = 0u32;
-        let mut total = 0u32;
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                let (x, y) = (cx + dx, cy + dy);
-                if x < 0 || y < 0 || x >= size || y >= size {
-                    continue;
-                }
-                total += 1;
-                let d = self.buffer.depth_m[(y * size + x) as usize] as f64;
-                if q[2] <= d + bias {
-                    lit += 1;
-                }
+        let (fx, fy) = ((sx - x0 as f64) as f32, (sy - y0 as f64) as f32);
+        let bias = (2.0 * self.texel + 1e-3) as f32;
+        let depth = q[2] as f32 - bias;
+        let lit = |x: i64, y: i64| -> f32 {
+            if depth <= self.buffer.depth_m[(y * size + x) as usize] {
+                1.0
+            } else {
+                0.0
             }
-        }
-        if total == 0 {
-            1.0
-        } else {
-            lit as f32 / total as f32
-        }
+        };
+        let top = lit(x0, y0) * (1.0 - fx) + lit(x0 + 1, y0) * fx;
+        let bottom = lit(x0, y0 + 1) * (1.0 - fx) + lit(x0 + 1, y0 + 1) * fx;
+        top * (1.0 - fy) + bottom * fy
     }
 }
 
@@ -685,7 +723,9 @@ pub fn render_shaded(
         let mut color: [f32; 3] = std::array::from_fn(|k| {
             albedo[k] * (lighting.sky_color[k] * hemi + lighting.ground_color[k] * (1.0 - hemi))
         });
-        let shininess = 2.0 / (material.roughness.clamp(0.05, 1.0).powi(4)) - 2.0;
+        // Blinn-Phong exponent from roughness.
+        let shininess =
+            (2.0 / material.roughness.clamp(0.05, 1.0).powi(4) - 2.0).clamp(1.0, 4096.0);
         let specular_strength = 0.35 * (1.0 - material.roughness.clamp(0.0, 1.0)).powi(2);
         for (li, light) in lighting.lights.iter().enumerate() {
             let l = normalize3(light.toward_light_world);
@@ -701,7 +741,9 @@ pub fn render_shaded(
                 continue;
             }
             let half = normalize3(add3(l, to_eye));
-            let spec = (dot3(n, half).max(0.0) as f32).powf(shininess.max(1.0)) * specular_strength;
+            // Schlick's rational stand-in for x^n: cheap, and close where it matters.
+            let x = dot3(n, half).max(0.0) as f32;
+            let spec = x / (shininess - shininess * x + x) * specular_strength;
             for k in 0..3 {
                 color[k] += light.color[k] * visible * (albedo[k] * ndotl + spec * ndotl.sqrt());
             }
