@@ -1,1 +1,76 @@
-fn main() {}
+//! The runner's per-scene overhead: what it costs beyond the stage's own work.
+//!
+//! - `skip_done`: a rerun over a done scene (read the marker, hash the inputs, compare);
+//! - `write_scene`: a scene processed with a trivial stage (run, atomic write of one output,
+//!   atomic write of the marker).
+
+use std::path::Path;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use mesa_pipeline::config::Config;
+use mesa_pipeline::fsio::DigestCache;
+use mesa_pipeline::runner::{
+    digest_of, discover_scenes, process_scene, Scene, SceneOutcome, SceneOutput, SceneStage,
+    StageContext,
+};
+
+struct Tiny;
+
+impl SceneStage for Tiny {
+    fn name(&self) -> &'static str {
+        "tiny"
+    }
+    fn inputs(&self, _: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
+        Ok(vec![
+            scene.rel("input/layout.json"),
+            scene.rel("input/instances.json"),
+        ])
+    }
+    fn config_digest(&self, ctx: &StageContext<'_>) -> String {
+        digest_of(&ctx.config.run.seed)
+    }
+    fn run(&self, _: &StageContext<'_>, _: &Scene) -> anyhow::Result<SceneOutput> {
+        let mut out = SceneOutput::new();
+        out.add_file("tiny/out.json", vec![b'x'; 4096]);
+        Ok(out)
+    }
+}
+
+fn dataset(dir: &Path) {
+    let scene = dir.join("scenes/office_table/office_table_0000/input");
+    std::fs::create_dir_all(&scene).expect("mkdir");
+    // Inputs of realistic size for a layout stage: a few kB of JSON.
+    std::fs::write(scene.join("layout.json"), vec![b' '; 8 * 1024]).expect("write");
+    std::fs::write(scene.join("instances.json"), vec![b' '; 2 * 1024]).expect("write");
+}
+
+fn bench(c: &mut Criterion) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    dataset(dir.path());
+    let config = Config::default();
+    let ctx = StageContext {
+        dataset: dir.path(),
+        config: &config,
+    };
+    let scene = discover_scenes(dir.path()).expect("scenes").remove(0);
+    let digest = Tiny.config_digest(&ctx);
+    let cache = DigestCache::default();
+    let first = process_scene(&Tiny, &ctx, &scene, &digest, false, &cache);
+    assert!(matches!(first, SceneOutcome::Done { .. }));
+
+    c.bench_function("skip_done", |b| {
+        b.iter(|| {
+            let outcome = process_scene(&Tiny, &ctx, &scene, &digest, false, &cache);
+            assert_eq!(outcome, SceneOutcome::Skipped);
+        })
+    });
+    c.bench_function("write_scene", |b| {
+        b.iter(|| {
+            let outcome = process_scene(&Tiny, &ctx, &scene, &digest, true, &cache);
+            assert!(matches!(outcome, SceneOutcome::Done { .. }));
+        })
+    });
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -45,7 +45,8 @@ pub fn yaw_deg_of(object: &LayoutObject) -> f64 {
     }
 }
 
-/// Dataset form → LLM form.
+/// Dataset form → LLM form, objects in the input's order (call
+/// [`LlmLayout::sort_objects`] for the published order).
 pub fn llm_from_dataset(layout: &DatasetLayout) -> Converted<LlmLayout> {
     let mut warnings = Vec::new();
     let mut objects = Vec::with_capacity(layout.objects.len());
@@ -80,19 +81,17 @@ pub fn llm_from_dataset(layout: &DatasetLayout) -> Converted<LlmLayout> {
                 .to_owned(),
         );
     }
-    let mut out = LlmLayout {
-        zone_cm: layout.zone_cm,
-        sink_zone_cm: layout.restricted_zone_cm,
-        objects,
-    };
-    out.sort_objects();
     Converted {
-        layout: out,
+        layout: LlmLayout {
+            zone_cm: layout.zone_cm,
+            sink_zone_cm: layout.restricted_zone_cm,
+            objects,
+        },
         warnings,
     }
 }
 
-/// LLM form → dataset form. No asset is known, so `retrieved_uid` is left empty and
+/// LLM form → dataset form, objects in the input's order. No asset is known, so `retrieved_uid` is left empty and
 /// `scale_factor` is `[1, 1, 1]` (run `mesa retrieve` / `mesa place` to fill them).
 pub fn dataset_from_llm(layout: &LlmLayout) -> Converted<DatasetLayout> {
     let objects: Vec<LayoutObject> = layout
@@ -124,28 +123,39 @@ pub fn dataset_from_llm(layout: &LlmLayout) -> Converted<DatasetLayout> {
             objects.len()
         ));
     }
-    let mut out = DatasetLayout {
-        schema: LAYOUT_SCHEMA.to_owned(),
-        zone_cm: layout.zone_cm,
-        restricted_zone_cm: layout.sink_zone_cm,
-        objects,
-        extra: BTreeMap::new(),
-    };
-    out.sort_objects();
     Converted {
-        layout: out,
+        layout: DatasetLayout {
+            schema: LAYOUT_SCHEMA.to_owned(),
+            zone_cm: layout.zone_cm,
+            restricted_zone_cm: layout.sink_zone_cm,
+            objects,
+            extra: BTreeMap::new(),
+        },
         warnings,
     }
 }
 
+/// Orders objects by descending footprint w·d, ties by instance name (the order mesa writes
+/// and the published records mostly have). Returns whether the order changed.
+pub fn sort_by_footprint<T>(objects: &mut [T], key: impl Fn(&T) -> (&str, [f64; 3])) -> bool {
+    let before: Vec<String> = objects.iter().map(|o| key(o).0.to_owned()).collect();
+    objects.sort_by(|a, b| {
+        let (name_a, size_a) = key(a);
+        let (name_b, size_b) = key(b);
+        let fa = size_a[0] * size_a[1];
+        let fb = size_b[0] * size_b[1];
+        fb.total_cmp(&fa).then_with(|| name_a.cmp(name_b))
+    });
+    objects
+        .iter()
+        .map(|o| key(o).0)
+        .ne(before.iter().map(String::as_str))
+}
+
 impl DatasetLayout {
-    /// Sorts objects by descending footprint w·d, ties by instance name.
-    pub fn sort_objects(&mut self) {
-        self.objects.sort_by(|a, b| {
-            let fa = a.size_cm.0[0] * a.size_cm.0[1];
-            let fb = b.size_cm.0[0] * b.size_cm.0[1];
-            fb.total_cmp(&fa).then_with(|| a.instance.cmp(&b.instance))
-        });
+    /// Sorts objects by descending footprint w·d, ties by instance name; whether it changed.
+    pub fn sort_objects(&mut self) -> bool {
+        sort_by_footprint(&mut self.objects, |o| (&o.instance, o.size_cm.0))
     }
 }
 
@@ -183,12 +193,11 @@ mod tests {
     proptest! {
         #[test]
         fn pure_yaw_layouts_round_trip_exactly(objects in prop::collection::vec(object(), 0..12)) {
-            let mut llm = LlmLayout {
+            let llm = LlmLayout {
                 zone_cm: ZoneCm([0.0, 120.0, 0.0, 80.0]),
                 sink_zone_cm: None,
                 objects,
             };
-            llm.sort_objects();
             let dataset = dataset_from_llm(&llm).layout;
             let back = llm_from_dataset(&dataset);
             prop_assert!(back.warnings.iter().all(|w| !w.contains("tilted")));

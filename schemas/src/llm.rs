@@ -41,13 +41,10 @@ pub struct LlmObject {
 }
 
 impl LlmLayout {
-    /// Sorts objects by descending footprint w·d, ties by instance name (the published order).
-    pub fn sort_objects(&mut self) {
-        self.objects.sort_by(|a, b| {
-            let fa = a.size_cm.0[0] * a.size_cm.0[1];
-            let fb = b.size_cm.0[0] * b.size_cm.0[1];
-            fb.total_cmp(&fa).then_with(|| a.instance.cmp(&b.instance))
-        });
+    /// Sorts objects by descending footprint w·d, ties by instance name (the published order);
+    /// whether the order changed.
+    pub fn sort_objects(&mut self) -> bool {
+        crate::convert::sort_by_footprint(&mut self.objects, |o| (&o.instance, o.size_cm.0))
     }
 
     /// Checks what the JSON Schema cannot say: unique instances and ordered zones.

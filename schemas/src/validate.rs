@@ -165,10 +165,10 @@ impl<'a> Walker<'a> {
         }
         match value {
             Value::Object(map) => self.walk_object(schema, map, path, out),
-            Value::Array(items) => self.walk_array(schema, items, path, &expected, out),
+            Value::Array(items) => self.walk_array(schema, items, path, own_description, out),
             Value::Number(number) => {
                 if let Some(x) = number.as_f64() {
-                    check_bounds(schema, x, path, &expected, out);
+                    check_bounds(schema, own_description, x, path, out);
                 }
             }
             Value::String(text) => {
@@ -298,7 +298,7 @@ impl<'a> Walker<'a> {
         schema: &'a Map<String, Value>,
         items: &[Value],
         path: &str,
-        expected: &str,
+        description: Option<&str>,
         out: &mut Vec<Problem>,
     ) {
         let min = schema.get("minItems").and_then(Value::as_u64);
@@ -313,10 +313,9 @@ impl<'a> Walker<'a> {
                 (None, Some(b)) => format!("at most {b} items"),
                 (None, None) => unreachable!("count_ok is true without bounds"),
             };
-            let wanted = if expected.is_empty() {
-                wanted
-            } else {
-                format!("{wanted}: {expected}")
+            let wanted = match summary(schema, description) {
+                Some(description) => format!("{wanted}: {description}"),
+                None => wanted,
             };
             out.push(Problem::new(path, format!("has {count} items"), wanted));
         }
@@ -334,9 +333,9 @@ impl<'a> Walker<'a> {
 
 fn check_bounds(
     schema: &Map<String, Value>,
+    description: Option<&str>,
     x: f64,
     path: &str,
-    expected: &str,
     out: &mut Vec<Problem>,
 ) {
     let bound = |key: &str| schema.get(key).and_then(Value::as_f64);
@@ -362,10 +361,9 @@ fn check_bounds(
         }
     }
     if let Some(wanted) = violated {
-        let wanted = if expected.is_empty() {
-            wanted
-        } else {
-            format!("{wanted}: {expected}")
+        let wanted = match summary(schema, description) {
+            Some(description) => format!("{wanted}: {description}"),
+            None => wanted,
         };
         out.push(Problem::new(path, format!("is {x}"), wanted));
     }
@@ -391,14 +389,34 @@ fn type_matches(types: &Value, value: &Value) -> bool {
     }
 }
 
-/// What a schema expects, in words: its description, else its type.
+/// What a schema expects, in words: its type and its description (`an array: [x, y, z] in cm`).
 fn expectation(schema: &Map<String, Value>, own_description: Option<&str>) -> String {
-    let description = own_description.or_else(|| schema.get("description").and_then(Value::as_str));
-    if let Some(description) = description {
-        // The first sentence or line is the summary.
-        let line = description.lines().next().unwrap_or(description).trim();
-        return line.trim_end_matches('.').to_owned();
+    let types = type_words(schema);
+    match summary(schema, own_description) {
+        Some(description) if types.is_empty() => description,
+        Some(description) => format!("{types}: {description}"),
+        None => types,
     }
+}
+
+/// The first line of a schema's description, without its final period, lower-cased first.
+fn summary(schema: &Map<String, Value>, own_description: Option<&str>) -> Option<String> {
+    let description =
+        own_description.or_else(|| schema.get("description").and_then(Value::as_str))?;
+    let line = description.lines().next().unwrap_or(description).trim();
+    let line = line.trim_end_matches('.');
+    let mut chars = line.chars();
+    let first = chars.next()?;
+    // Keep acronyms and code (`SHA-256`, `[x, y]`) as they are; lower-case a plain word.
+    let second_upper = line.chars().nth(1).is_some_and(char::is_uppercase);
+    Some(if first.is_uppercase() && !second_upper {
+        first.to_lowercase().chain(chars).collect()
+    } else {
+        line.to_owned()
+    })
+}
+
+fn type_words(schema: &Map<String, Value>) -> String {
     match schema.get("type") {
         Some(Value::String(t)) => article(t),
         Some(Value::Array(list)) => list

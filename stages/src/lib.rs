@@ -1,14 +1,17 @@
-//! mesa-stages: the pipeline stages as pure library functions, and the shared pieces they
-//! need.
+//! mesa-stages: the stages of the mesa pipeline as pure library functions (no CLI types, no
+//! global state, every random choice seeded from the scene id and the configured seed), and
+//! the shared pieces they need.
 //!
 //! - [`mesh`]: triangle meshes, transforms, bounds and frame conversions.
 //! - [`glb_write`]: writing GLB files (embedded PNG textures, materials, node hierarchies).
 //! - [`raster`]: a CPU z-buffer rasterizer (depth in metres, instance ids, shaded colour).
 //! - [`image_io`]: PNG encoding and decoding.
 //! - [`demo`]: `mesa demo`, a synthetic dataset workspace with ground truth.
+//! - [`lift`]: depth + masks → point clouds, table frame, boxes.
 
 pub mod demo;
 pub mod glb_write;
 pub mod image_io;
+pub mod lift;
 pub mod mesh;
 pub mod raster;

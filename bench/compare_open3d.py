@@ -1,0 +1,89 @@
+#!/usr/bin/env python3
+"""Times `mesa lift` against the same work done with Open3D, on the same input.
+
+The input is the synthetic benchmark scene (1024x1024 depth, 15 boxes on a table, a label mask),
+written by `cargo run --release -p mesa-stages --example synthetic_scene`. The Open3D pipeline
+is what a user would otherwise write: read the PNGs, `PointCloud.create_from_depth_image`, a
+RANSAC table plane (`segment_plane`), and per instance `select_by_index`,
+`remove_statistical_outlier(20, 2.0)` and `get_axis_aligned_bounding_box`. Open3D runs
+single-threaded (OMP_NUM_THREADS=1); mesa runs with --jobs 1 over copies of the scene, so its
+process start-up is amortised but counted.
+
+    pip install open3d numpy pillow
+    python bench/compare_open3d.py [--copies 20] [--repeat 5]
+"""
+import argparse, json, os, shutil, subprocess, sys, tempfile, time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+import numpy as np  # noqa: E402
+import open3d as o3d  # noqa: E402
+from PIL import Image  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def cargo(*args):
+    subprocess.run(["cargo", *args], cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+
+
+def open3d_lift(input_dir: Path):
+    camera = json.loads((input_dir / "camera.json").read_text())
+    instances = json.loads((input_dir / "instances.json").read_text())["instances"]
+    depth = o3d.io.read_image(str(input_dir / "depth.png"))
+    labels = np.asarray(Image.open(input_dir / "masks.png"))
+    _photo = o3d.io.read_image(str(input_dir / "image.png"))
+    intrinsic = o3d.camera.PinholeCameraIntrinsic(
+        camera["width"], camera["height"], camera["fx"], camera["fy"], camera["cx"], camera["cy"])
+    cloud = o3d.geometry.PointCloud.create_from_depth_image(depth, intrinsic, depth_scale=1000.0, depth_trunc=100.0)
+    valid = np.asarray(depth).reshape(-1) > 0
+    index_of_pixel = np.cumsum(valid) - 1
+    flat = labels.reshape(-1)
+    boxes = {}
+    for inst in instances:
+        pixels = np.nonzero((flat == inst["id"]) & valid)[0]
+        part = cloud.select_by_index(index_of_pixel[pixels].tolist())
+        if inst.get("support"):
+            part.segment_plane(distance_threshold=0.005, ransac_n=3, num_iterations=400)
+            continue
+        kept, _ = part.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
+        boxes[inst["id"]] = kept.get_axis_aligned_bounding_box()
+    return boxes
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--copies", type=int, default=20, help="scenes in the mesa dataset")
+    parser.add_argument("--repeat", type=int, default=5, help="Open3D repetitions")
+    parser.add_argument("--mesa", default=str(ROOT / "target/release/mesa"))
+    args = parser.parse_args()
+    cargo("build", "--release", "-p", "mesa-pipeline")
+    with tempfile.TemporaryDirectory() as tmp:
+        dataset = Path(tmp) / "dataset"
+        first = dataset / "scenes/office_table/office_table_0000/input"
+        cargo("run", "--release", "-q", "-p", "mesa-stages", "--example", "synthetic_scene", "--", str(first))
+        for k in range(1, args.copies):
+            shutil.copytree(first, dataset / f"scenes/office_table/office_table_{k:04d}/input")
+
+        open3d_lift(first)  # warm-up
+        times = []
+        for _ in range(args.repeat):
+            start = time.perf_counter()
+            open3d_lift(first)
+            times.append(time.perf_counter() - start)
+        open3d_ms = 1000 * min(times)
+
+        cmd = [args.mesa, "lift", str(dataset), "--jobs", "1", "--force", "--progress", "off", "-q"]
+        subprocess.run(cmd, check=True)  # warm-up (page cache)
+        start = time.perf_counter()
+        subprocess.run(cmd, check=True)
+        mesa_ms = 1000 * (time.perf_counter() - start) / args.copies
+
+    print(f"input: 1024x1024 depth, 15 instances + table; Open3D {o3d.__version__}, single-threaded")
+    print(f"open3d: {open3d_ms:8.1f} ms per scene (best of {args.repeat})")
+    print(f"mesa:   {mesa_ms:8.1f} ms per scene (mesa lift --jobs 1 over {args.copies} scenes, writes included)")
+    print(f"ratio:  {open3d_ms / mesa_ms:8.2f}x")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

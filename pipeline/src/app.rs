@@ -1,0 +1,431 @@
+//! What each subcommand does: raw flags become a validated configuration before any work
+//! starts (bad usage fails in the first second with exit code 2), then the library runs.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::{bail, Context as _};
+use mesa_schemas::convert::{dataset_from_llm, llm_from_dataset};
+use mesa_schemas::json::to_sorted_pretty;
+use mesa_schemas::output::parse_model_output;
+use mesa_schemas::{kinds, validate_text, Kind};
+
+use crate::cli::{Cli, Command, ConvertArgs, LayoutForm, ParseOutputArgs, RunArgs, StageArgs};
+use crate::cli::{StatusArgs, ValidateArgs};
+use crate::config::{annotated_toml, Config};
+use crate::fsio::{write_atomic, DigestCache};
+use crate::layouts::{read_any_layout, AnyLayout};
+use crate::runner::{
+    discover_scenes, format_summary, run_stage, scene_state, RunOptions, SceneStage, SceneState,
+    Shard, StageContext,
+};
+use crate::stages::pipeline_stages;
+
+/// Exit code: every scene done / the files are valid.
+pub const EXIT_OK: u8 = 0;
+/// Exit code: some scenes failed / some files are invalid.
+pub const EXIT_FAILED: u8 = 1;
+/// Exit code: bad usage or configuration.
+pub const EXIT_USAGE: u8 = 2;
+
+/// A usage or configuration error (exit code 2), as opposed to failed scenes (exit code 1).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
+/// Runs a parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {
+        Command::Run(args) => run_all(args, cli.quiet),
+        Command::Status(args) => status(args),
+        Command::Validate(args) => validate(args),
+        Command::Convert(args) => convert(args),
+        Command::ParseOutput(args) => parse_output(args),
+        Command::Lift(args) => run_one(&crate::stages::lift::Lift, &resolve(&args, cli.quiet)?),
+    }
+}
+
+/// The resolved configuration and runner options of a stage command.
+pub struct Resolved {
+    /// The dataset folder.
+    pub dataset: PathBuf,
+    /// The configuration.
+    pub config: Config,
+    /// The runner options.
+    pub options: RunOptions,
+}
+
+/// Resolves the runner flags against `mesa.toml` and the Slurm environment.
+pub fn resolve(args: &StageArgs, quiet: bool) -> anyhow::Result<Resolved> {
+    if !args.dataset.is_dir() {
+        return Err(UsageError(format!(
+            "{}: no such dataset folder (expected a folder with scenes/; `mesa demo DIR` writes one)",
+            args.dataset.display()
+        ))
+        .into());
+    }
+    let config = Config::load(&args.dataset, args.config.as_deref())
+        .map_err(|e| UsageError(e.to_string()))?;
+    let mut options = RunOptions::from_config(&config);
+    options.scenes = args.scenes.clone();
+    if let Some(jobs) = args.jobs {
+        options.jobs = jobs;
+    }
+    options.shard = match args.shard {
+        Some(shard) => shard,
+        None => Shard::from_slurm_env()
+            .map_err(UsageError)?
+            .unwrap_or_default(),
+    };
+    options.force = args.force;
+    if let Some(progress) = args.progress {
+        options.progress = progress.into();
+    }
+    if quiet {
+        options.progress = crate::config::ProgressMode::Off;
+    }
+    options.progress_interval = Duration::from_secs_f64(config.run.progress_interval_s.max(0.1));
+    Ok(Resolved {
+        dataset: args.dataset.clone(),
+        config,
+        options,
+    })
+}
+
+/// Runs one stage with resolved flags, prints the summary, and gives the exit code.
+pub fn run_one(stage: &dyn SceneStage, resolved: &Resolved) -> anyhow::Result<ExitCode> {
+    let ctx = StageContext {
+        dataset: &resolved.dataset,
+        config: &resolved.config,
+    };
+    let summary =
+        run_stage(stage, &ctx, &resolved.options).map_err(|e| UsageError(e.to_string()))?;
+    eprint!("{}", format_summary(&summary));
+    Ok(ExitCode::from(if summary.success() {
+        EXIT_OK
+    } else {
+        EXIT_FAILED
+    }))
+}
+
+fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let resolved = resolve(&args.stage, quiet)?;
+    if args.print_config {
+        print!("{}", annotated_toml(&resolved.config)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    let stages = pipeline_stages();
+    if stages.is_empty() {
+        bail!("this build of mesa has no per-scene stage to run");
+    }
+    // The resolved configuration of the last run, for the record.
+    let resolved_toml = annotated_toml(&resolved.config)?;
+    write_atomic(
+        &resolved.dataset.join(".mesa/config.resolved.toml"),
+        resolved_toml.as_bytes(),
+    )
+    .with_context(|| format!("{}: cannot write .mesa/", resolved.dataset.display()))?;
+    let mut failed = false;
+    for stage in &stages {
+        let code = run_one(stage.as_ref(), &resolved)?;
+        failed |= code != ExitCode::SUCCESS;
+    }
+    Ok(ExitCode::from(if failed { EXIT_FAILED } else { EXIT_OK }))
+}
+
+fn status(args: StatusArgs) -> anyhow::Result<ExitCode> {
+    let config = Config::load(&args.dataset, args.config.as_deref())
+        .map_err(|e| UsageError(e.to_string()))?;
+    let ctx = StageContext {
+        dataset: &args.dataset,
+        config: &config,
+    };
+    let scenes = discover_scenes(&args.dataset).map_err(|e| UsageError(e.to_string()))?;
+    let cache = DigestCache::default();
+    let mut out = String::new();
+    out.push_str(&format!(
+        "{}: {} scenes\n{:<10} {:>7} {:>7} {:>7} {:>7}\n",
+        args.dataset.display(),
+        scenes.len(),
+        "stage",
+        "done",
+        "stale",
+        "failed",
+        "pending"
+    ));
+    let mut notes = Vec::new();
+    for stage in pipeline_stages() {
+        let digest = stage.config_digest(&ctx);
+        let (mut done, mut stale, mut failed, mut pending) = (0, 0, 0, 0);
+        for scene in &scenes {
+            match scene_state(stage.as_ref(), &ctx, scene, &digest, &cache) {
+                SceneState::Done => done += 1,
+                SceneState::Stale(why) => {
+                    stale += 1;
+                    if notes.len() < 20 {
+                        notes.push(format!("  {} {}: stale: {why}", stage.name(), scene.key()));
+                    }
+                }
+                SceneState::Failed(why) => {
+                    failed += 1;
+                    if notes.len() < 20 {
+                        notes.push(format!("  {} {}: failed: {why}", stage.name(), scene.key()));
+                    }
+                }
+                SceneState::Pending => pending += 1,
+            }
+        }
+        out.push_str(&format!(
+            "{:<10} {done:>7} {stale:>7} {failed:>7} {pending:>7}\n",
+            stage.name()
+        ));
+    }
+    for note in notes {
+        out.push_str(&note);
+        out.push('\n');
+    }
+    print!("{out}");
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The kind of an official file that carries no `schema` field, from its file name.
+fn kind_from_file_name(path: &Path) -> Option<&'static Kind> {
+    let name = path.file_name()?.to_str()?;
+    let parent = path
+        .parent()
+        .and_then(|p| p.file_name())
+        .and_then(|n| n.to_str());
+    let kind = match (parent, name) {
+        (_, "layout.json") => "layout",
+        (Some("input"), "camera.json") => "camera",
+        (Some("input" | "truth"), "instances.json") => "instances",
+        (_, "sft.json") => "sft",
+        (_, "dpo.json") => "dpo",
+        (_, "trl_sft.jsonl") => "trl-sft",
+        (_, "trl_dpo.jsonl") => "trl-dpo",
+        (_, "dataset_info.json") => "dataset-info",
+        _ => return None,
+    };
+    Kind::by_name(kind)
+}
+
+fn collect_files(path: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
+    if path.is_dir() {
+        let mut entries: Vec<PathBuf> = std::fs::read_dir(path)?
+            .map(|e| e.map(|e| e.path()))
+            .collect::<Result<_, _>>()?;
+        entries.sort();
+        for entry in entries {
+            let hidden = entry
+                .file_name()
+                .is_some_and(|n| n.to_string_lossy().starts_with('.'));
+            if entry.is_dir() && !hidden {
+                collect_files(&entry, out)?;
+            } else if !hidden
+                && entry
+                    .extension()
+                    .is_some_and(|e| e == "json" || e == "jsonl")
+            {
+                out.push(entry);
+            }
+        }
+    } else {
+        out.push(path.to_owned());
+    }
+    Ok(())
+}
+
+fn validate(args: ValidateArgs) -> anyhow::Result<ExitCode> {
+    if args.list_kinds {
+        for kind in kinds() {
+            println!(
+                "{:<15} {:<18} {}",
+                kind.name,
+                kind.schema_id.unwrap_or("(no schema field)"),
+                kind.summary
+            );
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let forced = match &args.kind {
+        Some(name) => Some(Kind::by_name(name).ok_or_else(|| {
+            let names: Vec<&str> = kinds().iter().map(|k| k.name).collect();
+            UsageError(format!(
+                "--kind {name}: unknown kind (expected one of {})",
+                names.join(", ")
+            ))
+        })?),
+        None => None,
+    };
+    let mut files = Vec::new();
+    for path in &args.paths {
+        if !path.exists() {
+            return Err(UsageError(format!("{}: no such file or folder", path.display())).into());
+        }
+        collect_files(path, &mut files).with_context(|| format!("{}", path.display()))?;
+    }
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    let mut problems = 0usize;
+    let mut bad_files = 0usize;
+    for file in &files {
+        let text = match std::fs::read(file) {
+            Ok(bytes) => match String::from_utf8(bytes) {
+                Ok(text) => text,
+                Err(_) => {
+                    writeln!(
+                        out,
+                        "{}: $: is not UTF-8 text (expected JSON)",
+                        file.display()
+                    )?;
+                    problems += 1;
+                    bad_files += 1;
+                    continue;
+                }
+            },
+            Err(e) => {
+                writeln!(out, "{}: cannot read: {e}", file.display())?;
+                problems += 1;
+                bad_files += 1;
+                continue;
+            }
+        };
+        let jsonl = file.extension().is_some_and(|e| e == "jsonl");
+        let kind = forced.or_else(|| {
+            // Only files without a `schema` field fall back to their well-known names.
+            let first_doc = if jsonl {
+                text.lines().find(|l| !l.trim().is_empty()).unwrap_or("")
+            } else {
+                text.as_str()
+            };
+            let has_schema = mesa_schemas::json::parse_lenient(first_doc)
+                .ok()
+                .is_some_and(|v| v.get("schema").is_some());
+            if has_schema {
+                None
+            } else {
+                kind_from_file_name(file)
+            }
+        });
+        let found = validate_text(&text, kind, jsonl);
+        if !found.is_empty() {
+            bad_files += 1;
+        }
+        for located in &found {
+            problems += 1;
+            match located.line {
+                Some(line) if jsonl => {
+                    writeln!(out, "{}:{line}: {}", file.display(), located.problem)?
+                }
+                Some(line) => {
+                    writeln!(out, "{}: {} (line {line})", file.display(), located.problem)?
+                }
+                None => writeln!(out, "{}: {}", file.display(), located.problem)?,
+            }
+        }
+    }
+    eprintln!(
+        "{} files checked: {} valid, {bad_files} with problems ({problems} problems)",
+        files.len(),
+        files.len() - bad_files
+    );
+    Ok(ExitCode::from(if problems == 0 {
+        EXIT_OK
+    } else {
+        EXIT_FAILED
+    }))
+}
+
+fn convert(args: ConvertArgs) -> anyhow::Result<ExitCode> {
+    let layout = match read_any_layout(&args.input) {
+        Ok(layout) => layout,
+        Err(e) => {
+            eprintln!("mesa: {e:#}");
+            return Ok(ExitCode::from(EXIT_FAILED));
+        }
+    };
+    const REORDERED: &str = "objects reordered by descending footprint w·d (the input had \
+                             another order, which the scene graph's layout order follows; \
+                             --keep-order keeps it)";
+    let (bytes, warnings) = match (layout, args.to) {
+        (AnyLayout::Dataset(dataset), LayoutForm::Llm) => {
+            let mut converted = llm_from_dataset(&dataset);
+            if !args.keep_order && converted.layout.sort_objects() {
+                converted.warnings.push(REORDERED.to_owned());
+            }
+            (llm_bytes(&converted.layout)?, converted.warnings)
+        }
+        (AnyLayout::Llm(llm), LayoutForm::Dataset) => {
+            let mut converted = dataset_from_llm(&llm);
+            if !args.keep_order && converted.layout.sort_objects() {
+                converted.warnings.push(REORDERED.to_owned());
+            }
+            (to_sorted_pretty(&converted.layout)?, converted.warnings)
+        }
+        (AnyLayout::Llm(mut llm), LayoutForm::Llm) => {
+            let reordered = !args.keep_order && llm.sort_objects();
+            (
+                llm_bytes(&llm)?,
+                if reordered {
+                    vec![REORDERED.to_owned()]
+                } else {
+                    vec![]
+                },
+            )
+        }
+        (AnyLayout::Dataset(mut dataset), LayoutForm::Dataset) => {
+            let reordered = !args.keep_order && dataset.sort_objects();
+            (
+                to_sorted_pretty(&dataset)?,
+                if reordered {
+                    vec![REORDERED.to_owned()]
+                } else {
+                    vec![]
+                },
+            )
+        }
+    };
+    for warning in &warnings {
+        eprintln!("warning: {}: {warning}", args.input.display());
+    }
+    match &args.output {
+        Some(path) => write_atomic(path, &bytes)
+            .with_context(|| format!("{}: cannot write", path.display()))?,
+        None => std::io::stdout().write_all(&bytes)?,
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// An LLM layout as pretty JSON in the published key order, with a trailing newline.
+pub fn llm_bytes(layout: &mesa_schemas::LlmLayout) -> anyhow::Result<Vec<u8>> {
+    let mut bytes = serde_json::to_vec_pretty(layout)?;
+    bytes.push(b'\n');
+    Ok(bytes)
+}
+
+fn parse_output(args: ParseOutputArgs) -> anyhow::Result<ExitCode> {
+    let text = std::fs::read_to_string(&args.file)
+        .with_context(|| format!("{}: cannot read", args.file.display()))?;
+    match parse_model_output(&text) {
+        Ok(parsed) => {
+            std::io::stdout().write_all(&llm_bytes(&parsed.layout)?)?;
+            eprintln!(
+                "{}: success: {} objects, {} scene-graph lines, reasoning of {} characters",
+                args.file.display(),
+                parsed.layout.objects.len(),
+                parsed.graph_lines.len(),
+                parsed.reasoning.chars().count()
+            );
+            for dropped in &parsed.dropped_objects {
+                eprintln!("{}: dropped {dropped}", args.file.display());
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Err(e) => {
+            eprintln!("{}: not a success: {e}", args.file.display());
+            Ok(ExitCode::from(EXIT_FAILED))
+        }
+    }
+}

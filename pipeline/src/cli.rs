@@ -1,0 +1,175 @@
+//! The command line: clap types only. Each doc comment is the `--help` text; the work is in
+//! [`crate::app`].
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use crate::config::ProgressMode;
+use crate::runner::Shard;
+
+/// mesa builds MesaTask-style tabletop-scene datasets: depth and masks to boxes, asset
+/// retrieval and placement, the annotator round trip, physics QA, scene graphs, and training
+/// records.
+#[derive(Debug, Parser)]
+#[command(name = "mesa", version, about, max_term_width = 100)]
+pub struct Cli {
+    /// More log output (-v: debug, -vv: trace).
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
+    /// Only errors and the final summary.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    /// The command.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run every stage over a dataset, in order.
+    Run(RunArgs),
+    /// Print, per stage, how many scenes are done, stale, failed and pending.
+    Status(StatusArgs),
+    /// Validate artifacts against their schemas, reporting every problem.
+    Validate(ValidateArgs),
+    /// Convert a layout between the dataset form and the LLM form.
+    Convert(ConvertArgs),
+    /// Parse a model output text (reasoning, scene graph, marker, layout JSON).
+    ParseOutput(ParseOutputArgs),
+    /// Depth maps and instance masks → point clouds, the table frame, and object boxes.
+    Lift(StageArgs),
+}
+
+/// Flags shared by every per-scene stage.
+#[derive(Debug, Args, Clone)]
+pub struct StageArgs {
+    /// The dataset folder (holds scenes/, assets/, mesa.toml).
+    pub dataset: PathBuf,
+    /// Only scenes whose "<table_type>/<scene_id>" or "<scene_id>" matches this glob.
+    #[arg(long, value_name = "GLOB")]
+    pub scenes: Option<String>,
+    /// Worker threads (default: [run] jobs of mesa.toml; 0 = one per core).
+    #[arg(short, long, value_name = "N")]
+    pub jobs: Option<usize>,
+    /// Process only scene k of the sorted scene list when k mod N = I (default: from
+    /// SLURM_ARRAY_TASK_ID / SLURM_ARRAY_TASK_COUNT when set).
+    #[arg(long, value_name = "I/N")]
+    pub shard: Option<Shard>,
+    /// Redo every scene, even those whose done marker still matches.
+    #[arg(long)]
+    pub force: bool,
+    /// The configuration file (default: DATASET/mesa.toml when it exists).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Progress display (default: [run] progress of mesa.toml).
+    #[arg(long, value_enum)]
+    pub progress: Option<ProgressArg>,
+}
+
+/// `--progress`.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum ProgressArg {
+    /// A bar on a terminal, periodic lines otherwise.
+    Auto,
+    /// Always a bar.
+    Bar,
+    /// Periodic lines.
+    Lines,
+    /// Only the summary.
+    Off,
+}
+
+impl From<ProgressArg> for ProgressMode {
+    fn from(value: ProgressArg) -> Self {
+        match value {
+            ProgressArg::Auto => Self::Auto,
+            ProgressArg::Bar => Self::Bar,
+            ProgressArg::Lines => Self::Lines,
+            ProgressArg::Off => Self::Off,
+        }
+    }
+}
+
+/// `mesa run`.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// The runner flags.
+    #[command(flatten)]
+    pub stage: StageArgs,
+    /// Print the resolved configuration (every key, documented) and exit.
+    #[arg(long)]
+    pub print_config: bool,
+}
+
+/// `mesa status`.
+#[derive(Debug, Args)]
+pub struct StatusArgs {
+    /// The dataset folder.
+    pub dataset: PathBuf,
+    /// The configuration file (default: DATASET/mesa.toml when it exists).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+}
+
+/// `mesa validate`.
+#[derive(Debug, Args)]
+pub struct ValidateArgs {
+    /// Files or folders (folders: every .json and .jsonl file below them).
+    #[arg(required = true)]
+    pub paths: Vec<PathBuf>,
+    /// The kind of files that carry no "schema" field (official formats): layout,
+    /// llm-layout, task-info, gallery-record, camera, instances, sft, dpo, trl-sft, trl-dpo,
+    /// dataset-info, ... (`mesa validate --list-kinds` shows all).
+    #[arg(long, value_name = "KIND")]
+    pub kind: Option<String>,
+    /// List the kinds and exit.
+    #[arg(long, exclusive = true)]
+    pub list_kinds: bool,
+}
+
+/// `--to`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LayoutForm {
+    /// The LLM layout (cm, z_rotation in degrees, objects by descending footprint).
+    Llm,
+    /// The dataset layout (cm, quaternion xyzw, retrieved_uid, scale_factor).
+    Dataset,
+}
+
+/// `mesa convert`.
+#[derive(Debug, Args)]
+pub struct ConvertArgs {
+    /// A dataset layout, an LLM layout, or a published MesaTask record (its
+    /// `scene_layout_json`).
+    pub input: PathBuf,
+    /// The form to write.
+    #[arg(long, value_enum)]
+    pub to: LayoutForm,
+    /// Where to write (default: standard output).
+    #[arg(short, long, value_name = "FILE")]
+    pub output: Option<PathBuf>,
+    /// Keep the input's object order instead of sorting by descending footprint w·d (the
+    /// scene graph's "layout order" depends on it).
+    #[arg(long)]
+    pub keep_order: bool,
+}
+
+/// `mesa parse-output`.
+#[derive(Debug, Args)]
+pub struct ParseOutputArgs {
+    /// A text file holding one model output.
+    pub file: PathBuf,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_cli_is_well_formed() {
+        Cli::command().debug_assert();
+    }
+}

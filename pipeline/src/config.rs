@@ -1,0 +1,198 @@
+//! `mesa.toml`: every threshold and path, each key defaulted and documented.
+//!
+//! The doc comment of each field is its documentation: it becomes the `description` of the
+//! generated JSON Schema, which [`annotated_toml`] prints above each key for
+//! `mesa run DATASET --print-config`. Unknown keys are errors (a typo must not silently fall
+//! back to a default).
+
+use std::path::{Path, PathBuf};
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+/// The name of the configuration file in a dataset folder.
+pub const CONFIG_FILE: &str = "mesa.toml";
+
+/// The resolved configuration of a dataset.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// How stages run: threads, seed, progress display.
+    pub run: RunConfig,
+    /// `mesa lift`: depth and masks to point clouds, the table frame and boxes.
+    pub lift: mesa_stages::lift::LiftConfig,
+}
+
+/// The `[run]` section.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunConfig {
+    /// Worker threads; 0 means one per available core. `--jobs` overrides it.
+    pub jobs: usize,
+    /// Seed of every random choice; combined with the scene id, so scenes are independent.
+    pub seed: u64,
+    /// Progress display: "auto" (a bar on a terminal, periodic lines otherwise), "bar",
+    /// "lines" or "off".
+    pub progress: ProgressMode,
+    /// Seconds between progress lines when lines are printed.
+    pub progress_interval_s: f64,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            jobs: 0,
+            seed: 0,
+            progress: ProgressMode::Auto,
+            progress_interval_s: 10.0,
+        }
+    }
+}
+
+/// How progress is shown.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ProgressMode {
+    /// A bar on a terminal, periodic lines otherwise.
+    Auto,
+    /// Always a bar.
+    Bar,
+    /// Always periodic lines.
+    Lines,
+    /// Nothing until the summary.
+    Off,
+}
+
+/// A configuration that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file cannot be read.
+    #[error("{path}: cannot read the configuration: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not a valid configuration.
+    #[error("{path}: {message}(run `mesa run DATASET --print-config` to see every key with its default)")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The parser's message (with line, column and key).
+        message: String,
+    },
+}
+
+impl Config {
+    /// Loads `file` if given, else `DATASET/mesa.toml` if it exists, else the defaults.
+    pub fn load(dataset: &Path, file: Option<&Path>) -> Result<Self, ConfigError> {
+        let path = match file {
+            Some(file) => file.to_owned(),
+            None => {
+                let path = dataset.join(CONFIG_FILE);
+                if !path.exists() {
+                    return Ok(Self::default());
+                }
+                path
+            }
+        };
+        let text = std::fs::read_to_string(&path).map_err(|source| ConfigError::Read {
+            path: path.clone(),
+            source,
+        })?;
+        Self::from_toml(&text).map_err(|message| ConfigError::Parse { path, message })
+    }
+
+    /// Parses TOML text; the error message names the line and key.
+    pub fn from_toml(text: &str) -> Result<Self, String> {
+        toml::from_str(text).map_err(|e| e.to_string())
+    }
+}
+
+/// The configuration as TOML, every key with its doc comment above it.
+pub fn annotated_toml(config: &Config) -> Result<String, toml::ser::Error> {
+    let schema = schemars::schema_for!(Config).to_value();
+    let table = toml::Table::try_from(config)?;
+    let mut out = String::from(
+        "# mesa configuration: every key with its resolved value.\n\
+         # Put any of these in DATASET/mesa.toml to change them; flags override the file.\n",
+    );
+    for (section, value) in &table {
+        let section_schema = property_schema(&schema, &schema, section);
+        out.push('\n');
+        push_comment(&mut out, description(&schema, &schema, section));
+        match value {
+            toml::Value::Table(keys) => {
+                out.push_str(&format!("[{section}]\n"));
+                for (key, value) in keys {
+                    push_comment(&mut out, description(&schema, section_schema, key));
+                    out.push_str(&format!("{key} = {value}\n"));
+                }
+            }
+            other => out.push_str(&format!("{section} = {other}\n")),
+        }
+    }
+    Ok(out)
+}
+
+fn resolve<'a>(root: &'a Value, schema: &'a Value) -> &'a Value {
+    match schema.get("$ref").and_then(Value::as_str) {
+        Some(r) => r
+            .strip_prefix('#')
+            .and_then(|p| root.pointer(p))
+            .unwrap_or(schema),
+        None => schema,
+    }
+}
+
+fn property_schema<'a>(root: &'a Value, parent: &'a Value, key: &str) -> &'a Value {
+    let parent = resolve(root, parent);
+    match parent.get("properties").and_then(|p| p.get(key)) {
+        Some(s) => resolve(root, s),
+        None => &Value::Null,
+    }
+}
+
+fn description<'a>(root: &'a Value, parent: &'a Value, key: &str) -> Option<&'a str> {
+    let parent = resolve(root, parent);
+    let property = parent.get("properties")?.get(key)?;
+    property
+        .get("description")
+        .or_else(|| resolve(root, property).get("description"))
+        .and_then(Value::as_str)
+}
+
+fn push_comment(out: &mut String, text: Option<&str>) {
+    for line in text.unwrap_or("").lines().filter(|l| !l.trim().is_empty()) {
+        out.push_str("# ");
+        out.push_str(line.trim());
+        out.push('\n');
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_key_is_documented_and_the_output_parses_back() {
+        let text = annotated_toml(&Config::default()).expect("toml");
+        let back = Config::from_toml(&text).expect("parses back");
+        assert_eq!(back, Config::default());
+        // Every key line is preceded by a comment line.
+        let lines: Vec<&str> = text.lines().collect();
+        for (i, line) in lines.iter().enumerate() {
+            if line.contains(" = ") || line.starts_with('[') {
+                assert!(lines[i - 1].starts_with("# "), "undocumented: {line}");
+            }
+        }
+    }
+
+    #[test]
+    fn unknown_keys_are_errors_naming_the_key() {
+        let err = Config::from_toml("[run]\njobz = 3\n").expect_err("typo");
+        assert!(err.contains("jobz"), "{err}");
+    }
+}

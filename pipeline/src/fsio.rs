@@ -1,0 +1,152 @@
+//! Atomic writes and content digests.
+//!
+//! A file is written to a temporary name in the same folder and renamed over the target, so a
+//! reader (or a rerun after `kill -9`) sees either the old bytes or the new ones, never a
+//! mixture. Temporary names carry [`TMP_MARK`] and the owner's file name, so a rerun can sweep
+//! the leftovers of a killed run for exactly the files it is about to write.
+
+use std::collections::HashMap;
+use std::fs;
+use std::io::{self, Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
+
+use sha2::{Digest, Sha256};
+
+/// The marker in the names of temporary files (also in `.gitignore`).
+pub const TMP_MARK: &str = ".mesa-tmp-";
+
+static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Writes `bytes` to `path` atomically, creating parent folders.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    let dir = path.parent().unwrap_or_else(|| Path::new("."));
+    fs::create_dir_all(dir)?;
+    let name = path
+        .file_name()
+        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"))?;
+    let tmp = dir.join(format!(
+        ".{}{}{}-{}",
+        name.to_string_lossy(),
+        TMP_MARK,
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let result = (|| {
+        let mut file = fs::File::create(&tmp)?;
+        file.write_all(bytes)?;
+        // No fsync: atomicity against a killed process needs only the rename; durability
+        // against power loss is the filesystem's job and would cost a flush per file.
+        drop(file);
+        fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Removes temporary files left beside `path` by a killed writer of that same file.
+pub fn sweep_tmp_for(path: &Path) -> io::Result<()> {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
+        return Ok(());
+    };
+    let prefix = format!(".{}{}", name.to_string_lossy(), TMP_MARK);
+    let entries = match fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e),
+    };
+    for entry in entries {
+        let entry = entry?;
+        if entry.file_name().to_string_lossy().starts_with(&prefix) {
+            let _ = fs::remove_file(entry.path());
+        }
+    }
+    Ok(())
+}
+
+/// SHA-256 of bytes, as lowercase hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    hex(&Sha256::digest(bytes))
+}
+
+/// SHA-256 of a file's content, streamed.
+pub fn sha256_file(path: &Path) -> io::Result<String> {
+    let mut file = fs::File::open(path)?;
+    let mut hasher = Sha256::new();
+    let mut buf = vec![0u8; 1 << 16];
+    loop {
+        let n = file.read(&mut buf)?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&buf[..n]);
+    }
+    Ok(hex(&hasher.finalize()))
+}
+
+fn hex(bytes: &[u8]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::with_capacity(bytes.len() * 2);
+    for b in bytes {
+        let _ = write!(s, "{b:02x}");
+    }
+    s
+}
+
+/// Digests of files shared by many scenes (asset index, annotations), computed once per run.
+#[derive(Debug, Default)]
+pub struct DigestCache {
+    shared: Mutex<HashMap<PathBuf, String>>,
+}
+
+impl DigestCache {
+    /// The digest of `path`; cached when `shared` (files outside a scene folder).
+    pub fn digest(&self, path: &Path, shared: bool) -> io::Result<String> {
+        if !shared {
+            return sha256_file(path);
+        }
+        if let Some(d) = self.lock().get(path) {
+            return Ok(d.clone());
+        }
+        let d = sha256_file(path)?;
+        self.lock().insert(path.to_owned(), d.clone());
+        Ok(d)
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<PathBuf, String>> {
+        // A poisoned cache only means another thread panicked mid-insert; the map is fine.
+        self.shared.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn atomic_write_replaces_and_sweeps() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let target = dir.path().join("a/b/out.json");
+        write_atomic(&target, b"one").expect("write");
+        write_atomic(&target, b"two").expect("write");
+        assert_eq!(fs::read(&target).expect("read"), b"two");
+        let stray = dir.path().join(format!("a/b/.out.json{TMP_MARK}999-0"));
+        fs::write(&stray, b"half").expect("stray");
+        let other = dir.path().join(format!("a/b/.other.json{TMP_MARK}999-0"));
+        fs::write(&other, b"half").expect("other");
+        sweep_tmp_for(&target).expect("sweep");
+        assert!(!stray.exists());
+        assert!(other.exists(), "only the named file's leftovers are swept");
+    }
+
+    #[test]
+    fn digests_are_sha256() {
+        assert_eq!(
+            sha256_hex(b"abc"),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+    }
+}

@@ -1,0 +1,11 @@
+//! The per-scene stages of `mesa run`, in pipeline order, as runner adapters over the pure
+//! functions of `mesa-stages`.
+
+pub mod lift;
+
+use crate::runner::SceneStage;
+
+/// Every per-scene stage, in the order `mesa run` runs them.
+pub fn pipeline_stages() -> Vec<Box<dyn SceneStage>> {
+    vec![Box::new(lift::Lift)]
+}

@@ -1,0 +1,338 @@
+//! The runner's guarantees, with a small test stage over generated scenes: skip-done, redo on
+//! change, failures that leave nothing behind, SIGKILL then resume, and byte-identical outputs
+//! for any thread count or shard split.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use mesa_pipeline::config::{Config, ProgressMode};
+use mesa_pipeline::runner::{
+    run_stage, RunOptions, Scene, SceneOutput, SceneStage, Shard, StageContext,
+};
+
+/// Upper-cases `input/data.txt` into three files; fails on "FAIL", panics on "PANIC".
+struct Echo {
+    delay: Duration,
+}
+
+impl SceneStage for Echo {
+    fn name(&self) -> &'static str {
+        "echo"
+    }
+
+    fn inputs(&self, _: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
+        Ok(vec![scene.rel("input/data.txt")])
+    }
+
+    fn config_digest(&self, ctx: &StageContext<'_>) -> String {
+        mesa_pipeline::runner::digest_of(&ctx.config.run.seed)
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
+        let text = std::fs::read_to_string(scene.path("input/data.txt"))?;
+        anyhow::ensure!(!text.contains("FAIL"), "input/data.txt asks to fail");
+        assert!(!text.contains("PANIC"), "input/data.txt asks to panic");
+        let mut out = SceneOutput::new();
+        // Files large enough that a kill can land mid-write.
+        let body = text.to_uppercase().repeat(2000);
+        out.add_file("echo/a.txt", body.clone().into_bytes());
+        std::thread::sleep(self.delay);
+        out.add_file(
+            "echo/b.txt",
+            format!("{}{body}", ctx.config.run.seed).into_bytes(),
+        );
+        out.add_json("echo/c.json", &BTreeMap::from([("scene", scene.key())]))?;
+        Ok(out)
+    }
+}
+
+fn make_dataset(dir: &Path, scenes: usize) {
+    let tables = ["office_table", "dining_table", "coffee_table"];
+    for k in 0..scenes {
+        let table = tables[k % tables.len()];
+        let scene = dir.join(format!("scenes/{table}/{table}_{k:04}/input"));
+        std::fs::create_dir_all(&scene).expect("mkdir");
+        std::fs::write(scene.join("data.txt"), format!("scene {k}\n")).expect("write");
+    }
+}
+
+fn options(jobs: usize) -> RunOptions {
+    RunOptions {
+        jobs,
+        progress: ProgressMode::Off,
+        ..RunOptions::from_config(&Config::default())
+    }
+}
+
+fn run(dir: &Path, config: &Config, options: &RunOptions) -> mesa_pipeline::runner::StageSummary {
+    let ctx = StageContext {
+        dataset: dir,
+        config,
+    };
+    run_stage(
+        &Echo {
+            delay: Duration::ZERO,
+        },
+        &ctx,
+        options,
+    )
+    .expect("run")
+}
+
+/// Every file under `scenes/` and `.mesa/markers/`, by relative path.
+fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return;
+        };
+        for entry in entries {
+            let path = entry.expect("entry").path();
+            if path.is_dir() {
+                walk(root, &path, out);
+            } else {
+                let rel = path
+                    .strip_prefix(root)
+                    .expect("prefix")
+                    .to_string_lossy()
+                    .into_owned();
+                out.insert(rel, std::fs::read(&path).expect("read"));
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(dir, &dir.join("scenes"), &mut out);
+    walk(dir, &dir.join(".mesa/markers"), &mut out);
+    out
+}
+
+fn reference(scenes: usize) -> (tempfile::TempDir, BTreeMap<String, Vec<u8>>) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), scenes);
+    let summary = run(dir.path(), &Config::default(), &options(1));
+    assert_eq!(summary.done, scenes);
+    let snap = snapshot(dir.path());
+    (dir, snap)
+}
+
+#[test]
+fn a_second_run_skips_everything_and_an_edit_redoes_exactly_that_scene() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), 12);
+    let config = Config::default();
+    let first = run(dir.path(), &config, &options(2));
+    assert_eq!((first.done, first.skipped, first.failed.len()), (12, 0, 0));
+    let second = run(dir.path(), &config, &options(2));
+    assert_eq!((second.done, second.skipped), (0, 12));
+
+    let edited = dir
+        .path()
+        .join("scenes/dining_table/dining_table_0004/input/data.txt");
+    std::fs::write(&edited, "edited\n").expect("edit");
+    let third = run(dir.path(), &config, &options(2));
+    assert_eq!((third.done, third.skipped), (1, 11));
+    let out = std::fs::read_to_string(
+        dir.path()
+            .join("scenes/dining_table/dining_table_0004/echo/a.txt"),
+    )
+    .expect("redone");
+    assert!(out.starts_with("EDITED"));
+
+    // A deleted output is noticed and rewritten.
+    std::fs::remove_file(
+        dir.path()
+            .join("scenes/office_table/office_table_0000/echo/b.txt"),
+    )
+    .expect("rm");
+    let fourth = run(dir.path(), &config, &options(1));
+    assert_eq!((fourth.done, fourth.skipped), (1, 11));
+
+    // A configuration change redoes everything; --force too.
+    let mut seeded = Config::default();
+    seeded.run.seed = 7;
+    assert_eq!(run(dir.path(), &seeded, &options(2)).done, 12);
+    let forced = RunOptions {
+        force: true,
+        ..options(2)
+    };
+    assert_eq!(run(dir.path(), &seeded, &forced).done, 12);
+}
+
+#[test]
+fn a_failing_scene_leaves_no_output_and_does_not_stop_the_others() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), 9);
+    let config = Config::default();
+    assert_eq!(run(dir.path(), &config, &options(2)).done, 9);
+    let bad = dir.path().join("scenes/coffee_table/coffee_table_0002");
+    let panicky = dir.path().join("scenes/office_table/office_table_0003");
+    std::fs::write(bad.join("input/data.txt"), "FAIL\n").expect("edit");
+    std::fs::write(panicky.join("input/data.txt"), "PANIC\n").expect("edit");
+    let summary = run(dir.path(), &config, &options(2));
+    assert_eq!((summary.done, summary.skipped), (0, 7));
+    assert_eq!(summary.failed.len(), 2);
+    let (scene, chain) = &summary.failed[0];
+    assert_eq!(scene, "coffee_table/coffee_table_0002");
+    assert_eq!(chain, &vec!["input/data.txt asks to fail".to_owned()]);
+    assert!(summary.failed[1].1[0].starts_with("internal error: input/data.txt asks to panic"));
+    // Nothing of the earlier success is left to be mistaken for current output.
+    assert_eq!(std::fs::read_dir(bad.join("echo")).expect("dir").count(), 0);
+    assert!(!panicky.join("echo/a.txt").exists());
+    let marker: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(
+            dir.path()
+                .join(".mesa/markers/echo/coffee_table/coffee_table_0002.json"),
+        )
+        .expect("failed marker"),
+    )
+    .expect("json");
+    assert_eq!(marker["status"], "failed");
+    assert_eq!(marker["error"][0], "input/data.txt asks to fail");
+    // A failed scene is retried, and succeeds once its input is fixed.
+    std::fs::write(bad.join("input/data.txt"), "fixed\n").expect("fix");
+    let again = run(dir.path(), &config, &options(2));
+    assert_eq!((again.done, again.failed.len()), (1, 1));
+}
+
+#[test]
+fn a_missing_input_fails_that_scene_with_the_path() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), 3);
+    std::fs::remove_file(
+        dir.path()
+            .join("scenes/dining_table/dining_table_0001/input/data.txt"),
+    )
+    .expect("rm");
+    let summary = run(dir.path(), &Config::default(), &options(1));
+    assert_eq!(summary.done, 2);
+    assert_eq!(summary.failed.len(), 1);
+    let message = &summary.failed[0].1[0];
+    assert!(
+        message.contains("dining_table_0001/input/data.txt: missing input of `mesa echo`"),
+        "{message}"
+    );
+}
+
+#[test]
+fn thread_counts_and_shard_splits_give_identical_bytes() {
+    let scenes = 20;
+    let (_ref_dir, expected) = reference(scenes);
+    for jobs in [2, 4] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        make_dataset(dir.path(), scenes);
+        run(dir.path(), &Config::default(), &options(jobs));
+        assert!(snapshot(dir.path()) == expected, "{jobs} threads differ");
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), scenes);
+    let mut processed = 0;
+    for index in 0..3 {
+        let sharded = RunOptions {
+            shard: Shard { index, count: 3 },
+            ..options(2)
+        };
+        let summary = run(dir.path(), &Config::default(), &sharded);
+        processed += summary.done;
+    }
+    assert_eq!(processed, scenes, "the shards partition the scenes");
+    assert!(
+        snapshot(dir.path()) == expected,
+        "3 shards merged differ from 1"
+    );
+}
+
+#[test]
+fn globs_select_by_table_type_or_scene_id() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), 9);
+    let only = |glob: &str| RunOptions {
+        scenes: Some(glob.to_owned()),
+        ..options(1)
+    };
+    assert_eq!(
+        run(dir.path(), &Config::default(), &only("office_table/*")).done,
+        3
+    );
+    // Scenes 0000-0004; the office tables among them (0000, 0003) are already done.
+    let by_id = run(dir.path(), &Config::default(), &only("*_000[0-4]"));
+    assert_eq!((by_id.scenes, by_id.done, by_id.skipped), (5, 3, 2));
+}
+
+/// The child side of the kill test: runs the echo stage slowly over the dataset in
+/// `MESA_KILL_CHILD`. Does nothing in a normal test run.
+#[test]
+#[ignore = "run by kill_then_resume_is_byte_identical as a child process"]
+fn kill_child() {
+    let Some(dir) = std::env::var_os("MESA_KILL_CHILD") else {
+        return;
+    };
+    let config = Config::default();
+    let ctx = StageContext {
+        dataset: Path::new(&dir),
+        config: &config,
+    };
+    let stage = Echo {
+        delay: Duration::from_millis(30),
+    };
+    run_stage(&stage, &ctx, &options(2)).expect("child run");
+}
+
+fn count_markers(dir: &Path) -> usize {
+    let root = dir.join(".mesa/markers/echo");
+    let Ok(tables) = std::fs::read_dir(root) else {
+        return 0;
+    };
+    tables
+        .filter_map(|t| std::fs::read_dir(t.ok()?.path()).ok())
+        .map(|entries| {
+            entries
+                .filter_map(Result::ok)
+                .filter(|e| e.file_name().to_string_lossy().ends_with(".json"))
+                .count()
+        })
+        .sum()
+}
+
+#[test]
+fn kill_then_resume_is_byte_identical() {
+    let scenes = 60;
+    let (_ref_dir, expected) = reference(scenes);
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), scenes);
+    let exe: PathBuf = std::env::current_exe().expect("test binary");
+    let mut child = Command::new(exe)
+        .args([
+            "--ignored",
+            "--exact",
+            "kill_child",
+            "--nocapture",
+            "--test-threads=1",
+        ])
+        .env("MESA_KILL_CHILD", dir.path())
+        .spawn()
+        .expect("spawn child");
+    let started = Instant::now();
+    while count_markers(dir.path()) < 10 {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "child made no progress"
+        );
+        if let Some(status) = child.try_wait().expect("wait") {
+            panic!("child ended before it was killed: {status}");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    child.kill().expect("SIGKILL");
+    child.wait().expect("reap");
+    let killed_at = count_markers(dir.path());
+    assert!(killed_at < scenes, "the child finished before the kill");
+
+    let summary = run(dir.path(), &Config::default(), &options(2));
+    assert!(summary.skipped >= 10, "resumed: {summary:?}");
+    assert_eq!(summary.done + summary.skipped, scenes);
+    let got = snapshot(dir.path());
+    let extra: Vec<&String> = got.keys().filter(|k| !expected.contains_key(*k)).collect();
+    assert!(extra.is_empty(), "left behind after the kill: {extra:?}");
+    assert!(got == expected, "outputs differ from an uninterrupted run");
+}

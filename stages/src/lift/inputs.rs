@@ -1,0 +1,631 @@
+//! Readers of a scene's inputs (SPEC section 3): depth in every accepted form, the camera,
+//! instance masks (label PNG, per-instance PNGs, COCO RLE), the photo.
+//!
+//! Every problem is a [`LiftError`] naming the file, the field and the fix.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use image::{DynamicImage, ImageReader};
+use mesa_schemas::artifacts::{CalibrationKind, DepthCalibration, InstanceEntry, InstancesJson};
+use serde_json::Value;
+
+use super::{LiftConfig, LiftError};
+
+/// A depth map in metres; `NaN` where there is no measurement.
+#[derive(Debug, Clone)]
+pub struct DepthMap {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Row-major depths in metres.
+    pub depth_m: Vec<f32>,
+}
+
+impl DepthMap {
+    /// The depth at (u, v), `None` when invalid.
+    pub fn at(&self, u: usize, v: usize) -> Option<f32> {
+        let d = self.depth_m[v * self.width + u];
+        d.is_finite().then_some(d)
+    }
+}
+
+/// Pinhole intrinsics in pixels (OpenCV convention).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Intrinsics {
+    /// Image width in pixels.
+    pub width: usize,
+    /// Image height in pixels.
+    pub height: usize,
+    /// Focal length x, pixels.
+    pub fx: f64,
+    /// Focal length y, pixels.
+    pub fy: f64,
+    /// Principal point x, pixels.
+    pub cx: f64,
+    /// Principal point y, pixels.
+    pub cy: f64,
+    /// Where they came from: `intrinsics` or `fov`.
+    pub source: &'static str,
+}
+
+/// The camera of a scene with the depth calibration it may carry.
+#[derive(Debug, Clone, Copy)]
+pub struct Camera {
+    /// The intrinsics.
+    pub intrinsics: Intrinsics,
+    /// An affine calibration when the depth map is relative.
+    pub calibration: Option<DepthCalibration>,
+}
+
+/// Instance masks: for each mask id, the pixel indices (row-major) it covers.
+#[derive(Debug, Clone, Default)]
+pub struct Masks {
+    /// Pixel indices by mask id, sorted.
+    pub pixels: BTreeMap<u32, Vec<u32>>,
+    /// Pixels covered by no mask (background), sorted.
+    pub background: Vec<u32>,
+    /// Which file the masks came from (for messages).
+    pub source: String,
+}
+
+fn image_error(path: &Path, e: impl std::fmt::Display) -> LiftError {
+    LiftError::input(
+        path,
+        "$",
+        format!("cannot decode the image: {e}"),
+        "re-export it as a complete PNG",
+    )
+}
+
+/// Opens a PNG fully (a truncated or corrupt file is an error naming it).
+pub fn read_png(path: &Path) -> Result<DynamicImage, LiftError> {
+    let reader = ImageReader::open(path)
+        .map_err(|e| LiftError::input(path, "$", format!("cannot open: {e}"), "check the path"))?
+        .with_guessed_format()
+        .map_err(|e| image_error(path, e))?;
+    reader.decode().map_err(|e| image_error(path, e))
+}
+
+/// Reads `input/depth.png` (16-bit, `depth_png_scale_m` metres per unit) or
+/// `input/depth.npy` (float32 or float64 metres, H×W or H×W×1), applying a relative-depth
+/// calibration when the camera has one. Zero, negative, NaN and infinite values are "no
+/// measurement".
+pub fn read_depth(
+    input: &Path,
+    camera: &Camera,
+    config: &LiftConfig,
+) -> Result<(DepthMap, PathBuf), LiftError> {
+    let png = input.join("depth.png");
+    let npy = input.join("depth.npy");
+    let (width, height, mut raw, path) = match (png.exists(), npy.exists()) {
+        (true, true) => {
+            return Err(LiftError::input(
+                &png,
+                "$",
+                "both depth.png and depth.npy exist",
+                "keep exactly one depth map per scene",
+            ))
+        }
+        (false, false) => {
+            return Err(LiftError::input(
+                &png,
+                "$",
+                "no depth map (neither depth.png nor depth.npy)",
+                "add input/depth.png (16-bit millimetres) or input/depth.npy (float32 metres)",
+            ))
+        }
+        (true, false) => {
+            let image = read_png(&png)?;
+            let DynamicImage::ImageLuma16(buffer) = image else {
+                return Err(LiftError::input(
+                    &png,
+                    "$",
+                    format!("is {:?}, not a 16-bit single-channel PNG", image.color()),
+                    "write depth as 16-bit grayscale (uint16 millimetres), or as depth.npy",
+                ));
+            };
+            let (w, h) = buffer.dimensions();
+            let scale = config.depth_png_scale_m as f32;
+            let values = buffer.into_raw().into_iter().map(|v| {
+                if v == 0 {
+                    f32::NAN
+                } else {
+                    f32::from(v) * scale
+                }
+            });
+            (w as usize, h as usize, values.collect::<Vec<f32>>(), png)
+        }
+        (false, true) => {
+            let (w, h, values) = read_npy_depth(&npy)?;
+            (w, h, values, npy)
+        }
+    };
+    if let Some(calibration) = camera.calibration {
+        for d in &mut raw {
+            *d = apply_calibration(*d, calibration);
+        }
+    }
+    for d in &mut raw {
+        if !(d.is_finite() && *d > 0.0) {
+            *d = f32::NAN;
+        }
+    }
+    if raw.iter().all(|d| d.is_nan()) {
+        return Err(LiftError::input(
+            &path,
+            "$",
+            "has no valid depth (every value is 0, negative, NaN or infinite)",
+            "check the depth export; metric depth in metres (npy) or millimetres (png) is expected",
+        ));
+    }
+    Ok((
+        DepthMap {
+            width,
+            height,
+            depth_m: raw,
+        },
+        path,
+    ))
+}
+
+fn apply_calibration(value: f32, c: DepthCalibration) -> f32 {
+    if !value.is_finite() {
+        return f32::NAN;
+    }
+    let affine = c.scale * f64::from(value) + c.shift;
+    match c.kind {
+        CalibrationKind::Depth => affine as f32,
+        CalibrationKind::Disparity if affine > 0.0 => (1.0 / affine) as f32,
+        CalibrationKind::Disparity => f32::NAN,
+    }
+}
+
+fn read_npy_depth(path: &Path) -> Result<(usize, usize, Vec<f32>), LiftError> {
+    use ndarray::ArrayD;
+    let file = std::fs::File::open(path)
+        .map_err(|e| LiftError::input(path, "$", format!("cannot open: {e}"), "check the path"))?;
+    let array: ArrayD<f32> = match ndarray_npy::ReadNpyExt::read_npy(&file) {
+        Ok(a) => a,
+        Err(first) => {
+            let file = std::fs::File::open(path).map_err(|e| {
+                LiftError::input(path, "$", format!("cannot open: {e}"), "check the path")
+            })?;
+            match <ArrayD<f64> as ndarray_npy::ReadNpyExt>::read_npy(file) {
+                Ok(a) => a.mapv(|v| v as f32),
+                Err(_) => {
+                    return Err(LiftError::input(
+                        path,
+                        "$",
+                        format!("is not a float32/float64 .npy array: {first}"),
+                        "save the depth with numpy.save(path, depth.astype(numpy.float32))",
+                    ))
+                }
+            }
+        }
+    };
+    let shape = array.shape().to_vec();
+    let (h, w) = match shape.as_slice() {
+        [h, w] | [h, w, 1] => (*h, *w),
+        _ => {
+            return Err(LiftError::input(
+                path,
+                "shape",
+                format!("has shape {shape:?}"),
+                "an H×W (or H×W×1) array of metres",
+            ))
+        }
+    };
+    let values = array.iter().copied().collect::<Vec<f32>>();
+    // `iter` walks in logical (row-major) order whatever the memory order is.
+    Ok((w, h, values))
+}
+
+/// Reads `input/camera.json`: intrinsics, or a horizontal FOV, or (when neither is present)
+/// the configured default FOV.
+pub fn read_camera(path: &Path, config: &LiftConfig) -> Result<Camera, LiftError> {
+    let value = read_json(path)?;
+    let number = |key: &str| -> Result<Option<f64>, LiftError> {
+        match value.get(key) {
+            None | Some(Value::Null) => Ok(None),
+            Some(v) => v
+                .as_f64()
+                .filter(|x| x.is_finite())
+                .map(Some)
+                .ok_or_else(|| LiftError::input(path, key, format!("is {v}"), "a finite number")),
+        }
+    };
+    let size = |key: &str| -> Result<usize, LiftError> {
+        match number(key)? {
+            Some(x) if x >= 1.0 && x.fract() == 0.0 => Ok(x as usize),
+            Some(x) => Err(LiftError::input(
+                path,
+                key,
+                format!("is {x}"),
+                "a positive integer (pixels)",
+            )),
+            None => Err(LiftError::input(
+                path,
+                key,
+                "is missing",
+                "the image size in pixels: {\"width\": W, \"height\": H, ...}",
+            )),
+        }
+    };
+    let width = size("width")?;
+    let height = size("height")?;
+    let calibration = match value.get("depth_calibration") {
+        None | Some(Value::Null) => None,
+        Some(v) => Some(
+            serde_json::from_value::<DepthCalibration>(v.clone()).map_err(|e| {
+                LiftError::input(
+                    path,
+                    "depth_calibration",
+                    e.to_string(),
+                    "{\"kind\": \"disparity\" | \"depth\", \"scale\": s, \"shift\": t}",
+                )
+            })?,
+        ),
+    };
+    let intrinsics = [number("fx")?, number("fy")?, number("cx")?, number("cy")?];
+    let intrinsics = match intrinsics {
+        [Some(fx), Some(fy), Some(cx), Some(cy)] => {
+            if fx <= 0.0 || fy <= 0.0 {
+                return Err(LiftError::input(
+                    path,
+                    "fx",
+                    format!("fx = {fx}, fy = {fy}"),
+                    "positive focal lengths in pixels",
+                ));
+            }
+            Intrinsics {
+                width,
+                height,
+                fx,
+                fy,
+                cx,
+                cy,
+                source: "intrinsics",
+            }
+        }
+        [None, None, None, None] => {
+            let fov = match number("fov_x_deg")? {
+                Some(fov) => fov,
+                None => Some(config.default_fov_x_deg).filter(|f| *f > 0.0).ok_or_else(|| {
+                    LiftError::input(
+                        path,
+                        "fx",
+                        "has no intrinsics (fx, fy, cx, cy) and no fov_x_deg, and [lift] default_fov_x_deg is 0 (unset)",
+                        "add fov_x_deg (degrees) or intrinsics to camera.json, or set [lift] default_fov_x_deg in mesa.toml",
+                    )
+                })?,
+            };
+            if !(fov > 1.0 && fov < 179.0) {
+                return Err(LiftError::input(
+                    path,
+                    "fov_x_deg",
+                    format!("is {fov}"),
+                    "a horizontal field of view between 1 and 179 degrees",
+                ));
+            }
+            let fx = (width as f64 / 2.0) / (fov.to_radians() / 2.0).tan();
+            Intrinsics {
+                width,
+                height,
+                fx,
+                fy: fx,
+                cx: width as f64 / 2.0,
+                cy: height as f64 / 2.0,
+                source: "fov",
+            }
+        }
+        partial => {
+            let names = ["fx", "fy", "cx", "cy"];
+            let missing: Vec<&str> = names
+                .iter()
+                .zip(partial)
+                .filter(|(_, v)| v.is_none())
+                .map(|(n, _)| *n)
+                .collect();
+            return Err(LiftError::input(
+                path,
+                missing[0],
+                format!("is missing ({} missing)", missing.join(", ")),
+                "all four of fx, fy, cx, cy in pixels, or only fov_x_deg",
+            ));
+        }
+    };
+    Ok(Camera {
+        intrinsics,
+        calibration,
+    })
+}
+
+/// Reads a JSON file, naming it on failure.
+pub fn read_json(path: &Path) -> Result<Value, LiftError> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        LiftError::input(
+            path,
+            "$",
+            format!("cannot read: {e}"),
+            "the file must exist and be UTF-8 JSON",
+        )
+    })?;
+    mesa_schemas::json::parse_lenient(&text)
+        .map_err(|e| LiftError::input(path, "$", format!("is not valid JSON: {e}"), "valid JSON"))
+}
+
+/// Reads `input/instances.json`.
+pub fn read_instances(path: &Path) -> Result<Vec<InstanceEntry>, LiftError> {
+    let value = read_json(path)?;
+    let problems = mesa_schemas::Kind::by_name("instances")
+        .map(|k| k.validate_value(&value))
+        .unwrap_or_default();
+    if let Some(problem) = problems.first() {
+        return Err(LiftError::input(
+            path,
+            problem.path.trim_start_matches("$."),
+            problem.problem.clone(),
+            problem.expected.clone(),
+        ));
+    }
+    let parsed: InstancesJson = serde_json::from_value(value).map_err(|e| {
+        LiftError::input(
+            path,
+            "instances",
+            e.to_string(),
+            "{\"instances\": [{\"id\", \"label\", \"description\", \"support\"}]}",
+        )
+    })?;
+    let mut seen = BTreeMap::new();
+    for (i, entry) in parsed.instances.iter().enumerate() {
+        if let Some(first) = seen.insert(entry.id, i) {
+            return Err(LiftError::input(
+                path,
+                &format!("instances[{i}].id"),
+                format!("id {} is used twice (also instances[{first}])", entry.id),
+                "one entry per mask id",
+            ));
+        }
+        if entry.id == 0 && entry.rle.is_none() {
+            return Err(LiftError::input(
+                path,
+                &format!("instances[{i}].id"),
+                "id 0 is the background of a label mask",
+                "ids from 1",
+            ));
+        }
+    }
+    Ok(parsed.instances)
+}
+
+/// Reads the masks of a scene: `masks.png` (8- or 16-bit labels), `masks/<id>.png` (binary,
+/// overlaps allowed), or COCO RLE in `instances.json`. Checks each against the depth size and
+/// the instance list, both ways.
+pub fn read_masks(
+    input: &Path,
+    instances: &[InstanceEntry],
+    width: usize,
+    height: usize,
+) -> Result<Masks, LiftError> {
+    let label = input.join("masks.png");
+    let folder = input.join("masks");
+    let rle_count = instances.iter().filter(|i| i.rle.is_some()).count();
+    // An empty masks/ folder is not a mask source.
+    let folder_has_masks = std::fs::read_dir(&folder).is_ok_and(|mut entries| {
+        entries.any(|e| e.is_ok_and(|e| e.path().extension().is_some_and(|x| x == "png")))
+    });
+    let sources =
+        usize::from(label.exists()) + usize::from(folder_has_masks) + usize::from(rle_count > 0);
+    if sources > 1 {
+        return Err(LiftError::input(
+            input,
+            "masks",
+            "more than one mask source (masks.png, masks/, RLE in instances.json)",
+            "keep exactly one form of masks per scene",
+        ));
+    }
+    let instances_path = input.join("instances.json");
+    let mut pixels: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    let source;
+    if label.exists() {
+        source = label.display().to_string();
+        let image = read_png(&label)?;
+        check_size(
+            &label,
+            image.width() as usize,
+            image.height() as usize,
+            width,
+            height,
+        )?;
+        let labels: Vec<u32> =
+            match image {
+                DynamicImage::ImageLuma8(b) => b.into_raw().into_iter().map(u32::from).collect(),
+                DynamicImage::ImageLuma16(b) => b.into_raw().into_iter().map(u32::from).collect(),
+                other => return Err(LiftError::input(
+                    &label,
+                    "$",
+                    format!("is {:?}", other.color()),
+                    "an 8- or 16-bit single-channel label image (0 = background, k = instance k)",
+                )),
+            };
+        for (i, id) in labels.into_iter().enumerate() {
+            if id != 0 {
+                pixels.entry(id).or_default().push(i as u32);
+            }
+        }
+        let known: std::collections::BTreeSet<u32> = instances.iter().map(|i| i.id).collect();
+        if let Some(unknown) = pixels.keys().find(|id| !known.contains(id)) {
+            return Err(LiftError::input(
+                &label,
+                &format!("label {unknown}"),
+                format!(
+                    "label {unknown} ({} pixels) has no entry in instances.json",
+                    pixels[unknown].len()
+                ),
+                "add it to instances.json, or set its pixels to 0 (background)",
+            ));
+        }
+    } else if folder_has_masks {
+        source = folder.display().to_string();
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&folder)
+            .map_err(|e| LiftError::input(&folder, "$", e.to_string(), "a readable folder"))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|e| e == "png"))
+            .collect();
+        files.sort();
+        for file in files {
+            let stem = file
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let Ok(id) = stem.parse::<u32>() else {
+                return Err(LiftError::input(
+                    &file,
+                    "$",
+                    format!("file name \"{stem}\" is not a mask id"),
+                    "masks/<id>.png with the id of instances.json",
+                ));
+            };
+            if !instances.iter().any(|i| i.id == id) {
+                return Err(LiftError::input(
+                    &file,
+                    "$",
+                    format!("mask {id} has no entry in instances.json"),
+                    "add it to instances.json or remove the file",
+                ));
+            }
+            let image = read_png(&file)?;
+            check_size(
+                &file,
+                image.width() as usize,
+                image.height() as usize,
+                width,
+                height,
+            )?;
+            let gray = image.into_luma16();
+            let list: Vec<u32> = gray
+                .into_raw()
+                .into_iter()
+                .enumerate()
+                .filter(|(_, v)| *v != 0)
+                .map(|(i, _)| i as u32)
+                .collect();
+            pixels.insert(id, list);
+        }
+    } else if rle_count > 0 {
+        source = format!("{} (rle)", instances_path.display());
+        for (i, entry) in instances.iter().enumerate() {
+            let Some(rle) = &entry.rle else {
+                return Err(LiftError::input(
+                    &instances_path,
+                    &format!("instances[{i}].rle"),
+                    "is missing while other instances have one",
+                    "an RLE mask for every instance",
+                ));
+            };
+            let mask = super::rle::decode(rle).map_err(|e| {
+                LiftError::input(
+                    &instances_path,
+                    &format!("instances[{i}].rle"),
+                    e,
+                    "COCO RLE: {\"size\": [h, w], \"counts\": [...] or \"...\"}",
+                )
+            })?;
+            check_size(&instances_path, mask.width, mask.height, width, height)?;
+            pixels.insert(entry.id, mask.pixels);
+        }
+    } else {
+        return Err(LiftError::input(
+            input,
+            "masks",
+            "no masks (masks.png, masks/<id>.png or RLE in instances.json)",
+            "add instance masks",
+        ));
+    }
+    for entry in instances {
+        match pixels.get(&entry.id) {
+            None => {
+                return Err(LiftError::input(
+                    &instances_path,
+                    &format!("id {}", entry.id),
+                    format!(
+                        "instance {} (\"{}\") has no mask in {source}",
+                        entry.id, entry.label
+                    ),
+                    "add its mask, or remove it from instances.json",
+                ))
+            }
+            Some(list) if list.is_empty() => {
+                return Err(LiftError::input(
+                    &instances_path,
+                    &format!("id {}", entry.id),
+                    format!(
+                        "the mask of instance {} (\"{}\") is empty",
+                        entry.id, entry.label
+                    ),
+                    "remove the instance or fix its mask",
+                ))
+            }
+            Some(_) => {}
+        }
+    }
+    let mut covered = vec![false; width * height];
+    for list in pixels.values() {
+        for &p in list {
+            covered[p as usize] = true;
+        }
+    }
+    let background = covered
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| !**c)
+        .map(|(i, _)| i as u32)
+        .collect();
+    Ok(Masks {
+        pixels,
+        background,
+        source,
+    })
+}
+
+fn check_size(
+    path: &Path,
+    w: usize,
+    h: usize,
+    width: usize,
+    height: usize,
+) -> Result<(), LiftError> {
+    if (w, h) != (width, height) {
+        return Err(LiftError::input(
+            path,
+            "size",
+            format!("is {w}×{h} but the depth map is {width}×{height}"),
+            "masks, photo and depth of the same size (resize with nearest-neighbour, or re-export)",
+        ));
+    }
+    Ok(())
+}
+
+/// Reads the photo as RGB8 at the depth size; `None` when there is no `image.png`.
+pub fn read_photo(
+    input: &Path,
+    width: usize,
+    height: usize,
+) -> Result<Option<Vec<[u8; 3]>>, LiftError> {
+    let path = input.join("image.png");
+    if !path.exists() {
+        return Ok(None);
+    }
+    let image = read_png(&path)?;
+    check_size(
+        &path,
+        image.width() as usize,
+        image.height() as usize,
+        width,
+        height,
+    )?;
+    let rgb = image.into_rgb8();
+    Ok(Some(rgb.pixels().map(|p| p.0).collect()))
+}

@@ -1,0 +1,770 @@
+//! `lift`: depth maps and instance masks → point clouds, the table frame, and object boxes
+//! (SPEC 5.1, frames of SPEC section 2).
+//!
+//! 1. Read the inputs ([`inputs`]): depth in metres, camera intrinsics, masks, photo.
+//! 2. Fit the table plane with RANSAC on the support instance's pixels (the table), or on the
+//!    background when no instance is marked `"support": true`; refine it by least squares on
+//!    the inliers; orient its normal toward the camera.
+//! 3. Build the table frame: z = the normal, x = the camera's x axis projected on the plane,
+//!    y = z × x; the origin and the placement zone come from robust percentiles of the table
+//!    points in the plane.
+//! 4. Per instance: erode the mask (drops the flying pixels at depth edges), back-project,
+//!    remove outliers, transform to the table frame, take the axis-aligned box with its bottom
+//!    clamped to the table (z ≥ 0).
+//!
+//! ## Outlier rule
+//! Statistical outlier removal as Open3D's `remove_statistical_outlier` does it — a point is an
+//! outlier when its mean distance to its neighbours exceeds the mean of that statistic over the
+//! instance by more than `outlier_std_ratio` standard deviations — with the neighbours taken
+//! from the depth image's pixel grid (the valid pixels of the eroded mask within
+//! `outlier_window_px`) instead of a k-d tree, since the cloud is organised. Distances are
+//! divided by the pixel footprint at the point's depth (depth / fx), so that near and far parts
+//! of one object are judged alike. A point with no neighbour at all is an outlier.
+
+pub mod inputs;
+pub mod ply;
+pub mod rle;
+pub mod synthetic;
+
+use std::path::{Path, PathBuf};
+
+use mesa_schemas::artifacts::{
+    LiftArtifact, LiftStats, LiftedInstance, PlaneFit, ResolvedCamera, LIFT_SCHEMA,
+};
+use mesa_schemas::units::{PositionCm, SizeCm, ZoneCm};
+use nalgebra::{Matrix3, Vector3};
+use rand::{Rng, SeedableRng};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use inputs::{
+    read_camera, read_depth, read_instances, read_masks, read_photo, DepthMap, Intrinsics,
+};
+
+/// The `[lift]` section of `mesa.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct LiftConfig {
+    /// Metres per unit of a 16-bit depth.png (0.001: millimetres; 0.0001 for YCB-Video).
+    pub depth_png_scale_m: f64,
+    /// Horizontal field of view in degrees used when camera.json has neither intrinsics nor
+    /// fov_x_deg (generated photos); 0 makes such a camera an error.
+    pub default_fov_x_deg: f64,
+    /// Radius in pixels of the square mask erosion that drops flying pixels at depth edges.
+    pub erode_px: u32,
+    /// Radius in pixels of the neighbourhood of the outlier rule.
+    pub outlier_window_px: u32,
+    /// A point is an outlier when its mean neighbour distance exceeds the instance's mean by
+    /// this many standard deviations.
+    pub outlier_std_ratio: f64,
+    /// RANSAC inlier distance to the table plane, metres.
+    pub plane_threshold_m: f64,
+    /// RANSAC iterations.
+    pub plane_iterations: u32,
+    /// Points sampled (evenly over the pixels) for RANSAC.
+    pub plane_max_points: u32,
+    /// The plane must explain at least this fraction of the points it is fitted on.
+    pub plane_min_inlier_fraction: f64,
+    /// Fewest table (or background) points with valid depth to fit a plane on.
+    pub plane_min_points: u32,
+    /// Percentile (0-50) of the table points that bounds the placement zone on each side.
+    pub zone_percentile: f64,
+    /// Fewest points an instance may keep after filtering.
+    pub min_points: u32,
+}
+
+impl Default for LiftConfig {
+    fn default() -> Self {
+        Self {
+            depth_png_scale_m: 0.001,
+            default_fov_x_deg: 60.0,
+            erode_px: 2,
+            outlier_window_px: 2,
+            outlier_std_ratio: 2.0,
+            plane_threshold_m: 0.005,
+            plane_iterations: 400,
+            plane_max_points: 20_000,
+            plane_min_inlier_fraction: 0.3,
+            plane_min_points: 500,
+            zone_percentile: 0.5,
+            min_points: 10,
+        }
+    }
+}
+
+/// Why a scene cannot be lifted.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LiftError {
+    /// An input file is wrong.
+    #[error("{}: {field}: {problem} (fix: {fix})", file.display())]
+    Input {
+        /// The file.
+        file: PathBuf,
+        /// The field or part of it.
+        field: String,
+        /// What is wrong.
+        problem: String,
+        /// How to fix it.
+        fix: String,
+    },
+    /// No table plane could be found.
+    #[error("no table plane: {0}")]
+    NoPlane(String),
+}
+
+impl LiftError {
+    /// An input problem.
+    pub fn input(
+        file: &Path,
+        field: &str,
+        problem: impl Into<String>,
+        fix: impl Into<String>,
+    ) -> Self {
+        Self::Input {
+            file: file.to_owned(),
+            field: field.to_owned(),
+            problem: problem.into(),
+            fix: fix.into(),
+        }
+    }
+}
+
+/// What lifting a scene produces.
+#[derive(Debug, Clone)]
+pub struct LiftOutput {
+    /// `coarse/lift.json`.
+    pub artifact: LiftArtifact,
+    /// `coarse/points/<instance>.ply` contents, by instance.
+    pub clouds: Vec<(String, Vec<u8>)>,
+    /// Warnings about the scene.
+    pub warnings: Vec<String>,
+}
+
+/// Lifts one scene whose inputs are in `input_dir` (the scene's `input/` folder).
+pub fn lift_scene(
+    input_dir: &Path,
+    scene_id: &str,
+    seed: u64,
+    config: &LiftConfig,
+) -> Result<LiftOutput, LiftError> {
+    let mut warnings = Vec::new();
+    let camera_path = input_dir.join("camera.json");
+    let camera = read_camera(&camera_path, config)?;
+    let k = camera.intrinsics;
+    if k.source == "fov" && !has_fov(&camera_path) {
+        warnings.push(format!(
+            "camera.json has no intrinsics and no fov_x_deg: used [lift] default_fov_x_deg = {}",
+            config.default_fov_x_deg
+        ));
+    }
+    let instances = read_instances(&input_dir.join("instances.json"))?;
+    let (depth, depth_path) = read_depth(input_dir, &camera, config)?;
+    if (depth.width, depth.height) != (k.width, k.height) {
+        return Err(LiftError::input(
+            &camera_path,
+            "width",
+            format!(
+                "says {}×{} but {} is {}×{}",
+                k.width,
+                k.height,
+                depth_path.display(),
+                depth.width,
+                depth.height
+            ),
+            "the camera's width and height must be the depth map's",
+        ));
+    }
+    let masks = read_masks(input_dir, &instances, depth.width, depth.height)?;
+    let photo = read_photo(input_dir, depth.width, depth.height)?;
+    if photo.is_none() {
+        warnings.push("no input/image.png: point clouds are grey".to_owned());
+    }
+
+    // The table plane.
+    let support: Vec<u32> = instances
+        .iter()
+        .filter(|i| i.support)
+        .flat_map(|i| masks.pixels[&i.id].iter().copied())
+        .collect();
+    let (plane_pixels, source) = if support.is_empty() {
+        (masks.background.clone(), "background")
+    } else {
+        let mut s = support;
+        s.sort_unstable();
+        s.dedup();
+        (s, "support")
+    };
+    // The plane and the zone's percentiles need a few hundred thousand points at most.
+    const PLANE_PIXELS: usize = 200_000;
+    let plane_points: Vec<Vector3<f64>> = plane_pixels
+        .iter()
+        .step_by(plane_pixels.len().div_ceil(PLANE_PIXELS).max(1))
+        .filter_map(|&p| back_project(&depth, &k, p))
+        .collect();
+    let plane = fit_plane(&plane_points, scene_id, seed, config, source)?;
+    let frame = TableFrame::new(&plane, &plane_points, config)?;
+
+    let mut lifted = Vec::new();
+    let mut clouds = Vec::new();
+    let mut label_counts = std::collections::BTreeMap::<String, usize>::new();
+    let masks_file = PathBuf::from(&masks.source);
+    for entry in instances.iter().filter(|i| !i.support) {
+        let label = sanitize_label(&entry.label);
+        let index = label_counts.entry(label.clone()).or_insert(0);
+        let instance = format!("{label}_{index}");
+        *index += 1;
+        let pixels = &masks.pixels[&entry.id];
+        let valid: Vec<u32> = pixels
+            .iter()
+            .copied()
+            .filter(|&p| depth.depth_m[p as usize].is_finite())
+            .collect();
+        if valid.is_empty() {
+            return Err(LiftError::input(
+                &masks_file,
+                &format!("id {}", entry.id),
+                format!(
+                    "none of the {} pixels of instance {} (\"{}\") has a valid depth in {}",
+                    pixels.len(),
+                    entry.id,
+                    entry.label,
+                    depth_path.display()
+                ),
+                "check that the mask and the depth map are registered, or drop the instance",
+            ));
+        }
+        let mut kept = erode(pixels, depth.width, depth.height, config.erode_px as usize);
+        kept.retain(|&p| depth.depth_m[p as usize].is_finite());
+        if kept.len() < config.min_points as usize {
+            warnings.push(format!(
+                "{instance}: the mask is too thin for a {} px erosion ({} pixels left); used it \
+                 unchanged",
+                config.erode_px,
+                kept.len()
+            ));
+            kept = valid.clone();
+        }
+        let eroded_px = kept.len();
+        let (points, removed) = remove_outliers(&depth, &k, &kept, config);
+        if points.len() < config.min_points.min(valid.len() as u32) as usize || points.is_empty() {
+            return Err(LiftError::input(
+                &masks_file,
+                &format!("id {}", entry.id),
+                format!(
+                    "instance {} (\"{}\") keeps {} points after filtering",
+                    entry.id,
+                    entry.label,
+                    points.len()
+                ),
+                "check its mask and depth, or lower [lift] min_points",
+            ));
+        }
+        let mut min = [f64::INFINITY; 3];
+        let mut max = [f64::NEG_INFINITY; 3];
+        let mut ply_points = Vec::with_capacity(points.len());
+        for &(pixel, point) in &points {
+            let t = frame.to_table(point);
+            for axis in 0..3 {
+                min[axis] = min[axis].min(t[axis]);
+                max[axis] = max[axis].max(t[axis]);
+            }
+            let rgb = photo
+                .as_ref()
+                .map_or([128, 128, 128], |p| p[pixel as usize]);
+            ply_points.push(([t[0] as f32, t[1] as f32, t[2] as f32], rgb));
+        }
+        // Objects rest on the table or above it.
+        min[2] = min[2].max(0.0);
+        max[2] = max[2].max(min[2] + 1e-3);
+        let center_cm = PositionCm(std::array::from_fn(|a| (min[a] + max[a]) * 50.0));
+        let size_cm = SizeCm(std::array::from_fn(|a| {
+            ((max[a] - min[a]) * 100.0).max(0.1)
+        }));
+        let points_file = format!("coarse/points/{instance}.ply");
+        clouds.push((
+            instance.clone(),
+            ply::write_ply(
+                &ply_points,
+                &format!("mesa lift: {scene_id} {instance}, table frame, metres"),
+            ),
+        ));
+        lifted.push(LiftedInstance {
+            instance,
+            mask_id: entry.id,
+            label: entry.label.clone(),
+            description: entry.description.clone(),
+            center_cm,
+            size_cm,
+            yaw_deg: None,
+            points: points_file,
+            stats: LiftStats {
+                mask_px: pixels.len() as u64,
+                valid_depth_px: valid.len() as u64,
+                valid_depth_fraction: valid.len() as f64 / pixels.len() as f64,
+                eroded_px: eroded_px as u64,
+                points_removed_outliers: removed as u64,
+                points_kept: points.len() as u64,
+            },
+        });
+    }
+    let artifact = LiftArtifact {
+        schema: LIFT_SCHEMA.to_owned(),
+        scene_id: scene_id.to_owned(),
+        camera: ResolvedCamera {
+            width: k.width as u32,
+            height: k.height as u32,
+            fx: k.fx,
+            fy: k.fy,
+            cx: k.cx,
+            cy: k.cy,
+            source: k.source.to_owned(),
+        },
+        table_from_camera: frame.table_from_camera(),
+        plane: PlaneFit {
+            normal_in_camera: [plane.normal.x, plane.normal.y, plane.normal.z],
+            offset_m: plane.offset_m,
+            source: source.to_owned(),
+            inliers: plane.inliers as u64,
+            inlier_fraction: plane.inlier_fraction,
+            rmse_m: plane.rmse_m,
+        },
+        zone_cm: ZoneCm([0.0, frame.zone_m[0] * 100.0, 0.0, frame.zone_m[1] * 100.0]),
+        instances: lifted,
+    };
+    Ok(LiftOutput {
+        artifact,
+        clouds,
+        warnings,
+    })
+}
+
+fn has_fov(camera_path: &Path) -> bool {
+    inputs::read_json(camera_path).is_ok_and(|v| v.get("fov_x_deg").is_some())
+}
+
+/// `Coffee Mug` → `coffee_mug`: lowercase, runs of other characters become one `_`.
+pub fn sanitize_label(label: &str) -> String {
+    let mut out = String::new();
+    for c in label.trim().chars() {
+        if c.is_alphanumeric() {
+            out.extend(c.to_lowercase());
+        } else if !out.ends_with('_') && !out.is_empty() {
+            out.push('_');
+        }
+    }
+    let out = out.trim_end_matches('_').to_owned();
+    if out.is_empty() {
+        "object".to_owned()
+    } else {
+        out
+    }
+}
+
+/// Back-projects pixel index `p` (SPEC section 2): `((u - cx) d / fx, (v - cy) d / fy, d)`.
+pub fn back_project(depth: &DepthMap, k: &Intrinsics, p: u32) -> Option<Vector3<f64>> {
+    let (u, v) = (p as usize % depth.width, p as usize / depth.width);
+    let d = f64::from(depth.at(u, v)?);
+    Some(Vector3::new(
+        (u as f64 - k.cx) * d / k.fx,
+        (v as f64 - k.cy) * d / k.fy,
+        d,
+    ))
+}
+
+/// Square erosion of a set of pixels (sorted row-major indices): a pixel stays when every
+/// pixel within `radius` (Chebyshev) is in the set and inside the image.
+pub fn erode(pixels: &[u32], width: usize, height: usize, radius: usize) -> Vec<u32> {
+    if radius == 0 || pixels.is_empty() {
+        return pixels.to_vec();
+    }
+    let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
+    for &p in pixels {
+        let (u, v) = (p as usize % width, p as usize / width);
+        u0 = u0.min(u);
+        v0 = v0.min(v);
+        u1 = u1.max(u);
+        v1 = v1.max(v);
+    }
+    let (bw, bh) = (u1 - u0 + 1, v1 - v0 + 1);
+    let mut inside = vec![false; bw * bh];
+    for &p in pixels {
+        let (u, v) = (p as usize % width, p as usize / width);
+        inside[(v - v0) * bw + (u - u0)] = true;
+    }
+    // Separable min filter: rows, then columns. Outside the box (and the image) counts as out.
+    let run_filter = |src: &[bool], len: usize, count: usize, stride: usize, step: usize| {
+        let mut dst = vec![false; src.len()];
+        for line in 0..count {
+            let base = line * stride;
+            let mut run = 0usize;
+            let mut runs = vec![0usize; len];
+            for i in 0..len {
+                run = if src[base + i * step] { run + 1 } else { 0 };
+                runs[i] = run;
+            }
+            // A pixel survives when the run ending `radius` past it covers 2·radius + 1.
+            for i in 0..len {
+                let end = i + radius;
+                dst[base + i * step] = end < len && runs[end] > 2 * radius;
+            }
+        }
+        dst
+    };
+    let rows = run_filter(&inside, bw, bh, bw, 1);
+    let both = run_filter(&rows, bh, bw, 1, bw);
+    let mut out = Vec::new();
+    for v in 0..bh {
+        for u in 0..bw {
+            let (gu, gv) = (u + u0, v + v0);
+            // Pixels closer than `radius` to the image border cannot have a full window.
+            if both[v * bw + u]
+                && gu >= radius
+                && gv >= radius
+                && gu + radius < width
+                && gv + radius < height
+            {
+                out.push((gv * width + gu) as u32);
+            }
+        }
+    }
+    out
+}
+
+/// The organised statistical outlier rule (module docs). Returns the kept (pixel, point) pairs
+/// and how many were removed.
+fn remove_outliers(
+    depth: &DepthMap,
+    k: &Intrinsics,
+    pixels: &[u32],
+    config: &LiftConfig,
+) -> (Vec<(u32, Vector3<f64>)>, usize) {
+    let w = depth.width;
+    let points: Vec<(u32, Vector3<f64>)> = pixels
+        .iter()
+        .filter_map(|&p| back_project(depth, k, p).map(|x| (p, x)))
+        .collect();
+    if points.is_empty() {
+        return (points, 0);
+    }
+    // A dense grid over the instance's bounding box: pixel → index into `points`.
+    let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
+    for (p, _) in &points {
+        let (u, v) = (*p as usize % w, *p as usize / w);
+        u0 = u0.min(u);
+        v0 = v0.min(v);
+        u1 = u1.max(u);
+        v1 = v1.max(v);
+    }
+    let (bw, bh) = (u1 - u0 + 1, v1 - v0 + 1);
+    let mut grid = vec![u32::MAX; bw * bh];
+    for (i, (p, _)) in points.iter().enumerate() {
+        let (u, v) = (*p as usize % w - u0, *p as usize / w - v0);
+        grid[v * bw + u] = i as u32;
+    }
+    let r = config.outlier_window_px as isize;
+    let mut scores = Vec::with_capacity(points.len());
+    for &(p, x) in &points {
+        let (u, v) = (
+            (p as usize % w - u0) as isize,
+            (p as usize / w - v0) as isize,
+        );
+        let footprint = (x.z / k.fx).max(1e-9);
+        let mut sum = 0.0;
+        let mut count = 0usize;
+        for dv in -r..=r {
+            let nv = v + dv;
+            if nv < 0 || nv >= bh as isize {
+                continue;
+            }
+            for du in -r..=r {
+                let nu = u + du;
+                if (du == 0 && dv == 0) || nu < 0 || nu >= bw as isize {
+                    continue;
+                }
+                let j = grid[nv as usize * bw + nu as usize];
+                if j != u32::MAX {
+                    sum += (points[j as usize].1 - x).norm();
+                    count += 1;
+                }
+            }
+        }
+        scores.push(if count == 0 {
+            f64::INFINITY
+        } else {
+            sum / count as f64 / footprint
+        });
+    }
+    let finite: Vec<f64> = scores.iter().copied().filter(|s| s.is_finite()).collect();
+    if finite.is_empty() {
+        return (Vec::new(), points.len());
+    }
+    let mean = finite.iter().sum::<f64>() / finite.len() as f64;
+    let var = finite.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / finite.len() as f64;
+    let limit = mean + config.outlier_std_ratio * var.sqrt();
+    let kept: Vec<(u32, Vector3<f64>)> = points
+        .iter()
+        .zip(&scores)
+        .filter(|(_, s)| **s <= limit)
+        .map(|(p, _)| *p)
+        .collect();
+    let removed = points.len() - kept.len();
+    (kept, removed)
+}
+
+/// A fitted plane n·p + offset = 0 in the camera frame, n toward the camera.
+#[derive(Debug, Clone)]
+pub struct Plane {
+    /// Unit normal.
+    pub normal: Vector3<f64>,
+    /// Offset in metres (positive: the camera is on the normal's side).
+    pub offset_m: f64,
+    /// Inliers among the points fitted on.
+    pub inliers: usize,
+    /// Inliers / points.
+    pub inlier_fraction: f64,
+    /// RMS distance of the inliers, metres.
+    pub rmse_m: f64,
+}
+
+fn scene_rng(scene_id: &str, seed: u64) -> rand_chacha::ChaCha8Rng {
+    // FNV-1a over the scene id, mixed with the seed: independent streams per scene.
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in scene_id.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    rand_chacha::ChaCha8Rng::seed_from_u64(h ^ seed.rotate_left(17))
+}
+
+/// RANSAC plane fit with a least-squares refinement.
+pub fn fit_plane(
+    points: &[Vector3<f64>],
+    scene_id: &str,
+    seed: u64,
+    config: &LiftConfig,
+    source: &str,
+) -> Result<Plane, LiftError> {
+    if points.len() < (config.plane_min_points as usize).max(3) {
+        return Err(LiftError::NoPlane(format!(
+            "only {} {source} points with valid depth (expected at least {}: mark the table as \
+             an instance with \"support\": true, or check the depth map)",
+            points.len(),
+            config.plane_min_points
+        )));
+    }
+    let stride = points
+        .len()
+        .div_ceil(config.plane_max_points.max(3) as usize);
+    let sample: Vec<Vector3<f64>> = points.iter().step_by(stride).copied().collect();
+    let mut rng = scene_rng(scene_id, seed);
+    let threshold = config.plane_threshold_m;
+    // Hypotheses are scored on an evenly spread subset; the winner is refined on the sample.
+    let scoring: Vec<Vector3<f64>> = sample
+        .iter()
+        .step_by(sample.len().div_ceil(2000))
+        .copied()
+        .collect();
+    let mut best: Option<(usize, Vector3<f64>, f64)> = None;
+    for _ in 0..config.plane_iterations {
+        let i = rng.random_range(0..sample.len());
+        let j = rng.random_range(0..sample.len());
+        let l = rng.random_range(0..sample.len());
+        let n = (sample[j] - sample[i]).cross(&(sample[l] - sample[i]));
+        let norm = n.norm();
+        if norm < 1e-12 {
+            continue;
+        }
+        let n = n / norm;
+        let d = -n.dot(&sample[i]);
+        let count = sample
+            .iter()
+            .filter(|p| (n.dot(p) + d).abs() < threshold)
+            .count();
+        if best.as_ref().is_none_or(|b| count > b.0) {
+            best = Some((count, n, d));
+        }
+    }
+    let Some((_, mut n, mut d)) = best else {
+        return Err(LiftError::NoPlane(format!(
+            "the {} {source} points are collinear",
+            sample.len()
+        )));
+    };
+    // Two rounds of least squares on the inliers of the current plane.
+    for _ in 0..2 {
+        let inliers: Vec<&Vector3<f64>> = sample
+            .iter()
+            .filter(|p| (n.dot(p) + d).abs() < threshold)
+            .collect();
+        if inliers.len() < 3 {
+            break;
+        }
+        let centroid = inliers.iter().fold(Vector3::zeros(), |a, p| a + **p) / inliers.len() as f64;
+        let mut cov = Matrix3::zeros();
+        for p in &inliers {
+            let q = **p - centroid;
+            cov += q * q.transpose();
+        }
+        let eigen = cov.symmetric_eigen();
+        let (idx, _) = eigen
+            .eigenvalues
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .unwrap_or((0, &0.0));
+        n = eigen.eigenvectors.column(idx).into_owned().normalize();
+        d = -n.dot(&centroid);
+    }
+    if d < 0.0 {
+        n = -n;
+        d = -d;
+    }
+    let residuals: Vec<f64> = sample
+        .iter()
+        .map(|p| (n.dot(p) + d).abs())
+        .filter(|r| *r < threshold)
+        .collect();
+    let fraction = residuals.len() as f64 / sample.len() as f64;
+    if fraction < config.plane_min_inlier_fraction {
+        return Err(LiftError::NoPlane(format!(
+            "the best plane explains {:.0}% of {} {source} points within {} mm (expected at \
+             least {:.0}%: check the depth scale, or mark the table with \"support\": true)",
+            fraction * 100.0,
+            sample.len(),
+            threshold * 1000.0,
+            config.plane_min_inlier_fraction * 100.0
+        )));
+    }
+    let rmse = (residuals.iter().map(|r| r * r).sum::<f64>() / residuals.len() as f64).sqrt();
+    Ok(Plane {
+        normal: n,
+        offset_m: d,
+        inliers: residuals.len(),
+        inlier_fraction: fraction,
+        rmse_m: rmse,
+    })
+}
+
+/// The table frame in the camera frame.
+#[derive(Debug, Clone)]
+pub struct TableFrame {
+    /// Rows are the table axes x, y, z in camera coordinates.
+    pub rotation: Matrix3<f64>,
+    /// The table origin in camera coordinates, metres.
+    pub origin: Vector3<f64>,
+    /// Zone width and depth, metres.
+    pub zone_m: [f64; 2],
+}
+
+impl TableFrame {
+    fn new(plane: &Plane, points: &[Vector3<f64>], config: &LiftConfig) -> Result<Self, LiftError> {
+        let z = plane.normal;
+        let camera_x = Vector3::x();
+        let x = camera_x - z * camera_x.dot(&z);
+        if x.norm() < 1e-6 {
+            return Err(LiftError::NoPlane(
+                "the table plane is perpendicular to the camera's x axis (a camera rolled by \
+                 90°); rotate the images upright"
+                    .to_owned(),
+            ));
+        }
+        let x = x.normalize();
+        let y = z.cross(&x);
+        let threshold = config.plane_threshold_m * 2.0;
+        let mut us = Vec::new();
+        let mut vs = Vec::new();
+        for p in points {
+            if (z.dot(p) + plane.offset_m).abs() < threshold {
+                us.push(x.dot(p));
+                vs.push(y.dot(p));
+            }
+        }
+        let q = config.zone_percentile.clamp(0.0, 49.0) / 100.0;
+        let (u0, u1) = (percentile(&mut us, q), percentile(&mut us, 1.0 - q));
+        let (v0, v1) = (percentile(&mut vs, q), percentile(&mut vs, 1.0 - q));
+        let origin = x * u0 + y * v0 - z * plane.offset_m;
+        Ok(Self {
+            rotation: Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]),
+            origin,
+            zone_m: [u1 - u0, v1 - v0],
+        })
+    }
+
+    /// A camera-frame point in the table frame (metres).
+    pub fn to_table(&self, p: Vector3<f64>) -> Vector3<f64> {
+        self.rotation * (p - self.origin)
+    }
+
+    /// The 4×4 rigid transform, row-major.
+    pub fn table_from_camera(&self) -> [[f64; 4]; 4] {
+        let t = -(self.rotation * self.origin);
+        let r = &self.rotation;
+        [
+            [r[(0, 0)], r[(0, 1)], r[(0, 2)], t.x],
+            [r[(1, 0)], r[(1, 1)], r[(1, 2)], t.y],
+            [r[(2, 0)], r[(2, 1)], r[(2, 2)], t.z],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    }
+}
+
+fn percentile(values: &mut [f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let i = ((values.len() - 1) as f64 * q).round() as usize;
+    let (_, v, _) = values.select_nth_unstable_by(i, f64::total_cmp);
+    *v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn erosion_removes_a_border_of_radius_pixels() {
+        let (w, h) = (20, 12);
+        let square: Vec<u32> = (2..10)
+            .flat_map(|v| (3..13).map(move |u| (v * w + u) as u32))
+            .collect();
+        let eroded = erode(&square, w, h, 2);
+        let expected: Vec<u32> = (4..8)
+            .flat_map(|v| (5..11).map(move |u| (v * w + u) as u32))
+            .collect();
+        assert_eq!(eroded, expected);
+        assert_eq!(erode(&square, w, h, 0), square);
+        assert!(erode(&square, w, h, 5).is_empty());
+    }
+
+    #[test]
+    fn labels_become_instance_stems() {
+        assert_eq!(sanitize_label("Coffee Mug"), "coffee_mug");
+        assert_eq!(sanitize_label("  desk-lamp "), "desk_lamp");
+        assert_eq!(sanitize_label("!!"), "object");
+    }
+
+    #[test]
+    fn ransac_finds_a_noisy_plane_among_clutter() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let n = Vector3::new(0.0, -0.8, -0.6).normalize();
+        let d = 0.9;
+        let mut points = Vec::new();
+        for _ in 0..3000 {
+            let a: f64 = rng.random_range(-0.5..0.5);
+            let b: f64 = rng.random_range(-0.5..0.5);
+            let base = -n * d + Vector3::new(a, b * 0.6, -b * 0.8);
+            points.push(base + n * rng.random_range(-0.002..0.002));
+        }
+        for _ in 0..1000 {
+            points.push(Vector3::new(
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.5..0.5),
+                rng.random_range(0.5..1.5),
+            ));
+        }
+        let plane = fit_plane(&points, "s", 0, &LiftConfig::default(), "support").expect("plane");
+        assert!(plane.normal.dot(&n) > 0.9999, "{:?}", plane.normal);
+        assert!((plane.offset_m - d).abs() < 1e-3);
+        assert!(plane.inlier_fraction > 0.7);
+    }
+}

@@ -1,0 +1,71 @@
+//! Binary little-endian PLY point clouds (xyz float32 + rgb uchar), as Open3D and trimesh read
+//! them.
+
+/// A point with its colour: xyz in metres, rgb.
+pub type ColoredPoint = ([f32; 3], [u8; 3]);
+
+/// Writes points with colours as a binary little-endian PLY.
+pub fn write_ply(points: &[ColoredPoint], comment: &str) -> Vec<u8> {
+    let header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment {}\nelement vertex {}\n\
+         property float x\nproperty float y\nproperty float z\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
+        comment.replace('\n', " "),
+        points.len()
+    );
+    let mut out = Vec::with_capacity(header.len() + points.len() * 15);
+    out.extend_from_slice(header.as_bytes());
+    for (xyz, rgb) in points {
+        for c in xyz {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+        out.extend_from_slice(rgb);
+    }
+    out
+}
+
+/// Reads back what [`write_ply`] writes (for tests and tools).
+pub fn read_ply(bytes: &[u8]) -> Result<Vec<ColoredPoint>, String> {
+    let end = b"end_header\n";
+    let at = bytes
+        .windows(end.len())
+        .position(|w| w == end)
+        .ok_or("no end_header")?;
+    let header = std::str::from_utf8(&bytes[..at]).map_err(|e| e.to_string())?;
+    let count: usize = header
+        .lines()
+        .find_map(|l| l.strip_prefix("element vertex "))
+        .ok_or("no vertex element")?
+        .trim()
+        .parse()
+        .map_err(|e| format!("vertex count: {e}"))?;
+    let body = &bytes[at + end.len()..];
+    if body.len() != count * 15 {
+        return Err(format!(
+            "{} bytes of vertex data for {count} vertices",
+            body.len()
+        ));
+    }
+    Ok(body
+        .chunks_exact(15)
+        .map(|c| {
+            let f = |i: usize| f32::from_le_bytes([c[i], c[i + 1], c[i + 2], c[i + 3]]);
+            ([f(0), f(4), f(8)], [c[12], c[13], c[14]])
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip() {
+        let points = vec![
+            ([1.0, -2.5, 0.125], [1, 2, 3]),
+            ([0.0, 0.0, 0.0], [255, 0, 9]),
+        ];
+        let bytes = write_ply(&points, "test");
+        assert_eq!(read_ply(&bytes).expect("read"), points);
+    }
+}
