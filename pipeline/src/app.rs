@@ -13,7 +13,7 @@ use mesa_schemas::output::parse_model_output;
 use mesa_schemas::{kinds, validate_text, Kind};
 
 use crate::cli::{Cli, Command, ConvertArgs, LayoutForm, ParseOutputArgs, RunArgs, StageArgs};
-use crate::cli::{StatusArgs, ValidateArgs};
+use crate::cli::{GraphArgs, StatusArgs, ValidateArgs};
 use crate::config::{annotated_toml, Config};
 use crate::fsio::{write_atomic, DigestCache};
 use crate::layouts::{read_any_layout, AnyLayout};
@@ -44,6 +44,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Convert(args) => convert(args),
         Command::ParseOutput(args) => parse_output(args),
         Command::Lift(args) => run_one(&crate::stages::lift::Lift, &resolve(&args, cli.quiet)?),
+        Command::Graph(args) => graph(args, cli.quiet),
     }
 }
 
@@ -133,6 +134,24 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
         failed |= code != ExitCode::SUCCESS;
     }
     Ok(ExitCode::from(if failed { EXIT_FAILED } else { EXIT_OK }))
+}
+
+fn graph(args: GraphArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    if let Some(layout) = &args.layout {
+        return crate::stages::graph::print_layout_graph(
+            layout,
+            args.containers.as_deref(),
+            args.equally_spaced,
+        );
+    }
+    let Some(stage_args) = &args.stage else {
+        return Err(UsageError("give a DATASET, or --layout FILE".to_owned()).into());
+    };
+    let mut resolved = resolve(stage_args, quiet)?;
+    if args.equally_spaced {
+        resolved.config.graph.equally_spaced = true;
+    }
+    run_one(&crate::stages::graph::GraphStage::new(), &resolved)
 }
 
 fn status(args: StatusArgs) -> anyhow::Result<ExitCode> {

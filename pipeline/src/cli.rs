@@ -40,6 +40,9 @@ pub enum Command {
     ParseOutput(ParseOutputArgs),
     /// Depth maps and instance masks → point clouds, the table frame, and object boxes.
     Lift(StageArgs),
+    /// Extract the scene graph of every scene (graph/graph.json and graph/graph.txt), or print
+    /// the triplets of one layout file with --layout.
+    Graph(GraphArgs),
 }
 
 /// Flags shared by every per-scene stage.
@@ -154,6 +157,28 @@ pub struct ConvertArgs {
     /// scene graph's "layout order" depends on it).
     #[arg(long)]
     pub keep_order: bool,
+}
+
+/// `mesa graph`.
+#[derive(Debug, Args)]
+#[command(group = clap::ArgGroup::new("source").required(true).args(["dataset", "layout"]))]
+pub struct GraphArgs {
+    /// The runner flags (a DATASET, or --layout FILE instead).
+    #[command(flatten)]
+    pub stage: Option<StageArgs>,
+    /// Print the triplet lines of one layout file instead: a dataset layout, an LLM layout, or
+    /// a published MesaTask record (its scene_layout_json), recognised by shape.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["scenes", "jobs", "shard", "force", "config", "progress"])]
+    pub layout: Option<PathBuf>,
+    /// With --layout: the containers, comma-separated, by instance (`bowl_0`) or category
+    /// (`bowl`: every bowl); "" means no object is a container. Without it, the default
+    /// keyword rule of SCENE_GRAPH.md decides (bowl, basket, box, cup, mug, ...; not tray).
+    #[arg(long, value_name = "A,B,...", conflicts_with = "dataset")]
+    pub containers: Option<String>,
+    /// Also write `(a, b, c, are equally spaced along, x|y)` (overrides [graph]
+    /// equally_spaced).
+    #[arg(long)]
+    pub equally_spaced: bool,
 }
 
 /// `mesa parse-output`.

@@ -22,6 +22,8 @@ pub struct Config {
     pub run: RunConfig,
     /// `mesa lift`: depth and masks to point clouds, the table frame and boxes.
     pub lift: mesa_stages::lift::LiftConfig,
+    /// `mesa graph`: the rule-based scene graph (SCENE_GRAPH.md).
+    pub graph: mesa_stages::graph::GraphConfig,
 }
 
 /// The `[run]` section.

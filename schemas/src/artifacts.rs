@@ -356,6 +356,9 @@ pub struct GraphArtifact {
     pub nodes: Vec<GraphNode>,
     /// Edges in output order.
     pub edges: Vec<GraphEdge>,
+    /// `are equally spaced along` triples (written only when that optional relation is on).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub equally_spaced: Vec<GraphSpacing>,
 }
 
 /// A node: where an object is and where it faces.
@@ -368,6 +371,8 @@ pub struct GraphNode {
     pub is_at: String,
     /// One of eight directions, like `front_right`.
     pub face_to: String,
+    /// Whether the object counted as a container (asset annotation, else the keyword rule).
+    pub container: bool,
 }
 
 /// An edge `(subject, relation, object)`.
@@ -381,6 +386,18 @@ pub struct GraphEdge {
     /// Object instance.
     pub object: String,
     /// The numbers that decided the edge (distances in cm, overlap ratios).
+    pub numbers: BTreeMap<String, f64>,
+}
+
+/// Three objects equally spaced along an axis: `(a, b, c, are equally spaced along, x)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GraphSpacing {
+    /// The three instances, by increasing coordinate along the axis.
+    pub instances: [String; 3],
+    /// `x` or `y`.
+    pub axis: String,
+    /// The numbers that decided it (the two gaps and the spread across the axis, in cm).
     pub numbers: BTreeMap<String, f64>,
 }
 

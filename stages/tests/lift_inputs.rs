@@ -167,7 +167,8 @@ fn the_synthetic_scene_lifts_to_two_boxes_on_the_table() {
     // The table's normal in the camera frame is (0, -cos 45°, -sin 45°).
     let n = out.artifact.plane.normal_in_camera;
     assert!(
-        (n[1] + 0.7071).abs() < 0.01 && (n[2] + 0.7071).abs() < 0.01,
+        (n[1] + std::f64::consts::FRAC_1_SQRT_2).abs() < 0.01
+            && (n[2] + std::f64::consts::FRAC_1_SQRT_2).abs() < 0.01,
         "{n:?}"
     );
 }

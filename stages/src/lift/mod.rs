@@ -576,7 +576,7 @@ pub fn fit_plane(
         }
         let n = n / norm;
         let d = -n.dot(&sample[i]);
-        let count = sample
+        let count = scoring
             .iter()
             .filter(|p| (n.dot(p) + d).abs() < threshold)
             .count();

@@ -1,0 +1,2649 @@
+//! The rule-based scene graph (SPEC 5.7): nodes `is at` / `face to`, edges `in`, `above` and
+//! the four horizontal relations, and the optional `are equally spaced along`, exactly as
+//! `SCENE_GRAPH.md` states them (the rules were fitted to the authors' published records).
+//!
+//! The extraction is a pure function of a layout and one container flag per object:
+//!
+//! ```
+//! use mesa_stages::graph::{extract_graph, keyword_containers, GraphOptions, GraphScene, SceneObject};
+//!
+//! let scene = GraphScene {
+//!     zone_cm: [0.0, 100.0, 0.0, 60.0],
+//!     objects: vec![
+//!         SceneObject::new("bowl_0", [30.0, 30.0, 4.0], [20.0, 20.0, 8.0], 0.0),
+//!         SceneObject::new("apple_0", [30.0, 30.0, 5.0], [6.0, 6.0, 6.0], 0.0),
+//!         SceneObject::new("mug_0", [60.0, 30.0, 5.0], [8.0, 8.0, 10.0], 90.0),
+//!     ],
+//! };
+//! let options = GraphOptions::default();
+//! let containers = keyword_containers(&scene, &options);
+//! let graph = extract_graph(&scene, &containers, &options)?;
+//! assert_eq!(
+//!     graph.triplet_lines(),
+//!     [
+//!         "(bowl_0, is at, center)",
+//!         "(bowl_0, face to, front)",
+//!         "(apple_0, is at, center)",
+//!         "(apple_0, face to, front)",
+//!         "(mug_0, is at, center)",
+//!         "(mug_0, face to, right)",
+//!         "(apple_0, in, bowl_0)",
+//!         "(bowl_0, left of, mug_0)",
+//!     ]
+//! );
+//! # Ok::<(), mesa_stages::graph::GraphError>(())
+//! ```
+//!
+//! All lengths are in the layout's units (cm) in the table frame (SPEC section 2); "layout
+//! order" is the order of `objects` in the layout file. Geometry is computed in `f64` relative
+//! to the subject's centre, so that translating a whole scene together with its zone changes
+//! no decision.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use mesa_schemas::artifacts::{GraphArtifact, GraphEdge, GraphNode, GraphSpacing, GRAPH_SCHEMA};
+use mesa_schemas::convert::{category_of_instance, yaw_deg_of, TILT_EPSILON_DEG};
+use mesa_schemas::layout_file::AnyLayout;
+use mesa_schemas::rotation::tilt_deg_from_quat_xyzw;
+use mesa_schemas::{DatasetLayout, LlmLayout, Problem};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::annotations::Annotations;
+
+// ---------------------------------------------------------------------------------------------
+// Thresholds (SCENE_GRAPH.md). They are fixed: the published records were made with them.
+
+/// `is at`: the x band is `left` when the zone fraction fx is below this.
+pub const LEFT_BAND_BELOW: f64 = 0.20;
+/// `is at`: the x band is `right` when fx is above this.
+pub const RIGHT_BAND_ABOVE: f64 = 0.80;
+/// `is at`: the y band is `front` when the zone fraction fy is below this.
+pub const FRONT_BAND_BELOW: f64 = 0.15;
+/// `is at`: the y band is `back` when fy is above this.
+pub const BACK_BAND_ABOVE: f64 = 0.85;
+/// `in`: the least share of the subject's footprint inside the container's footprint.
+pub const CONTAINMENT_MIN_FOOTPRINT_SHARE: f64 = 0.9;
+/// `in`: the least vertical overlap, as a share of the smaller height.
+pub const CONTAINMENT_MIN_Z_SHARE: f64 = 0.5;
+/// `above`: the subject's bottom may sink this far (cm) below the other's top.
+pub const ABOVE_Z_TOLERANCE_CM: f64 = 1.0;
+/// `above`: the least share of the subject's footprint over the other's footprint.
+pub const ABOVE_MIN_FOOTPRINT_SHARE: f64 = 0.5;
+/// Horizontal relations: an object is raised when its bottom is above this height (cm).
+pub const RAISED_Z_MIN_CM: f64 = 0.5;
+/// Horizontal relations: neighbours farther (3-D centre distance) than this share of the
+/// zone's larger side are dropped.
+pub const NEIGHBOUR_MAX_DISTANCE_SHARE: f64 = 0.4;
+/// Horizontal relations: the number of nearest neighbours each subject considers.
+pub const NEIGHBOURS_PER_SUBJECT: usize = 5;
+/// `are equally spaced along`: the gaps may differ by this share of the larger gap.
+pub const SPACING_MAX_GAP_DIFFERENCE_SHARE: f64 = 0.10;
+/// `are equally spaced along`: the most the three may spread across the axis (cm).
+pub const SPACING_MAX_SPREAD_CM: f64 = 2.0;
+
+/// The default container keywords: a category is a container when it is, or ends with, one of
+/// them (a tray is not a container).
+pub const DEFAULT_CONTAINER_KEYWORDS: [&str; 16] = [
+    "bowl",
+    "basket",
+    "box",
+    "bin",
+    "bucket",
+    "cup",
+    "mug",
+    "pot",
+    "pan",
+    "jar",
+    "vase",
+    "holder",
+    "container",
+    "caddy",
+    "crate",
+    "organizer",
+];
+
+// ---------------------------------------------------------------------------------------------
+// Configuration and options.
+
+/// The `[graph]` section of `mesa.toml`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct GraphConfig {
+    /// Categories that count as containers for objects whose asset has no annotation (or whose
+    /// annotation says nothing): a category (the instance name without its `_<n>` suffix) is a
+    /// container when it is, or ends with, one of these words, case-insensitively. Asset
+    /// annotations (`isContainer`, or objathor's `receptacle`) take precedence.
+    pub container_keywords: Vec<String>,
+    /// Also write the optional relation `(a, b, c, are equally spaced along, x|y)`, which the
+    /// published records never contain.
+    pub equally_spaced: bool,
+}
+
+impl Default for GraphConfig {
+    fn default() -> Self {
+        Self {
+            container_keywords: DEFAULT_CONTAINER_KEYWORDS
+                .iter()
+                .map(|k| (*k).to_owned())
+                .collect(),
+            equally_spaced: false,
+        }
+    }
+}
+
+/// Options of [`extract_graph`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GraphOptions {
+    /// Lower-case container keywords for [`keyword_containers`].
+    pub container_keywords: Vec<String>,
+    /// Whether to emit `are equally spaced along` triples.
+    pub equally_spaced: bool,
+}
+
+impl Default for GraphOptions {
+    fn default() -> Self {
+        Self::from(&GraphConfig::default())
+    }
+}
+
+impl From<&GraphConfig> for GraphOptions {
+    fn from(config: &GraphConfig) -> Self {
+        Self {
+            container_keywords: Vec::new(),
+            equally_spaced: config.equally_spaced,
+        }
+        .with_container_keywords(config.container_keywords.iter().map(String::as_str))
+    }
+}
+
+impl GraphOptions {
+    /// Replaces the container keywords (trimmed, lower-cased, empty ones dropped).
+    pub fn with_container_keywords<'a>(
+        mut self,
+        keywords: impl IntoIterator<Item = &'a str>,
+    ) -> Self {
+        self.container_keywords = keywords
+            .into_iter()
+            .map(|k| k.trim().to_lowercase())
+            .filter(|k| !k.is_empty())
+            .collect();
+        self
+    }
+
+    /// Turns the optional `are equally spaced along` relation on or off.
+    pub fn with_equally_spaced(mut self, equally_spaced: bool) -> Self {
+        self.equally_spaced = equally_spaced;
+        self
+    }
+}
+
+/// Whether an instance is a container by the keyword rule: its category (the name without the
+/// `_<n>` suffix) is, or ends with, one of the keywords, case-insensitively. An empty keyword
+/// matches nothing.
+pub fn is_keyword_container(instance: &str, keywords: &[String]) -> bool {
+    let category = category_of_instance(instance).to_lowercase();
+    keywords
+        .iter()
+        .any(|k| !k.is_empty() && category.ends_with(k.to_lowercase().as_str()))
+}
+
+/// The keyword rule's container flag of every object, in layout order.
+pub fn keyword_containers(scene: &GraphScene, options: &GraphOptions) -> Vec<bool> {
+    scene
+        .objects
+        .iter()
+        .map(|o| is_keyword_container(&o.instance, &options.container_keywords))
+        .collect()
+}
+
+/// Container flags of a scene's objects, with the objects the keyword rule had to decide.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ContainerFlags {
+    /// One flag per object, in layout order.
+    pub flags: Vec<bool>,
+    /// The objects without a usable annotation, each with why (`mug_0 (no retrieved_uid)`);
+    /// the keyword rule decided for them.
+    pub by_keyword: Vec<String>,
+}
+
+/// The container flag of every object: the asset annotation's `isContainer` (or objathor
+/// `receptacle`) of its `retrieved_uid` when there is one, else the keyword rule (SCENE_GRAPH.md).
+/// `retrieved_uids` is in layout order (empty strings for objects without an asset).
+pub fn annotated_containers(
+    scene: &GraphScene,
+    retrieved_uids: &[String],
+    annotations: Option<&Annotations>,
+    options: &GraphOptions,
+) -> ContainerFlags {
+    let mut by_keyword = Vec::new();
+    let flags = scene
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(i, object)| {
+            let uid = retrieved_uids.get(i).map(String::as_str).unwrap_or("");
+            let why = match annotations {
+                _ if uid.is_empty() => "no retrieved_uid".to_owned(),
+                None => "no annotations file".to_owned(),
+                Some(annotations) => match annotations.get(uid) {
+                    None => format!("asset {uid} is not annotated"),
+                    Some(annotation) => match annotation.is_container {
+                        Some(flag) => return flag,
+                        None => format!("the annotation of {uid} has no isContainer"),
+                    },
+                },
+            };
+            by_keyword.push(format!("{} ({why})", object.instance));
+            is_keyword_container(&object.instance, &options.container_keywords)
+        })
+        .collect();
+    ContainerFlags { flags, by_keyword }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Input.
+
+/// What the graph needs of one object.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneObject {
+    /// Instance name, like `mug_0`.
+    pub instance: String,
+    /// Centre of the bounding box [x, y, z] in cm, table frame.
+    pub position_cm: [f64; 3],
+    /// [width, depth, height] in cm before rotation.
+    pub size_cm: [f64; 3],
+    /// Yaw in degrees, counter-clockwise seen from above; 0 faces the observer (-y).
+    pub yaw_deg: f64,
+}
+
+impl SceneObject {
+    /// An object from its parts.
+    pub fn new(
+        instance: impl Into<String>,
+        position_cm: [f64; 3],
+        size_cm: [f64; 3],
+        yaw_deg: f64,
+    ) -> Self {
+        Self {
+            instance: instance.into(),
+            position_cm,
+            size_cm,
+            yaw_deg,
+        }
+    }
+}
+
+/// A layout as the graph sees it: the placement zone and the objects in layout order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GraphScene {
+    /// The item placement zone [x_min, x_max, y_min, y_max] in cm.
+    pub zone_cm: [f64; 4],
+    /// The objects, in the order of the layout file.
+    pub objects: Vec<SceneObject>,
+}
+
+impl GraphScene {
+    /// The scene of an LLM layout (objects in the file's order).
+    pub fn from_llm(layout: &LlmLayout) -> Self {
+        Self {
+            zone_cm: layout.zone_cm.0,
+            objects: layout
+                .objects
+                .iter()
+                .map(|o| {
+                    SceneObject::new(&o.instance, o.position_cm.0, o.size_cm.0, o.z_rotation_deg)
+                })
+                .collect(),
+        }
+    }
+
+    /// The scene of a dataset layout, objects in the file's order (not re-sorted, unlike
+    /// [`mesa_schemas::convert::llm_from_dataset`]). A tilted object contributes the yaw of
+    /// its rotation, as the LLM form would keep it.
+    pub fn from_dataset(layout: &DatasetLayout) -> Self {
+        Self {
+            zone_cm: layout.zone_cm.0,
+            objects: layout
+                .objects
+                .iter()
+                .map(|o| SceneObject::new(&o.instance, o.position_cm.0, o.size_cm.0, yaw_deg_of(o)))
+                .collect(),
+        }
+    }
+
+    /// Checks what the rules need: a finite, non-empty zone; non-empty unique instance names;
+    /// finite positions and yaws; finite positive sizes.
+    pub fn check(&self) -> Result<(), GraphError> {
+        let [x_min, x_max, y_min, y_max] = self.zone_cm;
+        if self.zone_cm.iter().any(|v| !v.is_finite()) {
+            return Err(GraphError::Zone {
+                problem: format!("has a non-finite bound [{x_min}, {x_max}, {y_min}, {y_max}]"),
+            });
+        }
+        // SCENE_GRAPH.md gives a fraction of 0.5 when W or D is 0 (kept in `zone_fraction`);
+        // issue 8 makes an empty zone an error instead, so that rule is never reached here.
+        if x_max <= x_min || y_max <= y_min {
+            return Err(GraphError::Zone {
+                problem: format!("is empty [{x_min}, {x_max}, {y_min}, {y_max}]"),
+            });
+        }
+        let mut first_index: BTreeMap<&str, usize> = BTreeMap::new();
+        for (index, object) in self.objects.iter().enumerate() {
+            if object.instance.trim().is_empty() {
+                return Err(GraphError::EmptyInstance { index });
+            }
+            if let Some(&first) = first_index.get(object.instance.as_str()) {
+                return Err(GraphError::DuplicateInstance {
+                    index,
+                    instance: object.instance.clone(),
+                    first,
+                });
+            }
+            first_index.insert(&object.instance, index);
+            let number = |field: String, value: f64, expected: &'static str| GraphError::Number {
+                index,
+                instance: object.instance.clone(),
+                field,
+                value,
+                expected,
+            };
+            for (axis, value) in object.position_cm.iter().enumerate() {
+                if !value.is_finite() {
+                    return Err(number(
+                        format!("position[{axis}]"),
+                        *value,
+                        "a finite number (cm)",
+                    ));
+                }
+            }
+            for (axis, value) in object.size_cm.iter().enumerate() {
+                if !(value.is_finite() && *value > 0.0) {
+                    return Err(number(
+                        format!("size[{axis}]"),
+                        *value,
+                        "a finite number > 0 (cm)",
+                    ));
+                }
+            }
+            if !object.yaw_deg.is_finite() {
+                return Err(number(
+                    "z_rotation".to_owned(),
+                    object.yaw_deg,
+                    "a finite number (degrees)",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why a layout has no scene graph.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum GraphError {
+    /// The placement zone is not a finite, non-empty rectangle.
+    #[error(
+        "item_placement_zone: {problem} (expected finite [x_min, x_max, y_min, y_max] with \
+         x_min < x_max and y_min < y_max)"
+    )]
+    Zone {
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// An object has an empty instance name.
+    #[error("objects[{index}].instance: is empty (expected a name like `mug_0`)")]
+    EmptyInstance {
+        /// Index of the object in the layout.
+        index: usize,
+    },
+    /// Two objects share an instance name.
+    #[error(
+        "objects[{index}].instance: duplicate instance \"{instance}\" (also objects[{first}]) \
+         (expected unique instance names; rename one, like `{instance}_dup`)"
+    )]
+    DuplicateInstance {
+        /// Index of the second object.
+        index: usize,
+        /// The shared name.
+        instance: String,
+        /// Index of the first object with that name.
+        first: usize,
+    },
+    /// A number of an object is not usable.
+    #[error("objects[{index}].{field} ({instance}): is {value} (expected {expected})")]
+    Number {
+        /// Index of the object in the layout.
+        index: usize,
+        /// Its instance name.
+        instance: String,
+        /// The field, like `size[2]`.
+        field: String,
+        /// The value found.
+        value: f64,
+        /// What the rules need.
+        expected: &'static str,
+    },
+    /// The container flags do not match the objects.
+    #[error("container flags: {flags} flags for {objects} objects (expected one per object, in layout order)")]
+    ContainerFlags {
+        /// Number of flags given.
+        flags: usize,
+        /// Number of objects.
+        objects: usize,
+    },
+}
+
+// ---------------------------------------------------------------------------------------------
+// Reading a layout file of any form.
+
+pub use mesa_schemas::layout_file::{layout_form_of, LayoutForm};
+
+/// A layout file read for the graph.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedLayout {
+    /// The scene, objects in the file's order.
+    pub scene: GraphScene,
+    /// What the file was recognised as.
+    pub form: LayoutForm,
+    /// The `retrieved_uid` of each object (dataset layouts only; empty strings otherwise).
+    pub retrieved_uids: Vec<String>,
+    /// What the graph leaves out, one line per object (a tilted object counts by its yaw).
+    pub warnings: Vec<String>,
+}
+
+/// Why a layout file could not be read for the graph: every problem, with its JSON path.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{}", render_problems(.problems))]
+pub struct LayoutReadError {
+    /// The problems, each `<json path>: <problem> (expected ...)`.
+    pub problems: Vec<Problem>,
+}
+
+fn render_problems(problems: &[Problem]) -> String {
+    problems
+        .iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// Reads the text of a dataset layout, an LLM layout or a published record (recognised by
+/// shape, see [`layout_form_of`]), validates it, and returns the scene with objects in the
+/// file's order. Problems name the JSON path and, for objects, the instance.
+pub fn read_layout_text(text: &str) -> Result<LoadedLayout, LayoutReadError> {
+    let read = mesa_schemas::layout_file::read_layout_text(text)
+        .map_err(|problems| LayoutReadError { problems })?;
+    Ok(match read.layout {
+        AnyLayout::Llm(layout) => LoadedLayout {
+            retrieved_uids: vec![String::new(); layout.objects.len()],
+            scene: GraphScene::from_llm(&layout),
+            form: read.form,
+            warnings: Vec::new(),
+        },
+        AnyLayout::Dataset(layout) => {
+            let warnings = layout
+                .objects
+                .iter()
+                .filter_map(|o| {
+                    let tilt_deg = tilt_deg_from_quat_xyzw(o.rotation.0);
+                    (tilt_deg > TILT_EPSILON_DEG).then(|| {
+                        format!(
+                            "{}: rotation is tilted by {tilt_deg:.3}°; the graph uses its \
+                             footprint turned by its yaw {:.3}° only",
+                            o.instance,
+                            yaw_deg_of(o)
+                        )
+                    })
+                })
+                .collect();
+            LoadedLayout {
+                retrieved_uids: layout
+                    .objects
+                    .iter()
+                    .map(|o| o.retrieved_uid.clone())
+                    .collect(),
+                scene: GraphScene::from_dataset(&layout),
+                form: read.form,
+                warnings,
+            }
+        }
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Output.
+
+/// The x band of a position in the zone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum XBand {
+    /// fx < 0.20.
+    Left,
+    /// 0.20 ≤ fx ≤ 0.80.
+    Middle,
+    /// fx > 0.80.
+    Right,
+}
+
+/// The y band of a position in the zone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum YBand {
+    /// fy < 0.15 (near the observer).
+    Front,
+    /// 0.15 ≤ fy ≤ 0.85.
+    Middle,
+    /// fy > 0.85.
+    Back,
+}
+
+/// A cell of the nine-grid: the value of `is at`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct GridCell {
+    /// Front, middle or back.
+    pub y: YBand,
+    /// Left, middle or right.
+    pub x: XBand,
+}
+
+impl GridCell {
+    /// The cell of zone fractions (fx, fy).
+    pub fn from_fractions(fx: f64, fy: f64) -> Self {
+        let x = if fx < LEFT_BAND_BELOW {
+            XBand::Left
+        } else if fx > RIGHT_BAND_ABOVE {
+            XBand::Right
+        } else {
+            XBand::Middle
+        };
+        let y = if fy < FRONT_BAND_BELOW {
+            YBand::Front
+        } else if fy > BACK_BAND_ABOVE {
+            YBand::Back
+        } else {
+            YBand::Middle
+        };
+        Self { y, x }
+    }
+
+    /// `<y band>_<x band>`, or `center` for the middle cell.
+    pub fn label(self) -> &'static str {
+        match (self.y, self.x) {
+            (YBand::Front, XBand::Left) => "front_left",
+            (YBand::Front, XBand::Middle) => "front_middle",
+            (YBand::Front, XBand::Right) => "front_right",
+            (YBand::Middle, XBand::Left) => "middle_left",
+            (YBand::Middle, XBand::Middle) => "center",
+            (YBand::Middle, XBand::Right) => "middle_right",
+            (YBand::Back, XBand::Left) => "back_left",
+            (YBand::Back, XBand::Middle) => "back_middle",
+            (YBand::Back, XBand::Right) => "back_right",
+        }
+    }
+}
+
+impl fmt::Display for GridCell {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.label())
+    }
+}
+
+/// The fraction of `value` across `[min, min + extent]`; 0.5 when the extent is 0.
+pub fn zone_fraction(value: f64, min: f64, extent: f64) -> f64 {
+    if extent == 0.0 {
+        0.5
+    } else {
+        (value - min) / extent
+    }
+}
+
+/// One of the eight directions of `face to`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Facing {
+    /// Toward the observer (-y), yaw 0.
+    Front,
+    /// Yaw 45.
+    FrontRight,
+    /// Toward +x, yaw 90.
+    Right,
+    /// Yaw 135.
+    BackRight,
+    /// Toward +y, yaw 180.
+    Back,
+    /// Yaw -135.
+    BackLeft,
+    /// Toward -x, yaw -90.
+    Left,
+    /// Yaw -45.
+    FrontLeft,
+}
+
+impl Facing {
+    /// The eight directions, counter-clockwise from the front.
+    pub const ALL: [Facing; 8] = [
+        Facing::Front,
+        Facing::FrontRight,
+        Facing::Right,
+        Facing::BackRight,
+        Facing::Back,
+        Facing::BackLeft,
+        Facing::Left,
+        Facing::FrontLeft,
+    ];
+
+    /// The sector of a yaw: 45° sectors centred on the directions.
+    pub fn from_yaw_deg(yaw_deg: f64) -> Self {
+        let a = (yaw_deg + 180.0).rem_euclid(360.0) - 180.0;
+        let k = ((a + 22.5) / 45.0).floor().rem_euclid(8.0);
+        // k is an integer in 0..8 for any finite yaw; the cast cannot truncate.
+        Self::ALL[(k as usize) % 8]
+    }
+
+    /// The label, like `front_right`.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Front => "front",
+            Self::FrontRight => "front_right",
+            Self::Right => "right",
+            Self::BackRight => "back_right",
+            Self::Back => "back",
+            Self::BackLeft => "back_left",
+            Self::Left => "left",
+            Self::FrontLeft => "front_left",
+        }
+    }
+}
+
+impl fmt::Display for Facing {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.label())
+    }
+}
+
+/// A relation between two objects.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Relation {
+    /// Containment.
+    In,
+    /// The subject rests over the object.
+    Above,
+    /// dx < 0 dominates.
+    LeftOf,
+    /// dx > 0 dominates.
+    RightOf,
+    /// dy ≤ 0 dominates (or ties).
+    InFrontOf,
+    /// dy > 0 dominates (or ties).
+    Behind,
+}
+
+impl Relation {
+    /// The relation as written in a triplet.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::In => "in",
+            Self::Above => "above",
+            Self::LeftOf => "left of",
+            Self::RightOf => "right of",
+            Self::InFrontOf => "in front of",
+            Self::Behind => "behind",
+        }
+    }
+
+    /// The horizontal relation of a subject to an object from their centre offsets
+    /// dx = x_s - x_o, dy = y_s - y_o: x decides only when |dx| > |dy|.
+    pub fn horizontal(dx_cm: f64, dy_cm: f64) -> Self {
+        if dx_cm.abs() > dy_cm.abs() {
+            if dx_cm > 0.0 {
+                Self::RightOf
+            } else {
+                Self::LeftOf
+            }
+        } else if dy_cm > 0.0 {
+            Self::Behind
+        } else {
+            Self::InFrontOf
+        }
+    }
+}
+
+impl fmt::Display for Relation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.label())
+    }
+}
+
+/// The numbers that decided an edge.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Evidence {
+    /// Why the subject is in the container.
+    Containment {
+        /// Share of the subject's footprint inside the container's.
+        footprint_share: f64,
+        /// Vertical overlap over the smaller height.
+        z_share: f64,
+        /// The subject's footprint area w·d in cm².
+        subject_area_cm2: f64,
+        /// The container's footprint area in cm².
+        container_area_cm2: f64,
+    },
+    /// Why the subject is above the object.
+    Support {
+        /// Share of the subject's footprint over the object's.
+        footprint_share: f64,
+        /// The subject's bottom minus the object's top, in cm (≥ -1).
+        z_gap_cm: f64,
+    },
+    /// Why the pair is related horizontally.
+    Proximity {
+        /// x_s - x_o in cm.
+        dx_cm: f64,
+        /// y_s - y_o in cm.
+        dy_cm: f64,
+        /// Centre distance in the plane, cm.
+        distance_2d_cm: f64,
+        /// Centre distance in space, cm.
+        distance_3d_cm: f64,
+        /// The distance limit 0.4·max(W, D), cm.
+        max_distance_cm: f64,
+        /// Position of the object among the subject's kept neighbours, from 1.
+        rank: usize,
+    },
+}
+
+impl Evidence {
+    /// The numbers by name, as `graph.json` stores them.
+    pub fn numbers(&self) -> BTreeMap<String, f64> {
+        let pairs: Vec<(&str, f64)> = match *self {
+            Self::Containment {
+                footprint_share,
+                z_share,
+                subject_area_cm2,
+                container_area_cm2,
+            } => vec![
+                ("footprint_share", footprint_share),
+                ("z_share", z_share),
+                ("subject_area_cm2", subject_area_cm2),
+                ("container_area_cm2", container_area_cm2),
+            ],
+            Self::Support {
+                footprint_share,
+                z_gap_cm,
+            } => vec![("footprint_share", footprint_share), ("z_gap_cm", z_gap_cm)],
+            Self::Proximity {
+                dx_cm,
+                dy_cm,
+                distance_2d_cm,
+                distance_3d_cm,
+                max_distance_cm,
+                rank,
+            } => vec![
+                ("dx_cm", dx_cm),
+                ("dy_cm", dy_cm),
+                ("distance_2d_cm", distance_2d_cm),
+                ("distance_3d_cm", distance_3d_cm),
+                ("max_distance_cm", max_distance_cm),
+                ("rank", rank as f64),
+            ],
+        };
+        pairs.into_iter().map(|(k, v)| (k.to_owned(), v)).collect()
+    }
+}
+
+/// A node: where an object is, where it faces, and the numbers behind them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Node {
+    /// The instance.
+    pub instance: String,
+    /// The nine-grid cell.
+    pub is_at: GridCell,
+    /// The facing direction.
+    pub face_to: Facing,
+    /// (fx, fy): the centre's fractions across the zone.
+    pub zone_fraction: [f64; 2],
+    /// Whether the object counted as a container.
+    pub container: bool,
+}
+
+/// An edge `(subject, relation, object)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Edge {
+    /// Subject instance.
+    pub subject: String,
+    /// The relation.
+    pub relation: Relation,
+    /// Object instance.
+    pub object: String,
+    /// The numbers that decided it.
+    pub evidence: Evidence,
+}
+
+impl Edge {
+    /// `(subject, relation, object)`.
+    pub fn triplet(&self) -> String {
+        format!("({}, {}, {})", self.subject, self.relation, self.object)
+    }
+}
+
+/// An axis of the table frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Axis {
+    /// Left to right.
+    X,
+    /// Front to back.
+    Y,
+}
+
+impl Axis {
+    /// `x` or `y`.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::X => "x",
+            Self::Y => "y",
+        }
+    }
+}
+
+/// Three objects equally spaced along an axis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EquallySpaced {
+    /// The instances by increasing coordinate.
+    pub instances: [String; 3],
+    /// The axis.
+    pub axis: Axis,
+    /// The gaps b - a and c - b along the axis, cm.
+    pub gaps_cm: [f64; 2],
+    /// The spread (max - min) of the other coordinate, cm.
+    pub spread_cm: f64,
+}
+
+impl EquallySpaced {
+    /// `(a, b, c, are equally spaced along, x)`.
+    pub fn triplet(&self) -> String {
+        format!(
+            "({}, {}, {}, are equally spaced along, {})",
+            self.instances[0],
+            self.instances[1],
+            self.instances[2],
+            self.axis.label()
+        )
+    }
+}
+
+/// A scene graph: nodes in layout order, edges in output order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneGraph {
+    /// One node per object, in layout order.
+    pub nodes: Vec<Node>,
+    /// `in` edges, then `above` edges, then horizontal edges, as SCENE_GRAPH.md orders them.
+    pub edges: Vec<Edge>,
+    /// `are equally spaced along` triples (empty unless that option is on).
+    pub equally_spaced: Vec<EquallySpaced>,
+}
+
+impl SceneGraph {
+    /// The triplet lines: per node `is at` then `face to`, then the edges, then the
+    /// equally-spaced triples.
+    pub fn triplet_lines(&self) -> Vec<String> {
+        let mut lines = Vec::with_capacity(2 * self.nodes.len() + self.edges.len());
+        for node in &self.nodes {
+            lines.push(format!("({}, is at, {})", node.instance, node.is_at));
+            lines.push(format!("({}, face to, {})", node.instance, node.face_to));
+        }
+        lines.extend(self.edges.iter().map(Edge::triplet));
+        lines.extend(self.equally_spaced.iter().map(EquallySpaced::triplet));
+        lines
+    }
+
+    /// `graph.txt`: the triplet lines, each ending with a newline.
+    pub fn to_text(&self) -> String {
+        let mut text = String::new();
+        for line in self.triplet_lines() {
+            text.push_str(&line);
+            text.push('\n');
+        }
+        text
+    }
+
+    /// `graph.json` (`mesa.graph/1`) of a scene; `layout` is the layout file relative to the
+    /// scene folder.
+    pub fn to_artifact(&self, scene_id: &str, layout: &str) -> GraphArtifact {
+        GraphArtifact {
+            schema: GRAPH_SCHEMA.to_owned(),
+            scene_id: scene_id.to_owned(),
+            layout: layout.to_owned(),
+            nodes: self
+                .nodes
+                .iter()
+                .map(|n| GraphNode {
+                    instance: n.instance.clone(),
+                    is_at: n.is_at.label().to_owned(),
+                    face_to: n.face_to.label().to_owned(),
+                    container: n.container,
+                })
+                .collect(),
+            edges: self
+                .edges
+                .iter()
+                .map(|e| GraphEdge {
+                    subject: e.subject.clone(),
+                    relation: e.relation.label().to_owned(),
+                    object: e.object.clone(),
+                    numbers: e.evidence.numbers(),
+                })
+                .collect(),
+            equally_spaced: self
+                .equally_spaced
+                .iter()
+                .map(|s| GraphSpacing {
+                    instances: s.instances.clone(),
+                    axis: s.axis.label().to_owned(),
+                    numbers: [
+                        ("gap_1_cm".to_owned(), s.gaps_cm[0]),
+                        ("gap_2_cm".to_owned(), s.gaps_cm[1]),
+                        ("spread_cm".to_owned(), s.spread_cm),
+                    ]
+                    .into_iter()
+                    .collect(),
+                })
+                .collect(),
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Geometry.
+
+/// Sine and cosine of an angle in degrees, exact at multiples of 90° (so axis-aligned
+/// footprints stay exactly axis-aligned).
+pub fn sin_cos_deg(angle_deg: f64) -> (f64, f64) {
+    let a = angle_deg.rem_euclid(360.0);
+    if a == 0.0 {
+        (0.0, 1.0)
+    } else if a == 90.0 {
+        (1.0, 0.0)
+    } else if a == 180.0 {
+        (0.0, -1.0)
+    } else if a == 270.0 {
+        (-1.0, 0.0)
+    } else {
+        a.to_radians().sin_cos()
+    }
+}
+
+/// A footprint rectangle centred at the origin: its corners counter-clockwise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Footprint {
+    /// Corner offsets from the centre, counter-clockwise, in cm.
+    pub corners_cm: [[f64; 2]; 4],
+    /// Half extents of the axis-aligned box around the corners, in cm.
+    pub half_extent_cm: [f64; 2],
+    /// True when the rectangle's sides are parallel to the axes (yaw a multiple of 90°).
+    pub axis_aligned: bool,
+    /// w·d in cm².
+    pub area_cm2: f64,
+}
+
+impl Footprint {
+    /// The w×d rectangle rotated by `yaw_deg` counter-clockwise.
+    pub fn new(width_cm: f64, depth_cm: f64, yaw_deg: f64) -> Self {
+        let (s, c) = sin_cos_deg(yaw_deg);
+        let (hw, hd) = (width_cm / 2.0, depth_cm / 2.0);
+        let rotate = |u: f64, v: f64| [c * u - s * v, s * u + c * v];
+        let corners_cm = [
+            rotate(-hw, -hd),
+            rotate(hw, -hd),
+            rotate(hw, hd),
+            rotate(-hw, hd),
+        ];
+        let axis_aligned = s == 0.0 || c == 0.0;
+        let half_extent_cm = if axis_aligned {
+            if c == 0.0 {
+                [hd, hw]
+            } else {
+                [hw, hd]
+            }
+        } else {
+            let hx = corners_cm.iter().map(|p| p[0].abs()).fold(0.0, f64::max);
+            let hy = corners_cm.iter().map(|p| p[1].abs()).fold(0.0, f64::max);
+            [hx, hy]
+        };
+        Self {
+            corners_cm,
+            half_extent_cm,
+            axis_aligned,
+            area_cm2: width_cm * depth_cm,
+        }
+    }
+}
+
+/// The area (cm²) of the intersection of two footprints whose centres are `offset_cm` apart
+/// (centre of `b` minus centre of `a`): exact for axis-aligned pairs, else by clipping `a`
+/// against `b` (Sutherland–Hodgman; both are convex).
+pub fn intersection_area_footprints(a: &Footprint, b: &Footprint, offset_cm: [f64; 2]) -> f64 {
+    let [dx, dy] = offset_cm;
+    if dx.abs() >= a.half_extent_cm[0] + b.half_extent_cm[0]
+        || dy.abs() >= a.half_extent_cm[1] + b.half_extent_cm[1]
+    {
+        return 0.0;
+    }
+    if a.axis_aligned && b.axis_aligned {
+        let [ax, ay] = a.half_extent_cm;
+        let [bx, by] = b.half_extent_cm;
+        let ox = ax.min(dx + bx) - (-ax).max(dx - bx);
+        let oy = ay.min(dy + by) - (-ay).max(dy - by);
+        return ox.max(0.0) * oy.max(0.0);
+    }
+    let clip: [[f64; 2]; 4] = b.corners_cm.map(|[x, y]| [x + dx, y + dy]);
+    let mut polygon = Polygon::from_slice(&a.corners_cm);
+    for i in 0..4 {
+        polygon = polygon.clip_half_plane(clip[i], clip[(i + 1) % 4]);
+        if polygon.len < 3 {
+            return 0.0;
+        }
+    }
+    polygon.area()
+}
+
+/// A convex polygon of at most 8 vertices (a quadrilateral clipped by 4 half-planes gains at
+/// most one vertex per cut), kept on the stack.
+#[derive(Clone, Copy)]
+struct Polygon {
+    points: [[f64; 2]; 8],
+    len: usize,
+}
+
+impl Polygon {
+    fn from_slice(points: &[[f64; 2]]) -> Self {
+        let mut polygon = Self {
+            points: [[0.0; 2]; 8],
+            len: 0,
+        };
+        for p in points {
+            polygon.push(*p);
+        }
+        polygon
+    }
+
+    fn push(&mut self, p: [f64; 2]) {
+        // A convex 4-gon clipped by 4 half-planes has at most 8 vertices; rounding cannot add
+        // more, but never index past the end whatever happens.
+        if self.len < self.points.len() {
+            self.points[self.len] = p;
+            self.len += 1;
+        }
+    }
+
+    /// Keeps the part left of the directed line a → b (counter-clockwise clip edge).
+    fn clip_half_plane(&self, a: [f64; 2], b: [f64; 2]) -> Self {
+        let side = |p: [f64; 2]| (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]);
+        let mut out = Self::from_slice(&[]);
+        for i in 0..self.len {
+            let p = self.points[i];
+            let q = self.points[(i + 1) % self.len];
+            let (sp, sq) = (side(p), side(q));
+            if sp >= 0.0 {
+                out.push(p);
+            }
+            if (sp >= 0.0) != (sq >= 0.0) {
+                let t = sp / (sp - sq);
+                out.push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
+            }
+        }
+        out
+    }
+
+    fn area(&self) -> f64 {
+        let mut twice = 0.0;
+        for i in 0..self.len {
+            let p = self.points[i];
+            let q = self.points[(i + 1) % self.len];
+            twice += p[0] * q[1] - q[0] * p[1];
+        }
+        (twice / 2.0).abs()
+    }
+}
+
+/// The derived geometry of one object.
+struct Solid {
+    x: f64,
+    y: f64,
+    z: f64,
+    z_min: f64,
+    z_max: f64,
+    height: f64,
+    footprint: Footprint,
+}
+
+impl Solid {
+    fn new(object: &SceneObject) -> Self {
+        let [x, y, z] = object.position_cm;
+        let [w, d, h] = object.size_cm;
+        Self {
+            x,
+            y,
+            z,
+            z_min: z - h / 2.0,
+            z_max: z + h / 2.0,
+            height: h,
+            footprint: Footprint::new(w, d, object.yaw_deg),
+        }
+    }
+
+    fn area(&self) -> f64 {
+        self.footprint.area_cm2
+    }
+
+    /// Share of this object's footprint inside `other`'s.
+    fn footprint_share_in(&self, other: &Solid) -> f64 {
+        let inter = intersection_area_footprints(
+            &self.footprint,
+            &other.footprint,
+            [other.x - self.x, other.y - self.y],
+        );
+        inter / self.area()
+    }
+
+    fn z_overlap(&self, other: &Solid) -> f64 {
+        (self.z_max.min(other.z_max) - self.z_min.max(other.z_min)).max(0.0)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The extraction.
+
+/// Extracts the scene graph of `scene`, with `containers[i]` saying whether object i is a
+/// container (see [`keyword_containers`] for the keyword rule).
+pub fn extract_graph(
+    scene: &GraphScene,
+    containers: &[bool],
+    options: &GraphOptions,
+) -> Result<SceneGraph, GraphError> {
+    scene.check()?;
+    if containers.len() != scene.objects.len() {
+        return Err(GraphError::ContainerFlags {
+            flags: containers.len(),
+            objects: scene.objects.len(),
+        });
+    }
+    let solids: Vec<Solid> = scene.objects.iter().map(Solid::new).collect();
+    let names: Vec<&str> = scene.objects.iter().map(|o| o.instance.as_str()).collect();
+    let [x_min, x_max, y_min, y_max] = scene.zone_cm;
+    let (width, depth) = (x_max - x_min, y_max - y_min);
+
+    let nodes = scene
+        .objects
+        .iter()
+        .zip(containers)
+        .map(|(object, &container)| {
+            let fx = zone_fraction(object.position_cm[0], x_min, width);
+            let fy = zone_fraction(object.position_cm[1], y_min, depth);
+            Node {
+                instance: object.instance.clone(),
+                is_at: GridCell::from_fractions(fx, fy),
+                face_to: Facing::from_yaw_deg(object.yaw_deg),
+                zone_fraction: [fx, fy],
+                container,
+            }
+        })
+        .collect();
+
+    let mut edges = Vec::new();
+    let container_of = containment(&solids, containers);
+    for (s, found) in container_of.iter().enumerate() {
+        if let Some((c, evidence)) = found {
+            edges.push(Edge {
+                subject: names[s].to_owned(),
+                relation: Relation::In,
+                object: names[*c].to_owned(),
+                evidence: *evidence,
+            });
+        }
+    }
+    // Objects that take part in the other relations, in layout order.
+    let free: Vec<usize> = (0..solids.len())
+        .filter(|&i| container_of[i].is_none())
+        .collect();
+    for &s in &free {
+        if let Some((o, evidence)) = support_of(s, &solids, &free) {
+            edges.push(Edge {
+                subject: names[s].to_owned(),
+                relation: Relation::Above,
+                object: names[o].to_owned(),
+                evidence,
+            });
+        }
+    }
+    let max_distance_cm = NEIGHBOUR_MAX_DISTANCE_SHARE * width.max(depth);
+    for (s, o, relation, evidence) in horizontal_pairs(&solids, &free, max_distance_cm) {
+        edges.push(Edge {
+            subject: names[s].to_owned(),
+            relation,
+            object: names[o].to_owned(),
+            evidence,
+        });
+    }
+    let equally_spaced = if options.equally_spaced {
+        spacings(&solids, &free, &names)
+    } else {
+        Vec::new()
+    };
+    Ok(SceneGraph {
+        nodes,
+        edges,
+        equally_spaced,
+    })
+}
+
+/// Whether `c` may contain `s` by the thresholds alone; with the numbers when it may.
+fn containment_evidence(
+    s: usize,
+    c: usize,
+    solids: &[Solid],
+    containers: &[bool],
+) -> Option<Evidence> {
+    let (ss, sc) = (&solids[s], &solids[c]);
+    if s == c || !containers[c] || sc.area() < ss.area() || ss.z <= sc.z_min {
+        return None;
+    }
+    let z_share = ss.z_overlap(sc) / ss.height.min(sc.height);
+    if z_share < CONTAINMENT_MIN_Z_SHARE {
+        return None;
+    }
+    let footprint_share = ss.footprint_share_in(sc);
+    if footprint_share < CONTAINMENT_MIN_FOOTPRINT_SHARE {
+        return None;
+    }
+    Some(Evidence::Containment {
+        footprint_share,
+        z_share,
+        subject_area_cm2: ss.area(),
+        container_area_cm2: sc.area(),
+    })
+}
+
+/// The container of each object, if any: the qualifying container with the smallest footprint
+/// (ties: earlier in layout order).
+///
+/// SCENE_GRAPH.md leaves one case open: two containers of equal footprint can each qualify as
+/// the other's container (two identical cups stacked), which would write the pair twice. Then
+/// only the upper one (higher centre; on equal centres the later in layout order) is in the
+/// lower one. This also rules out longer cycles, so containment is a forest.
+fn containment(solids: &[Solid], containers: &[bool]) -> Vec<Option<(usize, Evidence)>> {
+    (0..solids.len())
+        .map(|s| {
+            let mut best: Option<(usize, Evidence)> = None;
+            for c in 0..solids.len() {
+                let Some(evidence) = containment_evidence(s, c, solids, containers) else {
+                    continue;
+                };
+                let s_is_lower = (solids[s].z, s) < (solids[c].z, c);
+                if s_is_lower && containment_evidence(c, s, solids, containers).is_some() {
+                    continue;
+                }
+                // Strictly smaller wins, so the earliest of equal areas stays.
+                if best.is_none_or(|(b, _)| solids[c].area() < solids[b].area()) {
+                    best = Some((c, evidence));
+                }
+            }
+            best
+        })
+        .collect()
+}
+
+/// What `s` is above, if anything: of the qualifying objects, the one with the highest top
+/// (ties: earlier in layout order).
+fn support_of(s: usize, solids: &[Solid], free: &[usize]) -> Option<(usize, Evidence)> {
+    let ss = &solids[s];
+    let mut best: Option<(usize, Evidence)> = None;
+    for &o in free {
+        let so = &solids[o];
+        if o == s || ss.z_min <= so.z_max - ABOVE_Z_TOLERANCE_CM || ss.z <= so.z {
+            continue;
+        }
+        let footprint_share = ss.footprint_share_in(so);
+        if footprint_share < ABOVE_MIN_FOOTPRINT_SHARE {
+            continue;
+        }
+        if best.is_none_or(|(b, _)| so.z_max > solids[b].z_max) {
+            best = Some((
+                o,
+                Evidence::Support {
+                    footprint_share,
+                    z_gap_cm: ss.z_min - so.z_max,
+                },
+            ));
+        }
+    }
+    best
+}
+
+/// The horizontal pairs ("keep closest pairs, remove duals"), grouped by subject in layout
+/// order, each group in the order its pairs were chosen.
+fn horizontal_pairs(
+    solids: &[Solid],
+    free: &[usize],
+    max_distance_cm: f64,
+) -> Vec<(usize, usize, Relation, Evidence)> {
+    let n = solids.len();
+    let raised: Vec<bool> = solids.iter().map(|s| s.z_min > RAISED_Z_MIN_CM).collect();
+    let visit = free
+        .iter()
+        .filter(|&&i| !raised[i])
+        .chain(free.iter().filter(|&&i| raised[i]));
+    let mut emitted = vec![false; n * n];
+    let mut blocks: Vec<Vec<(usize, usize, Relation, Evidence)>> = vec![Vec::new(); n];
+    let mut ranked: Vec<(f64, usize)> = Vec::with_capacity(free.len());
+    for &s in visit {
+        let ss = &solids[s];
+        ranked.clear();
+        // `free` is in layout order and the sort is stable: equal distances keep layout order.
+        ranked.extend(free.iter().filter(|&&o| o != s).map(|&o| {
+            let (dx, dy) = (ss.x - solids[o].x, ss.y - solids[o].y);
+            (dx * dx + dy * dy, o)
+        }));
+        ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let kept = ranked
+            .iter()
+            .filter(|&&(_, o)| distance_3d(ss, &solids[o]) <= max_distance_cm)
+            .take(NEIGHBOURS_PER_SUBJECT);
+        for (rank, &(d2_squared, o)) in kept.enumerate() {
+            if (raised[s] && !raised[o]) || emitted[s * n + o] {
+                continue;
+            }
+            emitted[s * n + o] = true;
+            emitted[o * n + s] = true;
+            let (dx_cm, dy_cm) = (ss.x - solids[o].x, ss.y - solids[o].y);
+            blocks[s].push((
+                s,
+                o,
+                Relation::horizontal(dx_cm, dy_cm),
+                Evidence::Proximity {
+                    dx_cm,
+                    dy_cm,
+                    distance_2d_cm: d2_squared.sqrt(),
+                    distance_3d_cm: distance_3d(ss, &solids[o]),
+                    max_distance_cm,
+                    rank: rank + 1,
+                },
+            ));
+        }
+    }
+    blocks.into_iter().flatten().collect()
+}
+
+fn distance_3d(a: &Solid, b: &Solid) -> f64 {
+    let (dx, dy, dz) = (a.x - b.x, a.y - b.y, a.z - b.z);
+    (dx * dx + dy * dy + dz * dz).sqrt()
+}
+
+/// The optional `are equally spaced along` triples, along x then y.
+fn spacings(solids: &[Solid], free: &[usize], names: &[&str]) -> Vec<EquallySpaced> {
+    let mut out = Vec::new();
+    for axis in [Axis::X, Axis::Y] {
+        let along = |i: usize| match axis {
+            Axis::X => solids[i].x,
+            Axis::Y => solids[i].y,
+        };
+        let across = |i: usize| match axis {
+            Axis::X => solids[i].y,
+            Axis::Y => solids[i].x,
+        };
+        let mut sorted = free.to_vec();
+        sorted.sort_by(|&a, &b| along(a).total_cmp(&along(b)));
+        for i in 0..sorted.len() {
+            for j in i + 1..sorted.len() {
+                for k in j + 1..sorted.len() {
+                    let (a, b, c) = (sorted[i], sorted[j], sorted[k]);
+                    let g1 = along(b) - along(a);
+                    let g2 = along(c) - along(b);
+                    if g1 <= 0.0 || g2 <= 0.0 {
+                        continue;
+                    }
+                    if (g1 - g2).abs() > SPACING_MAX_GAP_DIFFERENCE_SHARE * g1.max(g2) {
+                        continue;
+                    }
+                    let values = [across(a), across(b), across(c)];
+                    let spread = values.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+                        - values.iter().copied().fold(f64::INFINITY, f64::min);
+                    if spread > SPACING_MAX_SPREAD_CM {
+                        continue;
+                    }
+                    out.push(EquallySpaced {
+                        instances: [
+                            names[a].to_owned(),
+                            names[b].to_owned(),
+                            names[c].to_owned(),
+                        ],
+                        axis,
+                        gaps_cm: [g1, g2],
+                        spread_cm: spread,
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+    use proptest::prelude::*;
+
+    fn obj(instance: &str, position_cm: [f64; 3], size_cm: [f64; 3], yaw_deg: f64) -> SceneObject {
+        SceneObject::new(instance, position_cm, size_cm, yaw_deg)
+    }
+
+    fn scene(zone_cm: [f64; 4], objects: Vec<SceneObject>) -> GraphScene {
+        GraphScene { zone_cm, objects }
+    }
+
+    /// The graph with the keyword container rule.
+    fn graph_of(scene: &GraphScene, options: &GraphOptions) -> SceneGraph {
+        extract_graph(scene, &keyword_containers(scene, options), options).expect("valid scene")
+    }
+
+    /// The edge lines only (no `is at` / `face to`).
+    fn edges(scene: &GraphScene) -> Vec<String> {
+        graph_of(scene, &GraphOptions::default())
+            .edges
+            .iter()
+            .map(Edge::triplet)
+            .collect()
+    }
+
+    fn lines(scene: &GraphScene) -> Vec<String> {
+        graph_of(scene, &GraphOptions::default()).triplet_lines()
+    }
+
+    // --- nodes ---------------------------------------------------------------------------
+
+    #[test]
+    fn is_at_uses_20_and_15_percent_bands_with_edges_in_the_middle() {
+        let cases = [
+            ([10.0, 10.0], "front_left"),
+            ([50.0, 10.0], "front_middle"),
+            ([90.0, 10.0], "front_right"),
+            ([10.0, 50.0], "middle_left"),
+            ([50.0, 50.0], "center"),
+            ([90.0, 50.0], "middle_right"),
+            ([10.0, 90.0], "back_left"),
+            ([50.0, 90.0], "back_middle"),
+            ([90.0, 90.0], "back_right"),
+            // Exactly on a band edge: the middle band (the bounds are strict).
+            ([20.0, 15.0], "center"),
+            ([80.0, 85.0], "center"),
+            ([19.999, 85.001], "back_left"),
+            ([80.001, 14.999], "front_right"),
+        ];
+        let objects = cases
+            .iter()
+            .enumerate()
+            .map(|(i, ([x, y], _))| obj(&format!("o_{i}"), [*x, *y, 0.5], [1.0, 1.0, 1.0], 0.0))
+            .collect();
+        let graph = graph_of(
+            &scene([0.0, 100.0, 0.0, 100.0], objects),
+            &GraphOptions::default(),
+        );
+        for (node, (_, label)) in graph.nodes.iter().zip(cases) {
+            assert_eq!(
+                node.is_at.label(),
+                label,
+                "{}: {:?}",
+                node.instance,
+                node.zone_fraction
+            );
+        }
+    }
+
+    #[test]
+    fn is_at_is_relative_to_the_zone_origin() {
+        // fx = (120 - 100) / 100 = 0.2: the middle band, not left.
+        let s = scene(
+            [100.0, 200.0, 50.0, 150.0],
+            vec![obj("cup_0", [120.0, 64.0, 5.0], [8.0, 8.0, 10.0], 0.0)],
+        );
+        assert_eq!(lines(&s)[0], "(cup_0, is at, front_middle)");
+        assert_eq!(zone_fraction(3.0, 1.0, 0.0), 0.5);
+        assert_eq!(zone_fraction(3.0, 1.0, 4.0), 0.5);
+    }
+
+    #[test]
+    fn face_to_sectors_are_centred_on_the_directions() {
+        let cases = [
+            (0.0, "front"),
+            (22.4999, "front"),
+            (22.5, "front_right"),
+            (45.0, "front_right"),
+            (67.5, "right"),
+            (90.0, "right"),
+            (135.0, "back_right"),
+            (157.4, "back_right"),
+            (157.5, "back"),
+            (180.0, "back"),
+            (-180.0, "back"),
+            (-157.5, "back_left"),
+            (-157.6, "back"),
+            (-135.0, "back_left"),
+            (-90.0, "left"),
+            (-45.0, "front_left"),
+            (-22.5, "front"),
+            (-22.5001, "front_left"),
+            (270.0, "left"),
+            (360.0, "front"),
+            (810.0, "right"),
+            (-337.5, "front_right"),
+            (72.2, "right"),
+        ];
+        for (yaw, label) in cases {
+            assert_eq!(Facing::from_yaw_deg(yaw).label(), label, "yaw {yaw}");
+        }
+    }
+
+    // --- horizontal labels -----------------------------------------------------------------
+
+    #[test]
+    fn horizontal_label_ties_go_to_y() {
+        assert_eq!(Relation::horizontal(3.0, 2.0), Relation::RightOf);
+        assert_eq!(Relation::horizontal(-3.0, 2.0), Relation::LeftOf);
+        assert_eq!(Relation::horizontal(2.0, 3.0), Relation::Behind);
+        assert_eq!(Relation::horizontal(2.0, -3.0), Relation::InFrontOf);
+        // |dx| = |dy|: y decides.
+        assert_eq!(Relation::horizontal(3.0, 3.0), Relation::Behind);
+        assert_eq!(Relation::horizontal(3.0, -3.0), Relation::InFrontOf);
+        assert_eq!(Relation::horizontal(-3.0, 3.0), Relation::Behind);
+        // Same centre: in front of.
+        assert_eq!(Relation::horizontal(0.0, 0.0), Relation::InFrontOf);
+    }
+
+    #[test]
+    fn diagonal_neighbours_are_front_or_behind() {
+        // dx = dy = -10 for a (first in layout, so the subject).
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("book_0", [40.0, 40.0, 1.0], [4.0, 4.0, 2.0], 0.0),
+                obj("book_1", [50.0, 50.0, 1.0], [4.0, 4.0, 2.0], 0.0),
+                obj("book_2", [30.0, 50.0, 1.0], [4.0, 4.0, 2.0], 0.0),
+            ],
+        );
+        // book_0 → book_1 (14.1), book_2 (14.1, dx = 10, dy = -10): both in front of.
+        // book_1 → book_2: dx = 20, dy = 0.
+        assert_eq!(
+            edges(&s),
+            [
+                "(book_0, in front of, book_1)",
+                "(book_0, in front of, book_2)",
+                "(book_1, right of, book_2)",
+            ]
+        );
+    }
+
+    // --- footprint geometry ----------------------------------------------------------------
+
+    #[test]
+    fn intersection_of_axis_aligned_rectangles_is_exact() {
+        let a = Footprint::new(10.0, 10.0, 0.0);
+        let b = Footprint::new(10.0, 10.0, 90.0);
+        assert_eq!(intersection_area_footprints(&a, &a, [0.0, 0.0]), 100.0);
+        assert_eq!(intersection_area_footprints(&a, &b, [6.0, 0.0]), 40.0);
+        assert_eq!(intersection_area_footprints(&a, &a, [10.0, 0.0]), 0.0);
+        let long = Footprint::new(20.0, 4.0, 90.0);
+        assert_eq!(long.half_extent_cm, [2.0, 10.0]);
+        assert!(long.axis_aligned);
+        assert_eq!(intersection_area_footprints(&a, &long, [0.0, 0.0]), 40.0);
+    }
+
+    #[test]
+    fn intersection_of_a_square_and_its_45_degree_turn_is_the_octagon() {
+        let a = Footprint::new(1.0, 1.0, 0.0);
+        let b = Footprint::new(1.0, 1.0, 45.0);
+        let octagon = 2.0 * (2f64.sqrt() - 1.0);
+        assert_abs_diff_eq!(
+            intersection_area_footprints(&a, &b, [0.0, 0.0]),
+            octagon,
+            epsilon = 1e-12
+        );
+        assert_abs_diff_eq!(
+            intersection_area_footprints(&b, &a, [0.0, 0.0]),
+            octagon,
+            epsilon = 1e-12
+        );
+    }
+
+    #[test]
+    fn a_diagonal_strip_covers_the_centre_band_of_a_square() {
+        // A 40×4 board turned 45° under a 6×6 square centred on it: the square minus two
+        // corner triangles with legs 6 - 2√2, area 24√2 - 8.
+        let board = Footprint::new(40.0, 4.0, 45.0);
+        let square = Footprint::new(6.0, 6.0, 0.0);
+        let expected = 24.0 * 2f64.sqrt() - 8.0;
+        assert_abs_diff_eq!(
+            intersection_area_footprints(&square, &board, [0.0, 0.0]),
+            expected,
+            epsilon = 1e-9
+        );
+        // Far off the diagonal but inside the board's bounding box: the AABBs overlap, the
+        // rectangles do not.
+        assert!(board.half_extent_cm[0] > 15.0);
+        assert_eq!(
+            intersection_area_footprints(&square, &board, [12.0, -12.0]),
+            0.0
+        );
+    }
+
+    #[test]
+    fn a_rotated_footprint_whose_box_overlaps_supports_nothing() {
+        // The board's bounding box reaches (38, 62), its rectangle does not: no `above`.
+        let board = obj("board_0", [50.0, 50.0, 1.0], [40.0, 4.0, 2.0], 45.0);
+        let corner = obj("cube_0", [38.0, 62.0, 4.0], [6.0, 6.0, 4.0], 0.0);
+        let s = scene([0.0, 100.0, 0.0, 100.0], vec![board.clone(), corner]);
+        // cube_0 is raised (z_min 2) and board_0 is not: board_0 visits first; dx = -12 and
+        // dy = 12 tie, so y decides.
+        assert_eq!(edges(&s), ["(board_0, in front of, cube_0)"]);
+        // The same cube centred on the board: 72% of it is over the board.
+        let centred = obj("cube_0", [50.0, 50.0, 4.0], [6.0, 6.0, 4.0], 0.0);
+        let s = scene([0.0, 100.0, 0.0, 100.0], vec![board, centred]);
+        assert_eq!(
+            edges(&s),
+            ["(cube_0, above, board_0)", "(board_0, in front of, cube_0)"]
+        );
+        let graph = graph_of(&s, &GraphOptions::default());
+        let Evidence::Support {
+            footprint_share,
+            z_gap_cm,
+        } = graph.edges[0].evidence
+        else {
+            panic!("support evidence expected");
+        };
+        assert_abs_diff_eq!(
+            footprint_share,
+            (24.0 * 2f64.sqrt() - 8.0) / 36.0,
+            epsilon = 1e-9
+        );
+        assert_eq!(z_gap_cm, 0.0);
+    }
+
+    #[test]
+    fn exact_turns_have_exact_sines() {
+        assert_eq!(sin_cos_deg(90.0), (1.0, 0.0));
+        assert_eq!(sin_cos_deg(-90.0), (-1.0, 0.0));
+        assert_eq!(sin_cos_deg(540.0), (0.0, -1.0));
+        let (s, c) = sin_cos_deg(30.0);
+        assert_abs_diff_eq!(s, 0.5, epsilon = 1e-15);
+        assert_abs_diff_eq!(c, 3f64.sqrt() / 2.0, epsilon = 1e-15);
+    }
+
+    // --- containment -----------------------------------------------------------------------
+
+    #[test]
+    fn fruit_in_a_bowl_on_a_tray() {
+        let s = scene(
+            [0.0, 100.0, 0.0, 60.0],
+            vec![
+                obj("tray_0", [50.0, 30.0, 1.0], [40.0, 30.0, 2.0], 0.0),
+                obj("bowl_0", [55.0, 32.0, 6.0], [20.0, 20.0, 8.0], 0.0),
+                obj("apple_0", [57.0, 32.0, 6.0], [6.0, 6.0, 6.0], 0.0),
+            ],
+        );
+        // apple_0 in bowl_0: footprint fully inside, z overlap 6 of 6, centre 6 > bowl bottom 2.
+        // A tray is not a container, so the bowl is above it (bottom 2 > top 2 - 1).
+        // Horizontal: the tray (not raised) keeps the bowl (raised: bottom 2 > 0.5); the apple
+        // takes part in nothing else.
+        assert_eq!(
+            lines(&s),
+            [
+                "(tray_0, is at, center)",
+                "(tray_0, face to, front)",
+                "(bowl_0, is at, center)",
+                "(bowl_0, face to, front)",
+                "(apple_0, is at, center)",
+                "(apple_0, face to, front)",
+                "(apple_0, in, bowl_0)",
+                "(bowl_0, above, tray_0)",
+                "(tray_0, left of, bowl_0)",
+            ]
+        );
+        let graph = graph_of(&s, &GraphOptions::default());
+        assert_eq!(
+            graph.edges[0].evidence,
+            Evidence::Containment {
+                footprint_share: 1.0,
+                z_share: 1.0,
+                subject_area_cm2: 36.0,
+                container_area_cm2: 400.0,
+            }
+        );
+        assert!(graph.nodes[1].container && !graph.nodes[0].container);
+    }
+
+    #[test]
+    fn the_smallest_qualifying_container_wins_and_nests() {
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("box_0", [50.0, 50.0, 10.0], [60.0, 60.0, 20.0], 0.0),
+                obj("bowl_0", [50.0, 50.0, 5.0], [30.0, 30.0, 10.0], 0.0),
+                obj("apple_0", [50.0, 50.0, 4.0], [6.0, 6.0, 6.0], 0.0),
+            ],
+        );
+        // The apple qualifies for both; the bowl is smaller. The bowl is in the box. Nothing
+        // is left for the other relations.
+        assert_eq!(edges(&s), ["(bowl_0, in, box_0)", "(apple_0, in, bowl_0)"]);
+    }
+
+    #[test]
+    fn equal_containers_tie_on_layout_order() {
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("bin_1", [50.0, 50.0, 5.0], [20.0, 20.0, 10.0], 0.0),
+                obj("bin_0", [51.0, 50.0, 5.0], [20.0, 20.0, 10.0], 0.0),
+                obj("pen_0", [50.0, 50.0, 4.0], [1.0, 12.0, 1.0], 0.0),
+            ],
+        );
+        // The bins hold each other too, by the thresholds, at equal centre heights: the later
+        // one in layout order (bin_0) is in the earlier one.
+        assert_eq!(edges(&s), ["(bin_0, in, bin_1)", "(pen_0, in, bin_1)"]);
+    }
+
+    #[test]
+    fn two_identical_cups_stacked_give_one_in() {
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("cup_0", [30.0, 30.0, 5.0], [8.0, 8.0, 10.0], 0.0),
+                obj("cup_1", [30.0, 30.0, 7.0], [8.0, 8.0, 10.0], 0.0),
+            ],
+        );
+        // Each qualifies as the other's container; the upper one is in the lower one.
+        assert_eq!(edges(&s), ["(cup_1, in, cup_0)"]);
+        let flipped = scene(s.zone_cm, vec![s.objects[1].clone(), s.objects[0].clone()]);
+        assert_eq!(edges(&flipped), ["(cup_1, in, cup_0)"]);
+    }
+
+    #[test]
+    fn containment_thresholds_are_inclusive() {
+        let bin = obj("bin_0", [50.0, 50.0, 5.0], [20.0, 20.0, 10.0], 0.0);
+        // Footprint: x [51, 61] against [40, 60]: 9 × 10 = 90 of 100 = 0.9 exactly.
+        let at_90 = obj("block_0", [56.0, 50.0, 5.0], [10.0, 10.0, 4.0], 0.0);
+        let s = scene([0.0, 100.0, 0.0, 100.0], vec![bin.clone(), at_90]);
+        assert_eq!(edges(&s), ["(block_0, in, bin_0)"]);
+        // 8.5 of 10: 0.85, not in; the block's centre is only 6.5 away: a horizontal pair.
+        let at_85 = obj("block_0", [56.5, 50.0, 5.0], [10.0, 10.0, 4.0], 0.0);
+        let s = scene([0.0, 100.0, 0.0, 100.0], vec![bin.clone(), at_85]);
+        assert_eq!(edges(&s), ["(bin_0, left of, block_0)"]);
+        // z: [8, 12] against [0, 10]: 2 of min(4, 10) = 0.5 exactly.
+        let z_half = obj("block_0", [50.0, 50.0, 10.0], [10.0, 10.0, 4.0], 0.0);
+        let s = scene([0.0, 100.0, 0.0, 100.0], vec![bin.clone(), z_half]);
+        assert_eq!(edges(&s), ["(block_0, in, bin_0)"]);
+        // [8.5, 12.5]: 0.375, not in; nor above (bottom 8.5 is not above 10 - 1); raised, so
+        // the bin (table level) writes the pair.
+        let z_less = obj("block_0", [50.0, 50.0, 10.5], [10.0, 10.0, 4.0], 0.0);
+        let s = scene([0.0, 100.0, 0.0, 100.0], vec![bin, z_less]);
+        assert_eq!(edges(&s), ["(bin_0, in front of, block_0)"]);
+    }
+
+    #[test]
+    fn containment_needs_a_container_as_large_and_a_centre_above_its_bottom() {
+        // A cup smaller than the plate on it holds nothing; the plate, mostly overhanging (64
+        // of 400), is not above it either. The raised plate comes after the cup.
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("plate_0", [50.0, 50.0, 10.5], [20.0, 20.0, 1.0], 0.0),
+                obj("cup_0", [50.0, 50.0, 5.0], [8.0, 8.0, 10.0], 0.0),
+            ],
+        );
+        assert_eq!(edges(&s), ["(cup_0, in front of, plate_0)"]);
+        // An 8 × 8 plate on it: its whole footprint is over the cup.
+        let s = scene(
+            s.zone_cm,
+            vec![
+                obj("plate_0", [50.0, 50.0, 10.5], [8.0, 8.0, 1.0], 0.0),
+                s.objects[1].clone(),
+            ],
+        );
+        assert_eq!(
+            edges(&s),
+            ["(plate_0, above, cup_0)", "(cup_0, in front of, plate_0)"]
+        );
+        // A tall rod through a raised bin: centre 10 is not above the bin's bottom 10.
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("bin_0", [50.0, 50.0, 15.0], [20.0, 20.0, 10.0], 0.0),
+                obj("rod_0", [50.0, 50.0, 10.0], [2.0, 2.0, 20.0], 0.0),
+            ],
+        );
+        assert_eq!(edges(&s), ["(rod_0, in front of, bin_0)"]);
+        // Raise the rod by 0.5: centre 10.5 > 10, overlap 9.5 of 10.
+        let s = scene(
+            s.zone_cm,
+            vec![
+                s.objects[0].clone(),
+                obj("rod_0", [50.0, 50.0, 10.5], [2.0, 2.0, 20.0], 0.0),
+            ],
+        );
+        assert_eq!(edges(&s), ["(rod_0, in, bin_0)"]);
+    }
+
+    #[test]
+    fn explicit_flags_override_keywords() {
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("tray_0", [50.0, 50.0, 2.0], [40.0, 30.0, 4.0], 0.0),
+                obj("apple_0", [50.0, 50.0, 3.0], [6.0, 6.0, 6.0], 0.0),
+            ],
+        );
+        // By keywords a tray holds nothing; the apple (bottom 0) is not above it either.
+        assert_eq!(edges(&s), ["(tray_0, in front of, apple_0)"]);
+        let options = GraphOptions::default();
+        let graph = extract_graph(&s, &[true, false], &options).expect("valid");
+        assert_eq!(
+            graph.edges.iter().map(Edge::triplet).collect::<Vec<_>>(),
+            ["(apple_0, in, tray_0)"]
+        );
+    }
+
+    #[test]
+    fn annotations_decide_containers_and_keywords_fill_in() {
+        use crate::annotations::AssetAnnotation;
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("tray_0", [50.0, 50.0, 2.0], [40.0, 30.0, 4.0], 0.0),
+                obj("bowl_0", [20.0, 50.0, 4.0], [12.0, 12.0, 8.0], 0.0),
+                obj("mug_0", [80.0, 50.0, 5.0], [8.0, 8.0, 10.0], 0.0),
+                obj("cup_0", [80.0, 20.0, 5.0], [8.0, 8.0, 10.0], 0.0),
+                obj("box_0", [20.0, 20.0, 5.0], [8.0, 8.0, 10.0], 0.0),
+            ],
+        );
+        let mut annotations = Annotations::default();
+        let flag = |is_container| AssetAnnotation {
+            is_container,
+            ..AssetAnnotation::default()
+        };
+        annotations.insert("tray-uid", flag(Some(true)));
+        annotations.insert("bowl-uid", flag(Some(false)));
+        annotations.insert("mug-uid", flag(None));
+        let uids: Vec<String> = ["tray-uid", "bowl-uid", "mug-uid", "", "box-uid"]
+            .map(String::from)
+            .to_vec();
+        let options = GraphOptions::default();
+        let flags = annotated_containers(&s, &uids, Some(&annotations), &options);
+        // The annotation overrides the keywords both ways; the rest fall back to them.
+        assert_eq!(flags.flags, [true, false, true, true, true]);
+        assert_eq!(
+            flags.by_keyword,
+            [
+                "mug_0 (the annotation of mug-uid has no isContainer)",
+                "cup_0 (no retrieved_uid)",
+                "box_0 (asset box-uid is not annotated)",
+            ]
+        );
+        let none = annotated_containers(&s, &uids, None, &options);
+        assert_eq!(none.flags, keyword_containers(&s, &options));
+        assert_eq!(none.by_keyword[0], "tray_0 (no annotations file)");
+    }
+
+    #[test]
+    fn keyword_rule_matches_whole_categories_and_suffixes() {
+        let keywords = GraphOptions::default().container_keywords;
+        for yes in [
+            "bowl_0",
+            "fruit_bowl_1",
+            "teacup_2",
+            "Mug_0",
+            "pencil_holder_3",
+            "bowl",
+            "storage_box_10",
+        ] {
+            assert!(is_keyword_container(yes, &keywords), "{yes}");
+        }
+        for no in ["tray_0", "cupboard_0", "plate_1", "bowl_lid_0", "pen_0"] {
+            assert!(!is_keyword_container(no, &keywords), "{no}");
+        }
+        let none = GraphOptions::default().with_container_keywords([]);
+        assert!(!is_keyword_container("bowl_0", &none.container_keywords));
+        let custom = GraphOptions::default().with_container_keywords([" Tray ", ""]);
+        assert_eq!(custom.container_keywords, ["tray"]);
+        assert!(is_keyword_container(
+            "serving_tray_0",
+            &custom.container_keywords
+        ));
+    }
+
+    // --- above -----------------------------------------------------------------------------
+
+    #[test]
+    fn two_plates_stacked_and_a_third_on_top() {
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("plate_0", [30.0, 30.0, 1.0], [25.0, 25.0, 2.0], 0.0),
+                obj("plate_1", [30.0, 30.0, 3.0], [25.0, 25.0, 2.0], 0.0),
+                obj("plate_2", [30.0, 30.0, 5.0], [25.0, 25.0, 2.0], 0.0),
+            ],
+        );
+        // plate_2 qualifies over plate_0 (top 2) and plate_1 (top 4): the highest top wins.
+        // Horizontal: plate_0 (table level) keeps both at distance 0 (layout order); plate_1
+        // (raised) then writes the last pair.
+        assert_eq!(
+            edges(&s),
+            [
+                "(plate_1, above, plate_0)",
+                "(plate_2, above, plate_1)",
+                "(plate_0, in front of, plate_1)",
+                "(plate_0, in front of, plate_2)",
+                "(plate_1, in front of, plate_2)",
+            ]
+        );
+    }
+
+    #[test]
+    fn above_thresholds_and_ties() {
+        // A 30×10 board straddling two books: exactly half of it over each. Equal tops: the
+        // earlier book in layout order.
+        let book_0 = obj("book_0", [40.0, 50.0, 2.0], [20.0, 20.0, 4.0], 0.0);
+        let book_1 = obj("book_1", [60.0, 50.0, 2.0], [20.0, 20.0, 4.0], 0.0);
+        let board = obj("board_0", [50.0, 50.0, 4.5], [30.0, 10.0, 1.0], 0.0);
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![book_0.clone(), book_1, board.clone()],
+        );
+        assert_eq!(edges(&s)[0], "(board_0, above, book_0)");
+        // book_1 taller (top 4.5): the highest top wins although the board sinks 0.5 into it.
+        let tall = obj("book_1", [60.0, 50.0, 2.25], [20.0, 20.0, 4.5], 0.0);
+        let s = scene([0.0, 100.0, 0.0, 100.0], vec![book_0.clone(), tall, board]);
+        assert_eq!(edges(&s)[0], "(board_0, above, book_1)");
+        // Sinking exactly 1 cm is too much; 0.999 is not.
+        let sunk = obj("board_0", [40.0, 50.0, 3.5], [30.0, 10.0, 1.0], 0.0);
+        let s = scene([0.0, 100.0, 0.0, 100.0], vec![book_0.clone(), sunk]);
+        assert!(!edges(&s).iter().any(|e| e.contains("above")));
+        let barely = obj("board_0", [40.0, 50.0, 3.501], [30.0, 10.0, 1.0], 0.0);
+        let s = scene([0.0, 100.0, 0.0, 100.0], vec![book_0, barely]);
+        assert_eq!(edges(&s)[0], "(board_0, above, book_0)");
+    }
+
+    // --- horizontal ------------------------------------------------------------------------
+
+    #[test]
+    fn more_than_five_neighbours() {
+        // Zone 25 × 25: the distance limit is 10. All objects at table level, 1 cm cubes-ish.
+        let at = |name: &str, x: f64, y: f64| obj(name, [x, y, 1.0], [1.0, 1.0, 2.0], 0.0);
+        let s = scene(
+            [0.0, 25.0, 0.0, 25.0],
+            vec![
+                at("hub", 12.0, 12.0),
+                at("n1", 12.0, 16.0),
+                at("n2", 7.0, 12.0),
+                at("n3", 12.0, 6.0),
+                at("n4", 19.0, 12.0),
+                at("n5", 12.0, 20.0),
+                at("n6", 21.0, 12.0),
+            ],
+        );
+        // hub: n1 4, n2 5, n3 6, n4 7, n5 8 kept; n6 (9) is sixth.
+        // n1: hub 4 = n5 4 (layout order), n2 6.4, n4 8.06, n6 9.85 kept; n3 (10) sixth.
+        // n2: hub 5, n1 6.4, n3 7.81, n5 9.43 (n4 12, n6 14 too far).
+        // n3: hub 6, n2 7.81, n4 9.22, n1 10 (exactly the limit: kept).
+        // n4: n6 2, hub 7, n1 8.06, n3 9.22. n5: all written already.
+        // n6: n4 2, hub 9 (not yet written: hub dropped n6), n1 9.85.
+        assert_eq!(
+            edges(&s),
+            [
+                "(hub, in front of, n1)",
+                "(hub, right of, n2)",
+                "(hub, behind, n3)",
+                "(hub, left of, n4)",
+                "(hub, in front of, n5)",
+                "(n1, in front of, n5)",
+                "(n1, right of, n2)",
+                "(n1, left of, n4)",
+                "(n1, left of, n6)",
+                "(n2, behind, n3)",
+                "(n2, in front of, n5)",
+                "(n3, left of, n4)",
+                "(n3, in front of, n1)",
+                "(n4, left of, n6)",
+                "(n6, right of, hub)",
+            ]
+        );
+        let graph = graph_of(&s, &GraphOptions::default());
+        let Evidence::Proximity {
+            rank,
+            distance_3d_cm,
+            max_distance_cm,
+            ..
+        } = graph.edges[12].evidence
+        else {
+            panic!("proximity evidence expected");
+        };
+        assert_eq!((rank, distance_3d_cm, max_distance_cm), (4, 10.0, 10.0));
+    }
+
+    #[test]
+    fn raised_subjects_are_visited_last() {
+        // phone_0 lies on book_0; glasses_0 on mug_0. Layout order puts phone_0 before
+        // mug_0, but table-level objects visit first, so mug_0 writes their pair.
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("book_0", [50.0, 50.0, 1.5], [30.0, 20.0, 3.0], 0.0),
+                obj("phone_0", [52.0, 50.0, 3.5], [7.0, 14.0, 1.0], 0.0),
+                obj("mug_0", [70.0, 50.0, 5.0], [8.0, 8.0, 10.0], 0.0),
+                obj("glasses_0", [70.0, 50.0, 12.0], [12.0, 5.0, 4.0], 0.0),
+                obj("pen_0", [50.0, 72.0, 0.5], [1.0, 14.0, 1.0], 0.0),
+            ],
+        );
+        // glasses_0 over mug_0: 8 × 5 of 12 × 5 = 0.67, bottom 10 > top 10 - 1.
+        // book_0: phone 2, mug 20 = glasses 20 (layout order), pen 22.
+        // mug_0: glasses 0, phone 18, book (written), pen 29.7 (dx 20 < dy 22: in front of).
+        // pen_0: book (written), phone 22.1, mug (written), glasses 29.7.
+        // phone_0 (raised): book, mug skipped; glasses raised: written; pen skipped.
+        assert_eq!(
+            edges(&s),
+            [
+                "(phone_0, above, book_0)",
+                "(glasses_0, above, mug_0)",
+                "(book_0, left of, phone_0)",
+                "(book_0, left of, mug_0)",
+                "(book_0, left of, glasses_0)",
+                "(book_0, in front of, pen_0)",
+                "(phone_0, left of, glasses_0)",
+                "(mug_0, in front of, glasses_0)",
+                "(mug_0, right of, phone_0)",
+                "(mug_0, in front of, pen_0)",
+                "(pen_0, behind, phone_0)",
+                "(pen_0, behind, glasses_0)",
+            ]
+        );
+    }
+
+    #[test]
+    fn a_raised_subject_skips_table_level_neighbours() {
+        // x sits among five nearer table-level neighbours, none of which keeps remote_0 in its
+        // five; remote_0 is raised (bottom 1), so it may not write pairs to them itself.
+        let at = |name: &str, x: f64, z: f64| obj(name, [x, 10.0, z], [1.0, 1.0, 1.0], 0.0);
+        let table_level = || {
+            vec![
+                at("x", 10.0, 0.5),
+                at("a", 9.0, 0.5),
+                at("b", 8.0, 0.5),
+                at("c", 7.0, 0.5),
+                at("d", 6.0, 0.5),
+                at("e", 5.0, 0.5),
+            ]
+        };
+        let expected_table_level = [
+            "(x, right of, a)",
+            "(x, right of, b)",
+            "(x, right of, c)",
+            "(x, right of, d)",
+            "(x, right of, e)",
+            "(a, right of, b)",
+            "(a, right of, c)",
+            "(a, right of, d)",
+            "(a, right of, e)",
+            "(b, right of, c)",
+            "(b, right of, d)",
+            "(b, right of, e)",
+            "(c, right of, d)",
+            "(c, right of, e)",
+            "(d, right of, e)",
+        ];
+        let mut objects = table_level();
+        objects.push(at("remote_0", 16.0, 1.5));
+        let s = scene([0.0, 25.0, 0.0, 25.0], objects);
+        assert_eq!(edges(&s), expected_table_level);
+        // Lowered to the table, remote_0 writes its five: x 6, a 7, b 8, c 9, d 10 (the limit).
+        let mut objects = table_level();
+        objects.push(at("remote_0", 16.0, 0.5));
+        let s = scene([0.0, 25.0, 0.0, 25.0], objects);
+        let mut expected: Vec<String> = expected_table_level
+            .iter()
+            .map(|e| (*e).to_owned())
+            .collect();
+        for o in ["x", "a", "b", "c", "d"] {
+            expected.push(format!("(remote_0, right of, {o})"));
+        }
+        assert_eq!(edges(&s), expected);
+    }
+
+    #[test]
+    fn the_distance_limit_is_in_space_and_inclusive() {
+        // Zone 100 × 50: limit 40. The pen is 40 from the cup in the plane but, 4.5 lower,
+        // 40.25 away in space: not related. The clock hangs 31 over the cup, entirely over
+        // it: above it, at any height.
+        let lamp = obj("lamp_0", [20.0, 25.0, 20.0], [10.0, 10.0, 40.0], 0.0);
+        let cup = obj("cup_0", [50.0, 25.0, 5.0], [8.0, 8.0, 10.0], 0.0);
+        let clock = obj("clock_0", [50.0, 25.0, 35.0], [8.0, 2.0, 8.0], 0.0);
+        let s = scene(
+            [0.0, 100.0, 0.0, 50.0],
+            vec![
+                lamp.clone(),
+                cup.clone(),
+                clock.clone(),
+                obj("pen_0", [90.0, 25.0, 0.5], [1.0, 10.0, 1.0], 0.0),
+            ],
+        );
+        let expected = [
+            "(clock_0, above, cup_0)",
+            "(lamp_0, left of, cup_0)",
+            "(lamp_0, left of, clock_0)",
+            "(cup_0, in front of, clock_0)",
+        ];
+        assert_eq!(edges(&s), expected);
+        // At the cup's height the pen is exactly 40 away: related.
+        let s = scene(
+            s.zone_cm,
+            vec![
+                lamp,
+                cup,
+                clock,
+                obj("pen_0", [90.0, 25.0, 5.0], [1.0, 10.0, 10.0], 0.0),
+            ],
+        );
+        let mut with_pen: Vec<&str> = expected.to_vec();
+        with_pen.push("(cup_0, left of, pen_0)");
+        assert_eq!(edges(&s), with_pen);
+    }
+
+    // --- output order and forms --------------------------------------------------------------
+
+    #[test]
+    fn dataset_layouts_keep_the_file_order() {
+        use mesa_schemas::convert::dataset_from_llm;
+        let llm = LlmLayout {
+            zone_cm: [0.0, 100.0, 0.0, 100.0].into(),
+            sink_zone_cm: None,
+            objects: vec![
+                mesa_schemas::LlmObject {
+                    instance: "pen_0".into(),
+                    size_cm: [1.0, 14.0, 1.0].into(),
+                    position_cm: [10.0, 50.0, 0.5].into(),
+                    z_rotation_deg: -90.0,
+                    description: String::new(),
+                },
+                mesa_schemas::LlmObject {
+                    instance: "book_0".into(),
+                    size_cm: [20.0, 30.0, 3.0].into(),
+                    position_cm: [30.0, 50.0, 1.5].into(),
+                    z_rotation_deg: 180.0,
+                    description: String::new(),
+                },
+            ],
+        };
+        let mut dataset = dataset_from_llm(&llm).layout;
+        // Put the pen (the smaller footprint) first, as a file may, whatever the conversion did.
+        dataset.objects.sort_by(|a, b| b.instance.cmp(&a.instance));
+        let s = GraphScene::from_dataset(&dataset);
+        assert_eq!(s, GraphScene::from_llm(&llm));
+        assert_eq!(
+            lines(&s),
+            [
+                "(pen_0, is at, middle_left)",
+                "(pen_0, face to, left)",
+                "(book_0, is at, center)",
+                "(book_0, face to, back)",
+                "(pen_0, left of, book_0)",
+            ]
+        );
+    }
+
+    #[test]
+    fn text_and_artifact_forms() {
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("bowl_0", [30.0, 30.0, 4.0], [20.0, 20.0, 8.0], 0.0),
+                obj("apple_0", [30.0, 30.0, 5.0], [6.0, 6.0, 6.0], 0.0),
+                obj("mug_0", [60.0, 30.0, 5.0], [8.0, 8.0, 10.0], 90.0),
+            ],
+        );
+        let graph = graph_of(&s, &GraphOptions::default());
+        let text = graph.to_text();
+        assert!(text.ends_with("(bowl_0, left of, mug_0)\n"));
+        assert_eq!(text.lines().count(), 8);
+        let artifact = graph.to_artifact("office_table_0001", "qa/layout.json");
+        assert_eq!(artifact.schema, GRAPH_SCHEMA);
+        assert_eq!(artifact.nodes[2].face_to, "right");
+        assert!(artifact.nodes[0].container);
+        assert_eq!(artifact.edges[0].relation, "in");
+        assert_eq!(artifact.edges[1].numbers["dx_cm"], -30.0);
+        assert_eq!(artifact.edges[1].numbers["rank"], 1.0);
+        assert!(artifact.equally_spaced.is_empty());
+        let json = serde_json::to_value(&artifact).expect("serialises");
+        assert!(json.get("equally_spaced").is_none());
+        let problems = mesa_schemas::Kind::by_name("graph")
+            .expect("graph kind")
+            .validate_value(&json);
+        assert!(problems.is_empty(), "{problems:?}");
+        assert_eq!(
+            SceneGraph {
+                nodes: vec![],
+                edges: vec![],
+                equally_spaced: vec![]
+            }
+            .to_text(),
+            ""
+        );
+    }
+
+    // --- equally spaced --------------------------------------------------------------------
+
+    #[test]
+    fn equally_spaced_is_optional_and_uses_its_tolerances() {
+        let at = |name: &str, x: f64, y: f64| obj(name, [x, y, 0.5], [2.0, 2.0, 1.0], 0.0);
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                at("a", 10.0, 50.0),
+                at("b", 20.0, 51.0),
+                at("c", 31.0, 52.0),
+                at("d", 43.0, 50.0),
+                at("e", 43.0, 60.0),
+            ],
+        );
+        assert!(graph_of(&s, &GraphOptions::default())
+            .equally_spaced
+            .is_empty());
+        let graph = graph_of(&s, &GraphOptions::default().with_equally_spaced(true));
+        let triples: Vec<String> = graph
+            .equally_spaced
+            .iter()
+            .map(EquallySpaced::triplet)
+            .collect();
+        // Along x: a b c (gaps 10, 11: |1| ≤ 1.1; spread 2 ≤ 2); b c d (11, 12: 1 ≤ 1.2; spread
+        // 2); a b d (10, 23) no; c d e (12, 0): a zero gap. Along y: a d e... gaps 0 no;
+        // a b e? sorted y: a 50, d 50, b 51, c 52, e 60: (a, b, c) 1, 1 but spread along x 21.
+        assert_eq!(
+            triples,
+            [
+                "(a, b, c, are equally spaced along, x)",
+                "(b, c, d, are equally spaced along, x)",
+            ]
+        );
+        assert_eq!(graph.equally_spaced[0].gaps_cm, [10.0, 11.0]);
+        assert_eq!(graph.equally_spaced[0].spread_cm, 2.0);
+        assert_eq!(
+            graph.triplet_lines().last().map(String::as_str),
+            Some(triples[1].as_str())
+        );
+        // Gaps 10 and 12: 2 > 1.2.
+        let s = scene(
+            s.zone_cm,
+            vec![
+                at("a", 10.0, 50.0),
+                at("b", 20.0, 50.0),
+                at("c", 32.0, 50.0),
+            ],
+        );
+        assert!(
+            graph_of(&s, &GraphOptions::default().with_equally_spaced(true))
+                .equally_spaced
+                .is_empty()
+        );
+    }
+
+    #[test]
+    fn equally_spaced_along_y_skips_contained_objects() {
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("box_0", [50.0, 50.0, 5.0], [12.0, 12.0, 10.0], 0.0),
+                obj("tin_0", [50.0, 30.0, 2.0], [4.0, 4.0, 4.0], 0.0),
+                obj("tin_1", [51.0, 70.0, 2.0], [4.0, 4.0, 4.0], 0.0),
+                obj("tin_2", [50.0, 50.0, 2.0], [4.0, 4.0, 4.0], 0.0),
+            ],
+        );
+        // tin_2 is in box_0, so only box_0 is in the middle.
+        let graph = graph_of(&s, &GraphOptions::default().with_equally_spaced(true));
+        let triples: Vec<String> = graph
+            .equally_spaced
+            .iter()
+            .map(EquallySpaced::triplet)
+            .collect();
+        assert_eq!(
+            triples,
+            ["(tin_0, box_0, tin_1, are equally spaced along, y)"]
+        );
+        assert_eq!(graph.edges[0].triplet(), "(tin_2, in, box_0)");
+    }
+
+    // --- malformed layouts -----------------------------------------------------------------
+
+    fn error_of(s: &GraphScene) -> String {
+        let options = GraphOptions::default();
+        match extract_graph(s, &keyword_containers(s, &options), &options) {
+            Ok(_) => panic!("expected an error"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn malformed_layouts_are_errors_naming_object_and_field() {
+        let good = || obj("cup_0", [10.0, 10.0, 5.0], [8.0, 8.0, 10.0], 0.0);
+        let with = |o: SceneObject| scene([0.0, 100.0, 0.0, 100.0], vec![good(), o]);
+        assert_eq!(
+            error_of(&with(obj("pen_0", [1.0, 2.0, 3.0], [1.0, 0.0, 1.0], 0.0))),
+            "objects[1].size[1] (pen_0): is 0 (expected a finite number > 0 (cm))"
+        );
+        assert_eq!(
+            error_of(&with(obj("pen_0", [1.0, 2.0, 3.0], [-1.0, 1.0, 1.0], 0.0))),
+            "objects[1].size[0] (pen_0): is -1 (expected a finite number > 0 (cm))"
+        );
+        assert_eq!(
+            error_of(&with(obj(
+                "pen_0",
+                [1.0, f64::NAN, 3.0],
+                [1.0, 1.0, 1.0],
+                0.0
+            ))),
+            "objects[1].position[1] (pen_0): is NaN (expected a finite number (cm))"
+        );
+        assert_eq!(
+            error_of(&with(obj(
+                "pen_0",
+                [1.0, 2.0, 3.0],
+                [1.0, 1.0, f64::INFINITY],
+                0.0
+            ))),
+            "objects[1].size[2] (pen_0): is inf (expected a finite number > 0 (cm))"
+        );
+        assert_eq!(
+            error_of(&with(obj(
+                "pen_0",
+                [1.0, 2.0, 3.0],
+                [1.0, 1.0, 1.0],
+                f64::NAN
+            ))),
+            "objects[1].z_rotation (pen_0): is NaN (expected a finite number (degrees))"
+        );
+        assert_eq!(
+            error_of(&with(good())),
+            "objects[1].instance: duplicate instance \"cup_0\" (also objects[0]) (expected unique \
+             instance names; rename one, like `cup_0_dup`)"
+        );
+        assert_eq!(
+            error_of(&with(obj(" ", [1.0, 2.0, 3.0], [1.0, 1.0, 1.0], 0.0))),
+            "objects[1].instance: is empty (expected a name like `mug_0`)"
+        );
+        assert_eq!(
+            error_of(&scene([0.0, 0.0, 0.0, 50.0], vec![good()])),
+            "item_placement_zone: is empty [0, 0, 0, 50] (expected finite [x_min, x_max, y_min, \
+             y_max] with x_min < x_max and y_min < y_max)"
+        );
+        assert!(error_of(&scene([0.0, f64::NAN, 0.0, 50.0], vec![]))
+            .starts_with("item_placement_zone: has a non-finite bound [0, NaN, 0, 50]"));
+        let s = with(obj("pen_0", [1.0, 2.0, 3.0], [1.0, 1.0, 1.0], 0.0));
+        assert_eq!(
+            extract_graph(&s, &[true], &GraphOptions::default())
+                .expect_err("one flag")
+                .to_string(),
+            "container flags: 1 flags for 2 objects (expected one per object, in layout order)"
+        );
+        // An empty layout is fine: no lines.
+        let empty = scene([0.0, 10.0, 0.0, 10.0], vec![]);
+        assert!(lines(&empty).is_empty());
+    }
+
+    #[test]
+    fn layout_files_of_every_form_are_read() {
+        let llm = r#"{"item_placement_zone": [0, 100, 0, 50], "objects": [
+            {"instance": "mug_0", "size": [8, 8, 10], "position": [20, 25, 5], "z_rotation": 90,
+             "description": "a mug"}]}"#;
+        let loaded = read_layout_text(llm).expect("an LLM layout");
+        assert_eq!(loaded.form, LayoutForm::Llm);
+        assert_eq!(loaded.scene.objects[0].yaw_deg, 90.0);
+        let record = serde_json::json!({
+            "prompt_instructions": "p", "input_task_description": "{}", "reasoning_paragraph": "r",
+            "scene_graph": ["(mug_0, is at, center)"], "scene_layout_json": llm,
+        });
+        let loaded = read_layout_text(&record.to_string()).expect("a record");
+        assert_eq!(loaded.form, LayoutForm::GalleryRecord);
+        assert_eq!(loaded.scene.objects[0].instance, "mug_0");
+        let dataset = r#"{"schema": "mesa.layout/1", "item_placement_zone": [0, 100, 0, 50],
+            "objects": [{"instance": "mug_0", "retrieved_uid": "abc", "position": [20, 25, 5],
+            "rotation": [0, 0, 0.7071067811865476, 0.7071067811865476], "size": [8, 8, 10],
+            "scale_factor": [1, 1, 1]}]}"#;
+        let loaded = read_layout_text(dataset).expect("a dataset layout");
+        assert_eq!(loaded.form, LayoutForm::Dataset);
+        assert_eq!(loaded.retrieved_uids, ["abc"]);
+        assert!(loaded.warnings.is_empty());
+        assert_abs_diff_eq!(loaded.scene.objects[0].yaw_deg, 90.0, epsilon = 1e-9);
+        // A mug lying on its side (90° about x): its yaw is 0, and the reader says so.
+        let tilted = dataset.replace(
+            "[0, 0, 0.7071067811865476, 0.7071067811865476]",
+            "[0.7071067811865476, 0, 0, 0.7071067811865476]",
+        );
+        let loaded = read_layout_text(&tilted).expect("a tilted dataset layout");
+        assert_eq!(
+            loaded.warnings,
+            [
+                "mug_0: rotation is tilted by 90.000°; the graph uses its footprint turned by its \
+              yaw 0.000° only"
+            ]
+        );
+        // Shapes: an empty layout with a sink is an LLM layout, without one a dataset layout.
+        let empty_llm = serde_json::json!({
+            "item_placement_zone": [0, 1, 0, 1], "sink_zone": [0, 1, 0, 1], "objects": []
+        });
+        assert_eq!(layout_form_of(&empty_llm), LayoutForm::Llm);
+        let empty = serde_json::json!({"item_placement_zone": [0, 1, 0, 1], "objects": []});
+        assert_eq!(layout_form_of(&empty), LayoutForm::Dataset);
+    }
+
+    #[test]
+    fn layout_file_problems_name_the_object() {
+        let nan = r#"{"item_placement_zone": [0, 100, 0, 50], "objects": [
+            {"instance": "mug_0", "size": [8, 8, 10], "position": [20, NaN, 5], "z_rotation": 0}]}"#;
+        let e = read_layout_text(nan).expect_err("NaN");
+        assert_eq!(
+            e.to_string(),
+            "$.objects[0].position[1]: mug_0: is NaN (expected a finite number)"
+        );
+        let negative = r#"{"item_placement_zone": [0, 100, 0, 50], "objects": [
+            {"instance": "mug_0", "size": [8, -8, 10], "position": [20, 2, 5], "z_rotation": 0}]}"#;
+        let e = read_layout_text(negative).expect_err("negative size");
+        assert!(
+            e.to_string().starts_with("$.objects[0].size[1]: mug_0: "),
+            "{e}"
+        );
+        let duplicate = r#"{"item_placement_zone": [0, 100, 0, 50], "objects": [
+            {"instance": "mug_0", "size": [8, 8, 10], "position": [20, 2, 5], "z_rotation": 0},
+            {"instance": "mug_0", "size": [8, 8, 10], "position": [40, 2, 5], "z_rotation": 0}]}"#;
+        let e = read_layout_text(duplicate).expect_err("duplicate");
+        assert!(
+            e.to_string().contains("duplicate instance \"mug_0\""),
+            "{e}"
+        );
+        let record = serde_json::json!({
+            "prompt_instructions": "p", "input_task_description": "{}", "reasoning_paragraph": "r",
+            "scene_graph": [], "scene_layout_json": negative,
+        });
+        let e = read_layout_text(&record.to_string()).expect_err("negative size in a record");
+        assert!(e.to_string().contains("mug_0"), "{e}");
+        assert!(read_layout_text("[1]")
+            .expect_err("an array")
+            .to_string()
+            .starts_with("$: is an array"));
+        assert!(read_layout_text("{")
+            .expect_err("syntax")
+            .to_string()
+            .starts_with("$: is not valid JSON"));
+    }
+
+    // --- properties ------------------------------------------------------------------------
+
+    const CATEGORIES: [&str; 8] = [
+        "bowl", "cup", "plate", "apple", "tray", "book", "box", "pen",
+    ];
+
+    /// Random scenes on a quarter-centimetre grid (so that translations by whole centimetres
+    /// are exact in f64), with containers, rotations, shared coordinates and, for about a
+    /// third of the objects, a place on or in an earlier object (to exercise `in` and
+    /// `above`).
+    fn arb_scene() -> impl Strategy<Value = GraphScene> {
+        let object = (
+            0usize..CATEGORIES.len(),
+            (0i32..=400, 0i32..=240, 0i32..=20),
+            prop::array::uniform3(1i32..=120),
+            prop_oneof![Just(0.0), Just(90.0), Just(45.0), -180.0f64..180.0],
+            prop_oneof![2 => Just(None), 1 => (any::<prop::sample::Index>(), -8i32..=8, -8i32..=8, 0i32..=16).prop_map(Some)],
+        );
+        prop::collection::vec(object, 0..14).prop_map(|objects| {
+            let mut out: Vec<SceneObject> = Vec::with_capacity(objects.len());
+            for (i, (category, (x, y, lift), size, yaw, stack)) in objects.into_iter().enumerate() {
+                let size = size.map(|s| f64::from(s) / 4.0);
+                let quarter = |v: i32| f64::from(v) / 4.0;
+                let mut position = [quarter(x), quarter(y), size[2] / 2.0 + quarter(lift)];
+                if let (Some((base, dx, dy, up)), false) = (stack, out.is_empty()) {
+                    let base = &out[base.index(out.len())];
+                    let base_bottom = base.position_cm[2] - base.size_cm[2] / 2.0;
+                    position = [
+                        base.position_cm[0] + quarter(dx),
+                        base.position_cm[1] + quarter(dy),
+                        base_bottom + quarter(up) + size[2] / 2.0,
+                    ];
+                }
+                out.push(SceneObject::new(
+                    format!("{}_{i}", CATEGORIES[category]),
+                    position,
+                    size,
+                    yaw,
+                ));
+            }
+            out.sort_by(|a, b| {
+                let (fa, fb) = (a.size_cm[0] * a.size_cm[1], b.size_cm[0] * b.size_cm[1]);
+                fb.total_cmp(&fa).then_with(|| a.instance.cmp(&b.instance))
+            });
+            GraphScene {
+                zone_cm: [0.0, 100.0, 0.0, 60.0],
+                objects: out,
+            }
+        })
+    }
+
+    fn parse_triplet(line: &str) -> Vec<String> {
+        line.trim_start_matches('(')
+            .trim_end_matches(')')
+            .split(", ")
+            .map(str::to_owned)
+            .collect()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(512))]
+
+        #[test]
+        fn translating_scene_and_zone_changes_nothing(
+            s in arb_scene(),
+            tx in -500i32..500,
+            ty in -500i32..500,
+        ) {
+            let options = GraphOptions::default().with_equally_spaced(true);
+            let before = graph_of(&s, &options).triplet_lines();
+            let (tx, ty) = (f64::from(tx), f64::from(ty));
+            let mut moved = s.clone();
+            moved.zone_cm = [s.zone_cm[0] + tx, s.zone_cm[1] + tx, s.zone_cm[2] + ty, s.zone_cm[3] + ty];
+            for o in &mut moved.objects {
+                o.position_cm[0] += tx;
+                o.position_cm[1] += ty;
+            }
+            prop_assert_eq!(before, graph_of(&moved, &options).triplet_lines());
+        }
+
+        #[test]
+        fn graph_invariants_hold(s in arb_scene()) {
+            let options = GraphOptions::default().with_equally_spaced(true);
+            let graph = graph_of(&s, &options);
+            let lines = graph.triplet_lines();
+            let mut is_at: BTreeMap<String, usize> = BTreeMap::new();
+            let mut face_to: BTreeMap<String, usize> = BTreeMap::new();
+            let mut contained: BTreeMap<String, usize> = BTreeMap::new();
+            // A pair may carry both `above` and a horizontal relation (the rules allow it, and
+            // the published records have it: 001 writes `bowl_0 above tray_0` and `tray_0 left
+            // of bowl_0`), but never twice within one class: containment, vertical, horizontal.
+            let mut pairs = std::collections::BTreeSet::new();
+            let mut triplets = std::collections::BTreeSet::new();
+            let mut others: Vec<Vec<String>> = Vec::new();
+            for line in &lines {
+                let parts = parse_triplet(line);
+                match parts[1].as_str() {
+                    "is at" => *is_at.entry(parts[0].clone()).or_default() += 1,
+                    "face to" => *face_to.entry(parts[0].clone()).or_default() += 1,
+                    "in" => *contained.entry(parts[0].clone()).or_default() += 1,
+                    _ => {}
+                }
+                prop_assert!(triplets.insert(line.clone()), "line written twice: {}", line);
+                if parts.len() == 3 && parts[1] != "is at" && parts[1] != "face to" {
+                    let class = match parts[1].as_str() {
+                        "in" => "containment",
+                        "above" => "vertical",
+                        _ => "horizontal",
+                    };
+                    let pair = if parts[0] < parts[2] {
+                        (class, parts[0].clone(), parts[2].clone())
+                    } else {
+                        (class, parts[2].clone(), parts[0].clone())
+                    };
+                    prop_assert!(pairs.insert(pair), "pair written twice: {}", line);
+                    prop_assert_ne!(&parts[0], &parts[2]);
+                    if parts[1] != "in" {
+                        others.push(parts);
+                    }
+                } else if parts.len() == 5 {
+                    others.push(parts[..3].to_vec());
+                }
+            }
+            for o in &s.objects {
+                prop_assert_eq!(is_at.get(&o.instance), Some(&1));
+                prop_assert_eq!(face_to.get(&o.instance), Some(&1));
+            }
+            prop_assert_eq!(is_at.len(), s.objects.len());
+            prop_assert!(contained.values().all(|&n| n == 1));
+            for parts in &others {
+                for name in parts.iter().filter(|p| contained.contains_key(*p)) {
+                    prop_assert!(false, "contained {} appears in {:?}", name, parts);
+                }
+            }
+            // Each subject has at most one `above`, and the horizontal block of a subject has at
+            // most five edges.
+            let mut above: BTreeMap<&str, usize> = BTreeMap::new();
+            let mut horizontal: BTreeMap<&str, usize> = BTreeMap::new();
+            for edge in &graph.edges {
+                match edge.relation {
+                    Relation::Above => *above.entry(&edge.subject).or_default() += 1,
+                    Relation::In => {}
+                    _ => *horizontal.entry(&edge.subject).or_default() += 1,
+                }
+            }
+            prop_assert!(above.values().all(|&n| n == 1));
+            prop_assert!(horizontal.values().all(|&n| n <= NEIGHBOURS_PER_SUBJECT));
+        }
+
+        #[test]
+        fn intersection_is_symmetric_and_bounded(
+            w1 in 0.5f64..50.0, d1 in 0.5f64..50.0, t1 in -180.0f64..180.0,
+            w2 in 0.5f64..50.0, d2 in 0.5f64..50.0, t2 in -180.0f64..180.0,
+            dx in -40.0f64..40.0, dy in -40.0f64..40.0,
+        ) {
+            let a = Footprint::new(w1, d1, t1);
+            let b = Footprint::new(w2, d2, t2);
+            let ab = intersection_area_footprints(&a, &b, [dx, dy]);
+            let ba = intersection_area_footprints(&b, &a, [-dx, -dy]);
+            let tolerance = 1e-9 * (w1 * d1 + w2 * d2);
+            prop_assert!((ab - ba).abs() <= tolerance, "{} vs {}", ab, ba);
+            prop_assert!(ab >= 0.0);
+            prop_assert!(ab <= a.area_cm2.min(b.area_cm2) + tolerance);
+            // A footprint with itself: its full area.
+            let aa = intersection_area_footprints(&a, &a, [0.0, 0.0]);
+            prop_assert!((aa - a.area_cm2).abs() <= tolerance);
+        }
+    }
+}
