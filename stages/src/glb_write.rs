@@ -176,6 +176,9 @@ pub struct GlbBuilder {
     sampler: Option<Index<json::texture::Sampler>>,
     scene_roots: Vec<Index<json::Node>>,
     scene_name: Option<String>,
+    /// Per material: whether it samples a texture (only then do primitives carry texture
+    /// coordinates, which would otherwise be unused data).
+    textured: Vec<bool>,
 }
 
 const GLB_MAGIC: &[u8; 4] = b"glTF";
@@ -200,6 +203,7 @@ impl GlbBuilder {
             sampler: None,
             scene_roots: Vec::new(),
             scene_name: None,
+            textured: Vec::new(),
         }
     }
 
@@ -272,6 +276,7 @@ impl GlbBuilder {
     /// Adds a material.
     pub fn add_material(&mut self, spec: &MaterialSpec) -> Index<json::Material> {
         let clamp = |v: f32| v.clamp(0.0, 1.0);
+        self.textured.push(spec.base_color_texture.is_some());
         self.root.push(json::Material {
             name: Some(spec.name.clone()),
             double_sided: spec.double_sided,
@@ -294,7 +299,7 @@ impl GlbBuilder {
     }
 
     /// Adds a mesh with one primitive per `(triangles, material)` pair. Texture coordinates
-    /// are written when the triangle mesh has them.
+    /// are written when the triangle mesh has them and the material samples a texture.
     pub fn add_mesh(
         &mut self,
         name: &str,
@@ -386,7 +391,12 @@ impl GlbBuilder {
         attributes.insert(Valid(json::mesh::Semantic::Positions), pos);
         let nor = self.float_accessor(&normals, n, json::accessor::Type::Vec3, None);
         attributes.insert(Valid(json::mesh::Semantic::Normals), nor);
-        if mesh.has_uvs() {
+        let textured = self
+            .textured
+            .get(material.value())
+            .copied()
+            .unwrap_or(false);
+        if mesh.has_uvs() && textured {
             let uvs: Vec<u8> = mesh
                 .uvs
                 .iter()

@@ -53,7 +53,8 @@ pub struct DemoOptions {
     pub scenes: usize,
     /// The seed every random choice derives from (with the scene id).
     pub seed: u64,
-    /// Replace an earlier `mesa demo` output in the same directory (never anything else).
+    /// Replace an earlier `mesa demo` output made with other options in the same directory
+    /// (never anything else; one made with the same options is rewritten in place anyway).
     pub overwrite: bool,
     /// Make depth maps and masks realistic (noise, holes, mixed pixels, overlapping instance
     /// masks); off, they are exact, which tests use to check the geometry.
@@ -130,10 +131,11 @@ pub enum DemoError {
     /// Bad options.
     #[error("{0}")]
     Options(String),
-    /// The directory holds something else.
+    /// The directory holds something else, or a demo made with other options.
     #[error(
-        "{}: the directory is not empty (expected a new or empty directory; to replace an \
-         earlier `mesa demo` output there, pass --force)",
+        "{}: the directory is not empty (expected a new or empty directory, or an earlier \
+         `mesa demo` output with the same options; to replace a demo made with other options, \
+         pass --force)",
         dir.display()
     )]
     NotEmpty {
@@ -203,8 +205,8 @@ const TABLE_ITEM: u32 = u32::MAX - 1;
 /// Supersampling of the photo.
 const PHOTO_SUPERSAMPLING: u32 = 2;
 
-/// Writes a demo workspace into `dir` (created if needed; it must be empty unless it holds an
-/// earlier demo and `options.overwrite` is set).
+/// Writes a demo workspace into `dir`: created if needed; it must be empty or hold an earlier
+/// demo (written with the same options, or any options when `options.overwrite` is set).
 pub fn write_demo(dir: &Path, options: &DemoOptions) -> Result<DemoSummary, DemoError> {
     if options.scenes == 0 || options.scenes > 9999 {
         return Err(DemoError::Options(format!(
@@ -212,7 +214,7 @@ pub fn write_demo(dir: &Path, options: &DemoOptions) -> Result<DemoSummary, Demo
             options.scenes
         )));
     }
-    prepare_dir(dir, options.overwrite)?;
+    prepare_dir(dir, options)?;
     let library = Library::build().map_err(|source| DemoError::Glb {
         asset: "library".to_owned(),
         source,
@@ -253,14 +255,7 @@ pub fn write_demo(dir: &Path, options: &DemoOptions) -> Result<DemoSummary, Demo
         b"# mesa configuration of this dataset workspace (written by `mesa demo`).\n\
           # Every key has a default; `mesa run --print-config` shows the resolved values.\n",
     )?;
-    let marker = serde_json::json!({
-        "generator": "mesa demo",
-        "mesa_version": env!("CARGO_PKG_VERSION"),
-        "seed": options.seed,
-        "scenes": options.scenes,
-        "depth_noise": options.depth_noise,
-    });
-    write_json(&dir.join(".mesa/demo.json"), &marker)?;
+    write_json(&dir.join(".mesa/demo.json"), &marker(options))?;
 
     let scene_assets: Vec<_> = library.assets.iter().filter(|a| a.def.in_scenes).collect();
     let categories: BTreeSet<&str> = scene_assets.iter().map(|a| a.def.category).collect();
@@ -280,7 +275,22 @@ fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> DemoError + '_ {
     }
 }
 
-fn prepare_dir(dir: &Path, overwrite: bool) -> Result<(), DemoError> {
+/// The record of the options a demo folder was written with (`.mesa/demo.json`).
+fn marker(options: &DemoOptions) -> serde_json::Value {
+    serde_json::json!({
+        "generator": "mesa demo",
+        "mesa_version": env!("CARGO_PKG_VERSION"),
+        "seed": options.seed,
+        "scenes": options.scenes,
+        "depth_noise": options.depth_noise,
+    })
+}
+
+/// Makes `dir` ready: created when missing; an empty folder, or an earlier demo written with
+/// the same options (rewritten in place: the same bytes, and later stages' outputs stay valid),
+/// is used as it is; an earlier demo with other options is cleared when `overwrite` is set;
+/// anything else is refused.
+fn prepare_dir(dir: &Path, options: &DemoOptions) -> Result<(), DemoError> {
     if !dir.exists() {
         return std::fs::create_dir_all(dir).map_err(io_error(dir));
     }
@@ -288,13 +298,23 @@ fn prepare_dir(dir: &Path, overwrite: bool) -> Result<(), DemoError> {
     if entries.next().is_none() {
         return Ok(());
     }
-    if !overwrite {
-        return Err(DemoError::NotEmpty {
-            dir: dir.to_path_buf(),
+    let marker_path = dir.join(".mesa/demo.json");
+    let Ok(previous) = std::fs::read(&marker_path) else {
+        return Err(if options.overwrite {
+            DemoError::NotADemo {
+                dir: dir.to_path_buf(),
+            }
+        } else {
+            DemoError::NotEmpty {
+                dir: dir.to_path_buf(),
+            }
         });
+    };
+    if previous == json_bytes(&marker_path, &marker(options))? {
+        return Ok(());
     }
-    if !dir.join(".mesa/demo.json").is_file() {
-        return Err(DemoError::NotADemo {
+    if !options.overwrite {
+        return Err(DemoError::NotEmpty {
             dir: dir.to_path_buf(),
         });
     }

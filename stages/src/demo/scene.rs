@@ -107,7 +107,7 @@ pub(crate) struct Placed {
     pub rotation_xyzw: [f64; 4],
     /// Centre of the object's bounding box (object frame), table frame, metres.
     pub position_m: [f64; 3],
-    /// The object it rests on or in (`None`: the table).
+    /// The object it rests on: the one it touches from above (`None`: the table).
     pub support: Option<usize>,
     /// The photo-style description of this instance.
     pub description: String,
@@ -880,18 +880,23 @@ impl<'a, R: RngCore> Composer<'a, R> {
                 continue;
             }
             // Drop: lift above everything under it.
+            // It rests on whatever needs the largest lift: that is what it touches.
             let mut lift = f64::NEG_INFINITY;
-            for m in &self.meshes {
+            let mut rests_on = None;
+            for (i, m) in self.meshes.iter().enumerate() {
                 if let Some(l) = lift_to_clear(&probe, m) {
-                    lift = lift.max(l);
+                    if l > lift {
+                        lift = l;
+                        rests_on = Some(i);
+                    }
                 }
             }
-            let rests_on_object = lift.is_finite();
+            let rests_on_object = rests_on.is_some();
             let table_lift = -probe.bounds.min[2];
-            let dz = if rests_on_object && lift + REST_CLEARANCE_M > table_lift {
-                lift + REST_CLEARANCE_M
+            let (dz, rests_on) = if rests_on_object && lift + REST_CLEARANCE_M > table_lift {
+                (lift + REST_CLEARANCE_M, rests_on)
             } else {
-                table_lift
+                (table_lift, None)
             };
             let bottom = probe.bounds.min[2] + dz;
             let accepted = match mode {
@@ -911,7 +916,7 @@ impl<'a, R: RngCore> Composer<'a, R> {
                     scale,
                     rotation_xyzw: rotation,
                     position_m: position,
-                    support: Some(support),
+                    support: rests_on,
                     description,
                 },
                 mesh,
