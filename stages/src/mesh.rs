@@ -991,33 +991,6 @@ impl TriMesh {
             }
         }
     }
-
-    /// Replaces the texture coordinates by a planar projection along one axis: `u` from
-    /// coordinate `u_axis`, `v` from `v_axis` (downward), each mapped from the mesh bounds to
-    /// [0, 1].
-    pub fn planar_uvs(&mut self, u_axis: usize, v_axis: usize) {
-        let Some(b) = self.bounds() else {
-            return;
-        };
-        let size = b.size();
-        self.uvs = self
-            .positions
-            .iter()
-            .map(|p| {
-                let u = if size[u_axis] > 0.0 {
-                    (p[u_axis] as f64 - b.min[u_axis]) / size[u_axis]
-                } else {
-                    0.0
-                };
-                let v = if size[v_axis] > 0.0 {
-                    (b.max[v_axis] - p[v_axis] as f64) / size[v_axis]
-                } else {
-                    0.0
-                };
-                [u as f32, v as f32]
-            })
-            .collect();
-    }
 }
 
 #[cfg(test)]
@@ -1049,6 +1022,18 @@ mod tests {
         m.check().expect("valid");
         assert_outward(&m);
         assert_abs_diff_eq!(m.signed_volume(), 0.2 * 0.1 * 0.4, epsilon = 1e-9);
+        assert_abs_diff_eq!(
+            m.area(),
+            2.0 * (0.2 * 0.1 + 0.1 * 0.4 + 0.2 * 0.4),
+            epsilon = 1e-7
+        );
+        let b = m.bounds().expect("bounds");
+        let moved = Aabb {
+            min: [0.1, 0.0, 0.0],
+            max: [0.3, 0.1, 0.1],
+        };
+        assert!(b.intersects(&moved));
+        assert!(!b.intersects(&Aabb::from_point([0.5, 0.0, 0.0])));
         let b = m.bounds().expect("bounds");
         assert_abs_diff_eq!(b.size()[2], 0.4, epsilon = 1e-7);
     }

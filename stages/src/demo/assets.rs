@@ -2059,11 +2059,15 @@ pub(crate) struct Library {
 }
 
 impl Library {
-    pub(crate) fn build() -> Result<Self, GlbWriteError> {
+    /// Builds every asset; an error names the asset.
+    pub(crate) fn build() -> Result<Self, (&'static str, GlbWriteError)> {
         use rayon::prelude::*;
         let assets = catalogue()
             .into_par_iter()
-            .map(DemoAsset::build)
+            .map(|def| {
+                let key = def.key;
+                DemoAsset::build(def).map_err(|e| (key, e))
+            })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Self { assets })
     }

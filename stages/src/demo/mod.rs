@@ -215,8 +215,11 @@ pub fn write_demo(dir: &Path, options: &DemoOptions) -> Result<DemoSummary, Demo
         )));
     }
     prepare_dir(dir, options)?;
-    let library = Library::build().map_err(|source| DemoError::Glb {
-        asset: "library".to_owned(),
+    // The record first: a run that fails or is killed half-way leaves a folder that a rerun
+    // with the same options completes in place.
+    write_json(&dir.join(".mesa/demo.json"), &marker(options))?;
+    let library = Library::build().map_err(|(asset, source)| DemoError::Glb {
+        asset: asset.to_owned(),
         source,
     })?;
 
@@ -255,7 +258,6 @@ pub fn write_demo(dir: &Path, options: &DemoOptions) -> Result<DemoSummary, Demo
         b"# mesa configuration of this dataset workspace (written by `mesa demo`).\n\
           # Every key has a default; `mesa run --print-config` shows the resolved values.\n",
     )?;
-    write_json(&dir.join(".mesa/demo.json"), &marker(options))?;
 
     let scene_assets: Vec<_> = library.assets.iter().filter(|a| a.def.in_scenes).collect();
     let categories: BTreeSet<&str> = scene_assets.iter().map(|a| a.def.category).collect();
