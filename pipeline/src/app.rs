@@ -12,7 +12,7 @@ use mesa_schemas::json::to_sorted_pretty;
 use mesa_schemas::output::parse_model_output;
 use mesa_schemas::{kinds, validate_text, Kind};
 
-use crate::cli::{AssetsArgs, GraphArgs, StatusArgs, ValidateArgs};
+use crate::cli::{AssetsArgs, DemoArgs, GraphArgs, StatusArgs, ValidateArgs};
 use crate::cli::{Cli, Command, ConvertArgs, LayoutForm, ParseOutputArgs, RunArgs, StageArgs};
 use crate::config::{annotated_toml, Config};
 use crate::fsio::{write_atomic, DigestCache};
@@ -43,6 +43,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Validate(args) => validate(args),
         Command::Convert(args) => convert(args),
         Command::ParseOutput(args) => parse_output(args),
+        Command::Demo(args) => demo(args, cli.quiet),
         Command::Lift(args) => run_one(&crate::stages::lift::Lift, &resolve(&args, cli.quiet)?),
         Command::Assets(args) => assets(args, cli.quiet),
         Command::Retrieve(args) => run_one(
@@ -226,6 +227,49 @@ fn graph(args: GraphArgs, quiet: bool) -> anyhow::Result<ExitCode> {
         resolved.config.graph.equally_spaced = true;
     }
     run_one(&crate::stages::graph::GraphStage::new(), &resolved)
+}
+
+fn demo(args: DemoArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    use mesa_stages::demo::{write_demo, DemoError, DemoOptions};
+    let options = DemoOptions::default()
+        .with_scenes(args.scenes)
+        .with_seed(args.seed)
+        .with_overwrite(args.force);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.jobs)
+        .build()
+        .context("cannot start the worker threads")?;
+    let started = std::time::Instant::now();
+    let summary =
+        pool.install(|| write_demo(&args.dir, &options))
+            .map_err(|e| -> anyhow::Error {
+                match e {
+                    DemoError::Options(_)
+                    | DemoError::NotEmpty { .. }
+                    | DemoError::NotADemo { .. } => UsageError(e.to_string()).into(),
+                    other => other.into(),
+                }
+            })?;
+    if !quiet {
+        let objects: usize = summary.scenes.iter().map(|s| s.objects).sum();
+        let types: std::collections::BTreeSet<&str> = summary
+            .scenes
+            .iter()
+            .map(|s| s.table_type.as_str())
+            .collect();
+        eprintln!(
+            "mesa demo: {} scenes over {} table types ({objects} objects), {} assets ({} used in \
+             scenes, {} categories) written to {} in {:.1} s",
+            summary.scenes.len(),
+            types.len(),
+            summary.assets,
+            summary.scene_assets,
+            summary.categories,
+            summary.dir.display(),
+            started.elapsed().as_secs_f64()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn status(args: StatusArgs) -> anyhow::Result<ExitCode> {

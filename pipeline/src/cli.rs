@@ -38,6 +38,9 @@ pub enum Command {
     Convert(ConvertArgs),
     /// Parse a model output text (reasoning, scene graph, marker, layout JSON).
     ParseOutput(ParseOutputArgs),
+    /// Write a synthetic dataset workspace with ground truth: procedural assets, photos,
+    /// depth, masks, cameras and instances, and the true layouts.
+    Demo(DemoArgs),
     /// Depth maps and instance masks → point clouds, the table frame, and object boxes.
     Lift(StageArgs),
     /// Index the asset library (assets/index/): per asset its bounds in the table frame,
@@ -137,6 +140,26 @@ pub struct RunArgs {
     /// Print the resolved configuration (every key, documented) and exit.
     #[arg(long)]
     pub print_config: bool,
+}
+
+/// `mesa demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// The folder to write (created if needed; new, empty, or an earlier `mesa demo` output).
+    pub dir: PathBuf,
+    /// Number of scenes; they cycle through the six table types.
+    #[arg(long, value_name = "N", default_value_t = 20)]
+    pub scenes: usize,
+    /// The seed every random choice derives from (with the scene id).
+    #[arg(long, value_name = "S", default_value_t = 7)]
+    pub seed: u64,
+    /// Replace an earlier `mesa demo` output made with other options (its assets/, scenes/
+    /// and mesa.toml are deleted first; a folder `mesa demo` did not write is never touched).
+    #[arg(long)]
+    pub force: bool,
+    /// Worker threads (0 = one per core); the output does not depend on it.
+    #[arg(short, long, value_name = "N", default_value_t = 0)]
+    pub jobs: usize,
 }
 
 /// `mesa status`.

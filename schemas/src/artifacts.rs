@@ -775,3 +775,174 @@ pub enum MarkerStatus {
     /// The scene failed; no output of this run was written.
     Failed,
 }
+
+// ---------------------------------------------------------------------------------------------
+// demo ground truth
+
+/// Schema id of a demo scene's `truth/scene.json`.
+pub const TRUTH_SCENE_SCHEMA: &str = "mesa.truth-scene/1";
+/// Schema id of a demo scene's `truth/instances.json`.
+pub const TRUTH_INSTANCES_SCHEMA: &str = "mesa.truth-instances/1";
+
+/// `truth/scene.json` of a `mesa demo` scene: how its inputs were made, so that every stage
+/// can be measured against the truth (the layout itself is `truth/layout.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthScene {
+    /// `mesa.truth-scene/1`.
+    pub schema: String,
+    /// The scene id, like `office_table_0001`.
+    pub scene_id: String,
+    /// The table type, like `office_table`.
+    pub table_type: String,
+    /// The `--seed` the scene was made with.
+    pub seed: u64,
+    /// A one-sentence description of the scene, as the scene-writing step would give it.
+    pub environment: String,
+    /// The camera that took the photo (exact intrinsics, also for a FOV-only `camera.json`).
+    pub camera: TruthCamera,
+    /// Rigid transform taking camera-frame points (OpenCV, metres) to the table frame
+    /// (metres), row-major 4×4.
+    pub table_from_camera: [[f64; 4]; 4],
+    /// The table.
+    pub table: TruthTable,
+    /// How `input/depth.*` was made from the true depth.
+    pub depth: TruthDepth,
+    /// How the masks were written.
+    pub masks: TruthMasks,
+}
+
+/// The exact camera of a demo photo.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthCamera {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Focal length along x in pixels.
+    pub fx: f64,
+    /// Focal length along y in pixels.
+    pub fy: f64,
+    /// Principal point x in pixels.
+    pub cx: f64,
+    /// Principal point y in pixels.
+    pub cy: f64,
+    /// Horizontal field of view in degrees.
+    pub fov_x_deg: f64,
+    /// What `input/camera.json` states: `intrinsics` or `fov` (then the principal point is
+    /// the image centre `(width / 2, height / 2)` and `fx = fy`).
+    pub camera_json: String,
+    /// Camera pitch below the horizontal, degrees (the camera has no yaw or roll).
+    pub pitch_deg: f64,
+}
+
+/// The table of a demo scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthTable {
+    /// Its label in `instances.json`.
+    pub label: String,
+    /// Its description in `instances.json`.
+    pub description: String,
+    /// Height of the top above the floor, metres.
+    pub height_m: f64,
+    /// Thickness of the top, metres.
+    pub top_thickness_m: f64,
+    /// The placement zone (the whole top) [x_min, x_max, y_min, y_max] in cm.
+    #[serde(rename = "item_placement_zone")]
+    pub zone_cm: ZoneCm,
+    /// The sink's restricted zone in cm, for a bathroom vanity.
+    #[serde(
+        rename = "restricted_zone",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub restricted_zone_cm: Option<ZoneCm>,
+    /// Distance from the table's back edge to the wall behind it, metres.
+    pub wall_gap_m: f64,
+}
+
+/// How a demo depth map departs from the true depth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthDepth {
+    /// The depth file, relative to the scene folder.
+    pub file: String,
+    /// `sensor` (a structured-light camera: noise growing with distance, holes, mixed pixels
+    /// at edges, millimetre steps) or `estimator` (a metric monocular estimator: a global
+    /// scale error, smooth low-frequency error, edges blurred across objects).
+    pub model: String,
+    /// Global scale: away from edges, stored depth ≈ `scale` · true depth.
+    pub scale: f64,
+    /// Per-pixel noise σ(d) = `sigma_constant_m` + `sigma_linear` · d + `sigma_quadratic_per_m`
+    /// · (d − 0.4 m)², in metres.
+    pub sigma_constant_m: f64,
+    /// See `sigma_constant_m`.
+    pub sigma_linear: f64,
+    /// See `sigma_constant_m` (per metre).
+    pub sigma_quadratic_per_m: f64,
+    /// Largest absolute value of the smooth low-frequency error, relative to depth.
+    pub smooth_error_relative: f64,
+    /// Storage step, metres (0.001 for a 16-bit millimetre PNG, 0 for float32).
+    pub quantization_m: f64,
+    /// Pixels with a valid depth.
+    pub valid_px: u64,
+    /// Pixels without a measurement (0, NaN, inf or negative).
+    pub invalid_px: u64,
+    /// Pixels at depth edges whose value mixes foreground and background (flying pixels).
+    pub mixed_px: u64,
+}
+
+/// How the masks of a demo scene were written.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthMasks {
+    /// `label_png` (`input/masks.png`) or `instance_pngs` (`input/masks/<id>.png`).
+    pub form: String,
+    /// Bits per label of `masks.png` (8 or 16); 8 for binary instance masks.
+    pub bit_depth: u8,
+    /// How far instance masks were grown beyond the visible region, pixels (so neighbours'
+    /// masks overlap, as segmentation masks do); 0 for a label image.
+    pub dilation_px: u32,
+    /// Objects with fewer visible pixels than this were left out of the scene.
+    pub min_visible_px: u32,
+}
+
+/// `truth/instances.json` of a `mesa demo` scene: what each mask id is.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthInstances {
+    /// `mesa.truth-instances/1`.
+    pub schema: String,
+    /// The scene id.
+    pub scene_id: String,
+    /// One entry per id of `input/instances.json`, in id order.
+    pub instances: Vec<TruthInstance>,
+}
+
+/// The truth about one mask id.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthInstance {
+    /// The id in `instances.json` and the masks.
+    pub id: u32,
+    /// The label given in `instances.json`.
+    pub label: String,
+    /// True for the table.
+    pub support: bool,
+    /// The object's instance in `truth/layout.json` (absent for the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instance: Option<String>,
+    /// The asset placed there (absent for the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uid: Option<String>,
+    /// The asset's category (absent for the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub category: Option<String>,
+    /// The instance it rests on or in (absent when it stands on the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rests_on: Option<String>,
+    /// Pixels where it is the visible surface.
+    pub visible_px: u64,
+}

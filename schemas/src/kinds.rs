@@ -243,6 +243,22 @@ pub fn kinds() -> &'static [Kind] {
                 generate: schema_of::<RunMarker>,
                 semantic: no_semantics,
             },
+            Kind {
+                name: "truth-scene",
+                schema_id: Some(TRUTH_SCENE_SCHEMA),
+                form: FileForm::Json,
+                summary: "truth/scene.json of a demo scene (exact camera, pose, depth noise)",
+                generate: schema_of::<TruthScene>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "truth-instances",
+                schema_id: Some(TRUTH_INSTANCES_SCHEMA),
+                form: FileForm::Json,
+                summary: "truth/instances.json of a demo scene (mask id -> instance, asset)",
+                generate: schema_of::<TruthInstances>,
+                semantic: no_semantics,
+            },
         ]
     })
 }
