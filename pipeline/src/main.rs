@@ -9,6 +9,7 @@ use mesa_pipeline::cli::Cli;
 fn main() -> ExitCode {
     let cli = Cli::parse();
     init_logging(cli.verbose, cli.quiet);
+    quiet_caught_geometry_panics();
     match app::run(cli) {
         Ok(code) => code,
         Err(e) => {
@@ -38,4 +39,21 @@ fn init_logging(verbose: u8, quiet: bool) {
         .with_target(false)
         .without_time()
         .init();
+}
+
+/// parry3d's V-HACD panics on some degenerate voxel sets; `mesa assets` catches that and retries
+/// with other parameters (`mesa_stages::assets::shapes`), so the default hook's message would
+/// only alarm: it goes to the debug log. Every other panic prints as usual.
+fn quiet_caught_geometry_panics() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if info
+            .location()
+            .is_some_and(|l| l.file().contains("parry3d"))
+        {
+            tracing::debug!("caught and retried: {info}");
+        } else {
+            default(info);
+        }
+    }));
 }

@@ -378,8 +378,12 @@ pub struct Decomposition {
     /// hull (the hull is its one part); `hull` when the decomposition failed and the parts are
     /// the single hull (the asset's warnings say why).
     pub method: String,
-    /// Voxels along the longest axis.
+    /// Voxels along the longest axis (the configured resolution, or the one a retry used
+    /// when V-HACD failed on the configured one).
     pub resolution: u32,
+    /// Whether V-HACD approximated the parts' hulls while cutting (its default; a retry turns
+    /// it off).
+    pub convex_hull_approximation: bool,
     /// Maximum concavity of a part.
     pub concavity: f64,
     /// Most parts allowed.

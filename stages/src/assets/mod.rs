@@ -29,7 +29,7 @@ use crate::text::{document_frequency, features, LEXICAL_ENCODER};
 
 /// Bumped when the indexing of an unchanged asset would give another record: every asset is
 /// then re-indexed.
-pub const INDEX_VERSION: u32 = 1;
+pub const INDEX_VERSION: u32 = 2;
 
 /// How an asset's front is brought to face the observer (-y in the table frame).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]

@@ -127,6 +127,7 @@ pub fn collision_shapes(
     let decomposition = Decomposition {
         method: "vhacd".to_owned(),
         resolution: config.vhacd_resolution,
+        convex_hull_approximation: true,
         concavity: config.vhacd_concavity,
         max_parts: config.vhacd_max_parts,
     };
@@ -143,28 +144,55 @@ pub fn collision_shapes(
             warning: None,
         });
     }
-    let params = VHACDParameters {
-        resolution: config.vhacd_resolution,
-        concavity: config.vhacd_concavity as f32,
-        max_convex_hulls: config.vhacd_max_parts,
-        fill_mode: FillMode::FloodFill {
-            detect_cavities: false,
-        },
-        ..VHACDParameters::default()
-    };
-    // V-HACD must not take a whole indexing run down on a mesh it cannot handle.
-    let decomposed = std::panic::catch_unwind(|| {
-        let vhacd = VHACD::decompose(&params, &points, triangles, true);
-        vhacd.compute_exact_convex_hulls(&points, triangles)
-    });
-    let parts: Vec<ConvexPart> = match decomposed {
-        Ok(hulls) => hulls
-            .iter()
-            .filter(|(p, t)| !p.is_empty() && !t.is_empty())
-            .map(|(p, t)| part(p, t, config.shape_precision_m))
-            .collect(),
-        Err(_) => Vec::new(),
-    };
+    // parry3d's V-HACD can fail (a panic inside its convex hull) on degenerate voxel sets; a
+    // slightly different voxel grid or exact clipping hulls usually get past it.
+    let attempts = [
+        (config.vhacd_resolution, true),
+        (config.vhacd_resolution, false),
+        (
+            config.vhacd_resolution + config.vhacd_resolution / 8 + 1,
+            true,
+        ),
+        (
+            config
+                .vhacd_resolution
+                .saturating_sub(config.vhacd_resolution / 8 + 1)
+                .max(8),
+            true,
+        ),
+    ];
+    let mut parts: Vec<ConvexPart> = Vec::new();
+    let mut used = decomposition.clone();
+    for (resolution, approximation) in attempts {
+        let params = VHACDParameters {
+            resolution,
+            concavity: config.vhacd_concavity as f32,
+            max_convex_hulls: config.vhacd_max_parts,
+            convex_hull_approximation: approximation,
+            fill_mode: FillMode::FloodFill {
+                detect_cavities: false,
+            },
+            ..VHACDParameters::default()
+        };
+        // V-HACD must not take a whole indexing run down on a mesh it cannot handle.
+        let decomposed = std::panic::catch_unwind(|| {
+            let vhacd = VHACD::decompose(&params, &points, triangles, true);
+            vhacd.compute_exact_convex_hulls(&points, triangles)
+        });
+        if let Ok(hulls) = decomposed {
+            parts = hulls
+                .iter()
+                .filter(|(p, t)| !p.is_empty() && !t.is_empty())
+                .map(|(p, t)| part(p, t, config.shape_precision_m))
+                .collect();
+            used.resolution = resolution;
+            used.convex_hull_approximation = approximation;
+            if !parts.is_empty() {
+                break;
+            }
+        }
+    }
+    let decomposition = used;
     if parts.is_empty() {
         return Some(Shapes {
             parts: vec![hull.clone()],

@@ -4,9 +4,12 @@
 //!
 //! The text score is the cosine of the two vectors, computed in f64 from the f32 values (for
 //! SBERT's unit vectors it is the dot product MesaTask's code takes). Ranking 12,000 assets
-//! for a scene's queries is one pass over the matrix: every row is scored against every query
-//! in f32 (vectorised, rows split across threads); then the candidates that can be in the top k
-//! — within twice the f32 error bound of the k-th score — are rescored exactly in f64 and
+//! for a scene's queries takes one pass over the matrix in 16-bit integers: each row a is
+//! stored as s_a·â + r_a (â integers, the scale s_a from the row's largest component, r_a the
+//! rounding residual), each query likewise, and â·q̂ is exact in i32 (the quantisation step
+//! keeps every sum below 2³¹), vectorised, rows split across threads. The cosine it gives is
+//! off by at most e = (s_a·|â|·|r_q| + |r_a|·|q|) / (|a|·|q|), known per row; every row whose
+//! upper bound reaches the k-th best lower bound is rescored exactly in f64, and the rows are
 //! sorted by (score descending, uid ascending). The result is the ranking a brute-force f64
 //! computation gives, exactly.
 
@@ -25,6 +28,66 @@ pub struct FeatureMatrix {
     data: Vec<f32>,
     /// Euclidean norm of each row, f64.
     norms: Vec<f64>,
+    /// The rows quantised to ±`levels`.
+    quantised: Quantised,
+}
+
+/// Rows in 16-bit integers with what bounds their error.
+#[derive(Debug, Clone)]
+struct Quantised {
+    /// The largest integer magnitude: `levels² · dim < 2³¹`.
+    levels: f64,
+    /// `rows × dim` integers.
+    data: Vec<i16>,
+    /// s_a of each row.
+    scale: Vec<f64>,
+    /// |â| of each row.
+    int_norm: Vec<f64>,
+    /// |r_a| = |a − s_a·â| of each row.
+    residual: Vec<f64>,
+}
+
+/// One vector quantised: (integers, scale, |â|, |r|).
+fn quantise(v: &[f32], levels: f64) -> (Vec<i16>, f64, f64, f64) {
+    let max = v.iter().fold(0.0f64, |m, x| m.max(f64::from(x.abs())));
+    let scale = if max > 0.0 { max / levels } else { 1.0 };
+    let mut ints = Vec::with_capacity(v.len());
+    let (mut int_norm, mut residual) = (0.0, 0.0);
+    for x in v {
+        let x = f64::from(*x);
+        // |x / scale| <= levels <= i16::MAX: the cast cannot saturate.
+        let q = (x / scale).round().clamp(-levels, levels);
+        ints.push(q as i16);
+        int_norm += q * q;
+        let r = x - scale * q;
+        residual += r * r;
+    }
+    // The residual norm is inflated by a hair so its own rounding cannot undercut it.
+    (
+        ints,
+        scale,
+        int_norm.sqrt(),
+        residual.sqrt() * (1.0 + 1e-12),
+    )
+}
+
+/// An exact integer dot product (the caller keeps it below 2³¹), 16 lanes so that the
+/// compiler uses multiply-add of 16-bit pairs.
+fn dot_i16(a: &[i16], b: &[i16]) -> i32 {
+    const LANES: usize = 16;
+    let mut acc = [0i32; LANES];
+    let mut a_chunks = a.chunks_exact(LANES);
+    let mut b_chunks = b.chunks_exact(LANES);
+    for (x, y) in (&mut a_chunks).zip(&mut b_chunks) {
+        for k in 0..LANES {
+            acc[k] += i32::from(x[k]) * i32::from(y[k]);
+        }
+    }
+    let mut sum: i32 = acc.iter().sum();
+    for (x, y) in a_chunks.remainder().iter().zip(b_chunks.remainder()) {
+        sum += i32::from(*x) * i32::from(*y);
+    }
+    sum
 }
 
 /// The f64 cosine of two f32 vectors: the definition the fast path reproduces exactly.
@@ -55,32 +118,6 @@ fn dot_f64(a: &[f32], b: &[f32]) -> f64 {
         .sum()
 }
 
-/// A dot product in f32 with eight independent accumulators (the compiler vectorises it).
-fn dot_f32(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let chunks = a.len() / 8;
-    for c in 0..chunks {
-        let (x, y) = (&a[c * 8..c * 8 + 8], &b[c * 8..c * 8 + 8]);
-        for k in 0..8 {
-            acc[k] += x[k] * y[k];
-        }
-    }
-    let mut sum: f32 = acc.iter().sum();
-    for k in chunks * 8..a.len() {
-        sum += a[k] * b[k];
-    }
-    sum
-}
-
-/// An upper bound of |f32 cosine − exact cosine| for vectors of `dim` components: the dot
-/// product's rounding error is at most γ(dim + 1)·Σ|a_i b_i| ≤ γ(dim + 1)·|a||b| whatever the
-/// summation order (γ(n) = n·u / (1 − n·u), u = 2⁻²⁴), plus a margin for the f64 division.
-fn screening_error(dim: usize) -> f64 {
-    let u = f64::from(f32::EPSILON) / 2.0;
-    let n = (dim + 1) as f64;
-    1.01 * n * u / (1.0 - n * u) + 1e-12
-}
-
 impl FeatureMatrix {
     /// Embeddings from a matrix and the uid of each row.
     pub fn new(matrix: Matrix, uids: Vec<String>) -> Result<Self, String> {
@@ -102,8 +139,19 @@ impl FeatureMatrix {
                 ));
             }
         }
+        let dim = matrix.cols;
+        let levels = ((f64::from(i32::MAX) / dim as f64).sqrt().floor())
+            .min(f64::from(i16::MAX))
+            .max(1.0);
         let mut norms = Vec::with_capacity(matrix.rows);
-        for (i, row) in matrix.data.chunks_exact(matrix.cols).enumerate() {
+        let mut quantised = Quantised {
+            levels,
+            data: Vec::with_capacity(matrix.data.len()),
+            scale: Vec::with_capacity(matrix.rows),
+            int_norm: Vec::with_capacity(matrix.rows),
+            residual: Vec::with_capacity(matrix.rows),
+        };
+        for (i, row) in matrix.data.chunks_exact(dim).enumerate() {
             let norm = norm_f64(row);
             if !(norm.is_finite() && norm > 0.0) {
                 return Err(format!(
@@ -112,12 +160,18 @@ impl FeatureMatrix {
                 ));
             }
             norms.push(norm);
+            let (ints, scale, int_norm, residual) = quantise(row, levels);
+            quantised.data.extend(ints);
+            quantised.scale.push(scale);
+            quantised.int_norm.push(int_norm);
+            quantised.residual.push(residual);
         }
         Ok(Self {
             uids,
-            dim: matrix.cols,
+            dim,
             data: matrix.data,
             norms,
+            quantised,
         })
     }
 
@@ -169,38 +223,57 @@ impl FeatureMatrix {
         if k == 0 || queries.is_empty() {
             return vec![Vec::new(); queries.len()];
         }
-        let query_norms: Vec<f64> = queries.iter().map(|q| norm_f64(q)).collect();
-        // Screening: f32 dots of every row with every query, one pass over the matrix.
+        let q = &self.quantised;
+        let dim = self.dim;
+        // Each query as (integers, scale, |residual|, norm).
+        let quantised_queries: Vec<(Vec<i16>, f64, f64, f64)> = queries
+            .iter()
+            .map(|v| {
+                let (ints, scale, _, residual) = quantise(v, q.levels);
+                (ints, scale, residual, norm_f64(v))
+            })
+            .collect();
+        // Screening: integer dots of every row with every query, one pass over the matrix.
         const BLOCK: usize = 256;
-        let mut screened = vec![0.0f32; n * queries.len()];
-        screened
-            .par_chunks_mut(BLOCK * queries.len())
+        let nq = queries.len();
+        let mut dots = vec![0i32; n * nq];
+        dots.par_chunks_mut(BLOCK * nq)
             .enumerate()
             .for_each(|(block, out)| {
                 let first = block * BLOCK;
-                for (r, scores) in out.chunks_mut(queries.len()).enumerate() {
-                    let row = self.row(first + r);
-                    for (slot, q) in scores.iter_mut().zip(queries) {
-                        *slot = dot_f32(row, q);
+                for (r, slots) in out.chunks_mut(nq).enumerate() {
+                    let i = first + r;
+                    let row = &q.data[i * dim..(i + 1) * dim];
+                    for (slot, query) in slots.iter_mut().zip(&quantised_queries) {
+                        *slot = dot_i16(row, &query.0);
                     }
                 }
             });
-        let margin = 2.0 * screening_error(self.dim);
-        queries
+        quantised_queries
             .par_iter()
             .enumerate()
-            .map(|(qi, query)| {
-                let qn = query_norms[qi];
-                let approx: Vec<f64> = (0..n)
-                    .map(|i| f64::from(screened[i * queries.len() + qi]) / (self.norms[i] * qn))
+            .map(|(qi, (_, q_scale, q_residual, q_norm))| {
+                let query = queries[qi];
+                // [approximate cosine − bound, + bound] of each row.
+                let bounds: Vec<(f64, f64)> = (0..n)
+                    .map(|i| {
+                        let denominator = self.norms[i] * q_norm;
+                        let approx =
+                            q.scale[i] * q_scale * f64::from(dots[i * nq + qi]) / denominator;
+                        let error = (q.scale[i] * q.int_norm[i] * q_residual
+                            + q.residual[i] * q_norm)
+                            / denominator
+                            + 1e-12;
+                        (approx - error, approx + error)
+                    })
                     .collect();
-                let mut sorted = approx.clone();
-                // The k-th largest approximate score.
-                let (_, kth, _) = sorted.select_nth_unstable_by(k - 1, |a, b| b.total_cmp(a));
-                let threshold = *kth - margin;
+                let mut lower: Vec<f64> = bounds.iter().map(|b| b.0).collect();
+                // The k-th largest lower bound: k rows score at least that much.
+                let (_, kth, _) = lower.select_nth_unstable_by(k - 1, |a, b| b.total_cmp(a));
+                let threshold = *kth;
                 let mut exact: Vec<(usize, f64)> = (0..n)
-                    .filter(|i| approx[*i] >= threshold)
-                    .map(|i| (i, self.exact(i, query, qn)))
+                    .filter(|i| bounds[*i].1 >= threshold)
+                    .map(|i| (i, self.exact(i, query, *q_norm)))
                     .collect();
                 exact.sort_by(|a, b| {
                     b.1.total_cmp(&a.1)
