@@ -8,7 +8,8 @@
 //!
 //! Position: the box centre in x and y; in z the object's bottom rests on its support:
 //! - the **table** when its lifted bottom is within `table_snap_cm` of the table, or when
-//!   nothing lies under it (then it is dropped, and a warning says by how much);
+//!   nothing lies under it (then it is dropped: usually its bottom was hidden from the camera;
+//!   its provenance and one warning per scene say by how much);
 //! - **in** a container (an asset annotated `isContainer` / `receptacle`) whose lifted box
 //!   holds its lifted bottom: the bottom keeps its relative height in the container's box
 //!   (a fruit on a bowl's floor stays on the floor when the bowl is rescaled);
@@ -291,15 +292,12 @@ pub fn place_scene(
     }
     let placements = place_objects(&items, config);
     let mut objects = Vec::with_capacity(items.len());
+    let mut dropped = Vec::new();
     for ((item, placement), (lifted, uid, category)) in items.iter().zip(&placements).zip(chosen) {
         let note = match placement.support {
             Support::Table => "on the table".to_owned(),
             Support::Dropped(height_m) => {
-                warnings.push(format!(
-                    "{}: nothing under it: dropped {:.1} cm onto the table",
-                    item.instance,
-                    height_m * 100.0
-                ));
+                dropped.push(format!("{} ({:.1} cm)", item.instance, height_m * 100.0));
                 format!(
                     "dropped {:.1} cm onto the table: nothing under it",
                     height_m * 100.0
@@ -326,6 +324,15 @@ pub fn place_scene(
             }),
             extra: Default::default(),
         });
+    }
+    if !dropped.is_empty() {
+        // Usually a bottom the camera did not see: one line per scene, the details are in
+        // each object's provenance.
+        warnings.push(format!(
+            "{} lifted above the table with nothing under them, dropped onto it: {}",
+            dropped.len(),
+            dropped.join(", ")
+        ));
     }
     let mut layout = DatasetLayout {
         schema: LAYOUT_SCHEMA.to_owned(),

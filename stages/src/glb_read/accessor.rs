@@ -243,6 +243,17 @@ pub(crate) fn read_accessor(
         .checked_mul(width)
         .filter(|n| *n <= 1 << 31)
         .ok_or_else(|| data_error(&here, format!("count {count} is too large")))?;
+    // Without a bufferView the values are zeros (then sparse values): nothing bounds the
+    // count but the JSON, so it is bounded here (64 M values, 512 MB of f64).
+    if accessor.buffer_view.is_none() && total > 1 << 26 {
+        return Err(data_error(
+            &here,
+            format!(
+                "count {count} without a bufferView is too large (at most {} values)",
+                1 << 26
+            ),
+        ));
+    }
     let mut values = match accessor.buffer_view {
         Some(view) => {
             let (bytes, stride) = view_bytes(root, buffers, view.value(), &here)?;

@@ -1,6 +1,7 @@
 //! The GLB reader on small hand-built files, one feature or one defect each.
 
 use approx::assert_abs_diff_eq;
+use proptest::prelude::*;
 use serde_json::{json, Value};
 
 use super::*;
@@ -640,4 +641,72 @@ fn materials_textures_and_images_are_described() {
     );
     assert_eq!(mesh.info.textures, 1);
     assert_eq!(mesh.info.image_mime_types, ["image/png"]);
+}
+
+/// A small file using indices, sparse values, a hierarchy and a skin: something for damage to
+/// hit.
+fn rich_fixture() -> Vec<u8> {
+    let mut b = Builder::default();
+    let pos = b.positions(&QUAD);
+    let idx = b.indices_u16(&[0, 1, 2, 0, 2, 3]);
+    let indices = b.view(&[1u8, 0, 0, 0], None);
+    let values = b.view(
+        &[0.5f32, 0.5, 0.5]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect::<Vec<u8>>(),
+        None,
+    );
+    let sparse = b.accessor(json!({
+        "componentType": 5126, "count": 4, "type": "VEC3",
+        "sparse": {"count": 1, "indices": {"bufferView": indices, "componentType": 5121},
+                   "values": {"bufferView": values}}
+    }));
+    b.glb(json!({
+        "meshes": [{"primitives": [
+            {"attributes": {"POSITION": pos}, "indices": idx},
+            {"attributes": {"POSITION": pos}, "targets": [{"POSITION": sparse}]}
+        ], "weights": [1.0]}],
+        "nodes": [{"children": [1], "rotation": [0.0, 0.7071, 0.0, 0.7071]}, {"mesh": 0, "scale": [2.0, 1.0, 1.0]}],
+        "scenes": [{"nodes": [0]}]
+    }))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+    /// Damaged files (bytes changed, the end cut off) are read or rejected, never a panic and
+    /// never an out-of-range index.
+    #[test]
+    fn damaged_files_are_read_or_rejected(
+        flips in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..6),
+        keep in 0.0f64..=1.0,
+    ) {
+        let mut bytes = rich_fixture();
+        for (at, value) in flips {
+            let i = at.index(bytes.len());
+            bytes[i] = value;
+        }
+        let len = ((bytes.len() as f64) * keep).round() as usize;
+        bytes.truncate(len.max(1));
+        if let Ok(mesh) = read_glb(&bytes) {
+            let n = mesh.positions_m.len() as u32;
+            prop_assert!(mesh.triangles.iter().flatten().all(|i| *i < n));
+            prop_assert!(mesh.positions_m.iter().flatten().all(|v| v.is_finite()));
+        }
+    }
+}
+
+#[test]
+fn the_rich_fixture_reads() {
+    let mesh = read_glb(&rich_fixture()).expect("reads");
+    // Two from the indexed quad; the unindexed primitive's 4 vertices make one, and one left.
+    assert_eq!(mesh.triangles.len(), 3);
+    assert!(mesh.info.morph_targets);
+    assert!(
+        mesh.warnings
+            .iter()
+            .any(|w| w.contains("4 indices is not a multiple of 3")),
+        "{:?}",
+        mesh.warnings
+    );
 }

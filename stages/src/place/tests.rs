@@ -392,3 +392,40 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn drops_are_one_warning_per_scene_and_a_note_per_object() {
+    let mut lift = lift_of(vec![
+        lifted("lamp_0", 1, "a lamp", [10.0, 10.0, 30.0]),
+        lifted("cup_0", 2, "a cup", [8.0, 8.0, 10.0]),
+    ]);
+    lift.instances[0].center_cm = PositionCm([20.0, 20.0, 25.0]);
+    lift.instances[1].center_cm = PositionCm([80.0, 20.0, 7.5]);
+    let retrieval = retrieval_of(&lift, &[Some("lamp"), Some("cup")]);
+    let index = index_of(&[("lamp", [0.1, 0.1, 0.3]), ("cup", [0.08, 0.08, 0.1])]);
+    let out = place_scene(
+        &lift,
+        &retrieval,
+        &index,
+        &Annotations::default(),
+        &PlaceConfig::default(),
+    )
+    .expect("places");
+    assert_eq!(
+        out.warnings,
+        ["2 lifted above the table with nothing under them, dropped onto it: lamp_0 (10.0 cm), cup_0 (2.5 cm)"]
+    );
+    let lamp = out
+        .layout
+        .objects
+        .iter()
+        .find(|o| o.instance == "lamp_0")
+        .expect("lamp");
+    assert_eq!(
+        lamp.provenance.as_ref().map(|p| p.notes.clone()),
+        Some(vec![
+            "dropped 10.0 cm onto the table: nothing under it".to_owned()
+        ])
+    );
+    assert_eq!(lamp.position_cm.0[2], 15.0);
+}

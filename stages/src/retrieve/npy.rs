@@ -153,6 +153,27 @@ pub fn write_matrix(matrix: &Matrix, half: bool) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Damaged files are read or refused, never a panic.
+        #[test]
+        fn damaged_files_are_read_or_refused(
+            flips in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..6),
+            keep in 0.0f64..=1.0,
+        ) {
+            let m = Matrix { rows: 3, cols: 4, data: (0..12).map(|i| i as f32).collect() };
+            let mut bytes = write_matrix(&m, false);
+            for (at, value) in flips {
+                let i = at.index(bytes.len());
+                bytes[i] = value;
+            }
+            bytes.truncate(((bytes.len() as f64) * keep).round() as usize);
+            if let Ok(read) = parse_matrix(&bytes) {
+                prop_assert_eq!(read.data.len(), read.rows * read.cols);
+            }
+        }
+    }
 
     #[test]
     fn float32_and_float16_round_trip() {
