@@ -667,7 +667,7 @@ fn rich_fixture() -> Vec<u8> {
             {"attributes": {"POSITION": pos}, "indices": idx},
             {"attributes": {"POSITION": pos}, "targets": [{"POSITION": sparse}]}
         ], "weights": [1.0]}],
-        "nodes": [{"children": [1], "rotation": [0.0, 0.7071, 0.0, 0.7071]}, {"mesh": 0, "scale": [2.0, 1.0, 1.0]}],
+        "nodes": [{"children": [1], "rotation": [0.0, 0.6, 0.0, 0.8]}, {"mesh": 0, "scale": [2.0, 1.0, 1.0]}],
         "scenes": [{"nodes": [0]}]
     }))
 }
