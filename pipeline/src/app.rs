@@ -12,8 +12,8 @@ use mesa_schemas::json::to_sorted_pretty;
 use mesa_schemas::output::parse_model_output;
 use mesa_schemas::{kinds, validate_text, Kind};
 
+use crate::cli::{AssetsArgs, DemoArgs, GraphArgs, StatusArgs, ValidateArgs};
 use crate::cli::{Cli, Command, ConvertArgs, LayoutForm, ParseOutputArgs, RunArgs, StageArgs};
-use crate::cli::{DemoArgs, GraphArgs, StatusArgs, ValidateArgs};
 use crate::config::{annotated_toml, Config};
 use crate::fsio::{write_atomic, DigestCache};
 use crate::layouts::{read_any_layout, AnyLayout};
@@ -45,6 +45,15 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::ParseOutput(args) => parse_output(args),
         Command::Demo(args) => demo(args, cli.quiet),
         Command::Lift(args) => run_one(&crate::stages::lift::Lift, &resolve(&args, cli.quiet)?),
+        Command::Assets(args) => assets(args, cli.quiet),
+        Command::Retrieve(args) => run_one(
+            &crate::stages::retrieve::RetrieveStage::new(),
+            &resolve(&args, cli.quiet)?,
+        ),
+        Command::Place(args) => run_one(
+            &crate::stages::place::PlaceStage::new(),
+            &resolve(&args, cli.quiet)?,
+        ),
         Command::Graph(args) => graph(args, cli.quiet),
     }
 }
@@ -130,11 +139,76 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     )
     .with_context(|| format!("{}: cannot write .mesa/", resolved.dataset.display()))?;
     let mut failed = false;
+    // The asset index is a dataset-level step: it comes before the per-scene stages that read
+    // it. With --shard, every shard would index the library at once: it must run before them.
+    let library = resolved.dataset.join(crate::stages::assets::LIBRARY);
+    if resolved.options.shard.count > 1 {
+        eprintln!(
+            "assets: not run by `mesa run --shard` (every shard would index the library): run              `mesa assets {}` once before the shards",
+            resolved.dataset.display()
+        );
+    } else if library.is_dir() {
+        let summary = crate::stages::assets::index_library(
+            &resolved.dataset,
+            &resolved.config,
+            &assets_options(&resolved.options),
+        )?;
+        eprint!("{}", crate::stages::assets::format_summary(&summary));
+    } else {
+        eprintln!(
+            "assets: {} does not exist: no asset index (retrieve and place need one)",
+            library.display()
+        );
+    }
     for stage in &stages {
         let code = run_one(stage.as_ref(), &resolved)?;
         failed |= code != ExitCode::SUCCESS;
     }
     Ok(ExitCode::from(if failed { EXIT_FAILED } else { EXIT_OK }))
+}
+
+fn assets_options(options: &RunOptions) -> crate::stages::assets::AssetsOptions {
+    crate::stages::assets::AssetsOptions {
+        jobs: options.jobs,
+        force: options.force,
+        progress: options.progress,
+        progress_interval: options.progress_interval,
+    }
+}
+
+fn assets(args: AssetsArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let stage = StageArgs {
+        dataset: args.dataset.clone(),
+        scenes: None,
+        jobs: args.jobs,
+        shard: Some(Shard::default()),
+        force: args.force,
+        config: args.config.clone(),
+        progress: args.progress,
+    };
+    let resolved = resolve(&stage, quiet)?;
+    // Under a Slurm array, one task indexes the library; the others have nothing to do.
+    if let Some(shard) = Shard::from_slurm_env().map_err(UsageError)? {
+        if shard.index != 0 {
+            eprintln!(
+                "assets: the library is indexed by array task 0 (this is task {shard}): nothing                  to do here"
+            );
+            return Ok(ExitCode::SUCCESS);
+        }
+    }
+    let summary = crate::stages::assets::index_library(
+        &resolved.dataset,
+        &resolved.config,
+        &assets_options(&resolved.options),
+    )?;
+    eprint!("{}", crate::stages::assets::format_summary(&summary));
+    Ok(ExitCode::from(
+        if args.strict && !summary.invalid.is_empty() {
+            EXIT_FAILED
+        } else {
+            EXIT_OK
+        },
+    ))
 }
 
 fn graph(args: GraphArgs, quiet: bool) -> anyhow::Result<ExitCode> {

@@ -43,6 +43,16 @@ pub enum Command {
     Demo(DemoArgs),
     /// Depth maps and instance masks → point clouds, the table frame, and object boxes.
     Lift(StageArgs),
+    /// Index the asset library (assets/index/): per asset its bounds in the table frame,
+    /// counts, materials and validity, its collision shapes, and the text index. Unchanged
+    /// assets are not re-indexed.
+    Assets(AssetsArgs),
+    /// Choose an asset for every lifted instance by text and size, MesaTask's recipe
+    /// (coarse/retrieval.json).
+    Retrieve(StageArgs),
+    /// Scale each retrieved asset isometrically into its lifted box: the coarse layout
+    /// (coarse/layout.json).
+    Place(StageArgs),
     /// Extract the scene graph of every scene (graph/graph.json and graph/graph.txt), or print
     /// the triplets of one layout file with --layout.
     Graph(GraphArgs),
@@ -72,6 +82,29 @@ pub struct StageArgs {
     /// Progress display (default: [run] progress of mesa.toml).
     #[arg(long, value_enum)]
     pub progress: Option<ProgressArg>,
+}
+
+/// `mesa assets`.
+#[derive(Debug, Args, Clone)]
+pub struct AssetsArgs {
+    /// The dataset folder (holds assets/library/<uid>.glb and assets/annotations.json).
+    pub dataset: PathBuf,
+    /// Worker threads (default: [run] jobs of mesa.toml; 0 = one per core).
+    #[arg(short, long, value_name = "N")]
+    pub jobs: Option<usize>,
+    /// Re-index every asset, even those whose GLB, annotation and configuration are unchanged.
+    #[arg(long)]
+    pub force: bool,
+    /// The configuration file (default: DATASET/mesa.toml when it exists).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Progress display (default: [run] progress of mesa.toml).
+    #[arg(long, value_enum)]
+    pub progress: Option<ProgressArg>,
+    /// Exit with code 1 when some asset is invalid (by default invalid assets are listed, and
+    /// retrieval never chooses them).
+    #[arg(long)]
+    pub strict: bool,
 }
 
 /// `--progress`.

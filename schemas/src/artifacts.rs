@@ -13,6 +13,12 @@ use crate::units::{PositionCm, SizeCm, ZoneCm};
 pub const LIFT_SCHEMA: &str = "mesa.lift/1";
 /// Schema id of `coarse/retrieval.json`.
 pub const RETRIEVAL_SCHEMA: &str = "mesa.retrieval/1";
+/// Schema id of `assets/index/assets.json`.
+pub const ASSET_INDEX_SCHEMA: &str = "mesa.asset-index/1";
+/// Schema id of `assets/index/text.json`.
+pub const TEXT_INDEX_SCHEMA: &str = "mesa.text-index/1";
+/// Schema id of `assets/index/shapes/<uid>.json`.
+pub const SHAPES_SCHEMA: &str = "mesa.shapes/1";
 /// Schema id of `qa/check.json`.
 pub const CHECK_SCHEMA: &str = "mesa.check/1";
 /// Schema id of `graph/graph.json`.
@@ -222,6 +228,190 @@ pub struct LiftStats {
 }
 
 // ---------------------------------------------------------------------------------------------
+// assets
+
+/// `assets/index/assets.json`: every GLB of `assets/library/`, read once, with its verdict.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AssetIndexArtifact {
+    /// `mesa.asset-index/1`.
+    pub schema: String,
+    /// SHA-256 of the `[assets]` configuration the records were made with.
+    pub config_digest: String,
+    /// One record per GLB in `assets/library/`, by uid (the file name without `.glb`).
+    pub assets: BTreeMap<String, AssetRecord>,
+    /// Uids of `annotations.json` that have no GLB in the library.
+    pub annotated_without_glb: Vec<String>,
+}
+
+/// What `mesa assets` found in one GLB.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AssetRecord {
+    /// The GLB, relative to the dataset: `assets/library/<uid>.glb`.
+    pub file: String,
+    /// Size of the GLB in bytes.
+    pub glb_bytes: u64,
+    /// SHA-256 of the GLB.
+    pub glb_sha256: String,
+    /// SHA-256 of everything the record depends on (the GLB, the asset's annotation, the
+    /// `[assets]` configuration, the index version): an unchanged digest means the record is
+    /// reused as it is.
+    pub inputs_sha256: String,
+    /// Whether the asset can be retrieved and placed.
+    pub valid: bool,
+    /// Why it cannot, with how to fix it (invalid assets only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// A short code for the reason: a glTF-Validator code for a damaged container
+    /// (`GLB_LENGTH_MISMATCH`, ...), else `not_glb`, `gltf1`, `json`, `version`, `invalid_gltf`,
+    /// `unsupported_extension`, `external_uri`, `data`, `draco`, `no_mesh`, `zero_size_axis`,
+    /// `io` (the file cannot be read), `internal`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason_code: Option<String>,
+    /// Whether `annotations.json` has an entry for it.
+    pub annotated: bool,
+    /// The geometry, when the GLB could be read.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub geometry: Option<AssetGeometry>,
+    /// The collision shapes, when they were computed (valid assets).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shapes: Option<ShapesRef>,
+    /// Things that do not make the asset invalid.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
+}
+
+/// The geometry of an asset in its table-aligned frame: the glTF frame turned to the table
+/// frame (`x = X, y = -Z, z = Y`: front toward -y, the observer) and then by the front
+/// alignment yaw, metres, origin at the asset's glTF origin.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AssetGeometry {
+    /// Yaw about +z applied after the glTF → table conversion to bring the asset's front to -y,
+    /// degrees (0 unless `[assets] front_alignment` uses the annotation).
+    pub front_yaw_deg: f64,
+    /// Minimum corner of the bounding box, metres.
+    pub bounds_min_m: [f64; 3],
+    /// Maximum corner of the bounding box, metres.
+    pub bounds_max_m: [f64; 3],
+    /// [width (x), depth (y), height (z)] of the bounding box, metres.
+    pub size_m: [f64; 3],
+    /// Extents along glTF X, Y (up), Z before any alignment, metres: the frame annotation
+    /// bboxes are written in.
+    pub gltf_extents_m: [f64; 3],
+    /// Triangles placed (a mesh used by two nodes counts twice).
+    pub triangles: u64,
+    /// Vertices placed.
+    pub vertices: u64,
+    /// Triangle primitives placed.
+    pub primitives: u64,
+    /// Nodes that place a mesh.
+    pub mesh_instances: u64,
+    /// Material names (`material_<i>` for unnamed ones).
+    pub materials: Vec<String>,
+    /// Materials with a base colour texture.
+    pub textured_materials: u64,
+    /// Textures.
+    pub textures: u64,
+    /// MIME type of each embedded image.
+    pub images: Vec<String>,
+    /// `asset.generator` of the GLB.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generator: Option<String>,
+    /// Whether geometry was Draco-compressed (and decoded).
+    pub draco: bool,
+    /// Whether a mesh is skinned (read at its rest pose).
+    pub skinned: bool,
+    /// `extensionsRequired` of the GLB.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub extensions_required: Vec<String>,
+}
+
+/// Where an asset's collision shapes are.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ShapesRef {
+    /// The shapes file, relative to the dataset: `assets/index/shapes/<uid>.json`.
+    pub file: String,
+    /// SHA-256 of the shapes file.
+    pub sha256: String,
+    /// Convex parts of the decomposition.
+    pub parts: u64,
+}
+
+/// `assets/index/shapes/<uid>.json`: an asset's collision shapes for `mesa check`, in the
+/// asset's table-aligned frame ([`AssetGeometry`]), metres.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ShapesArtifact {
+    /// `mesa.shapes/1`.
+    pub schema: String,
+    /// The asset.
+    pub uid: String,
+    /// SHA-256 of the GLB the shapes were made from.
+    pub glb_sha256: String,
+    /// The convex hull of the whole asset.
+    pub hull: ConvexPart,
+    /// The convex decomposition: parts whose union follows the asset's shape, cavities
+    /// included (a bowl's inside stays empty).
+    pub parts: Vec<ConvexPart>,
+    /// How the parts were made.
+    pub decomposition: Decomposition,
+}
+
+/// One convex shape: the convex hull of its points.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ConvexPart {
+    /// The hull's vertices, metres.
+    pub points_m: Vec<[f64; 3]>,
+    /// Its volume, cubic metres.
+    pub volume_m3: f64,
+}
+
+/// The parameters of a convex decomposition.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Decomposition {
+    /// `vhacd` (parry3d's V-HACD); `convex` when the asset is a closed mesh filling its
+    /// hull (the hull is its one part); `hull` when the decomposition failed and the parts are
+    /// the single hull (the asset's warnings say why).
+    pub method: String,
+    /// Voxels along the longest axis.
+    pub resolution: u32,
+    /// Maximum concavity of a part.
+    pub concavity: f64,
+    /// Most parts allowed.
+    pub max_parts: u32,
+}
+
+/// `assets/index/text.json`: the asset texts and their features for the built-in lexical
+/// encoder.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TextIndexArtifact {
+    /// `mesa.text-index/1`.
+    pub schema: String,
+    /// The encoder, `lexical/1`.
+    pub encoder: String,
+    /// Per annotated asset with a description or a category, by uid.
+    pub documents: BTreeMap<String, TextDocument>,
+    /// In how many documents each feature occurs.
+    pub document_frequency: BTreeMap<String, u64>,
+}
+
+/// The text of one asset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TextDocument {
+    /// The text encoded (the category, then the description).
+    pub text: String,
+    /// Raw feature weights (before inverse document frequency).
+    pub features: BTreeMap<String, f64>,
+}
+
+// ---------------------------------------------------------------------------------------------
 // retrieve
 
 /// `coarse/retrieval.json`: the candidates of every instance, with their scores.
@@ -232,10 +422,32 @@ pub struct RetrievalArtifact {
     pub schema: String,
     /// The scene id.
     pub scene_id: String,
-    /// The text encoder used: `lexical` or `features`.
+    /// The text encoder used: `lexical/1` or `features` (with the embedding width, like
+    /// `features/768`).
     pub encoder: String,
+    /// The recipe's parameters.
+    pub recipe: RetrievalRecipe,
+    /// Assets the text ranking ran over.
+    pub candidate_assets: u64,
     /// Per instance, in instance order.
     pub instances: Vec<RetrievedInstance>,
+}
+
+/// The parameters of the retrieval recipe (SPEC 5.2; MesaTask's values are the defaults).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RetrievalRecipe {
+    /// Candidates kept by text score (20).
+    pub text_top_k: u32,
+    /// Candidates kept by final score, among which the first unfiltered is chosen (5).
+    pub final_top_k: u32,
+    /// Weight of the text score (0.9).
+    pub text_weight: f64,
+    /// Weight of the size score (0.1).
+    pub size_weight: f64,
+    /// Whether further candidates are taken when the filters reject the whole top
+    /// `final_top_k` (mesa's fallback; MesaTask's code gives up).
+    pub fallback: bool,
 }
 
 /// The retrieval of one instance.
@@ -244,16 +456,22 @@ pub struct RetrievalArtifact {
 pub struct RetrievedInstance {
     /// The instance name.
     pub instance: String,
+    /// Its id in `instances.json`.
+    pub mask_id: u32,
+    /// Its label.
+    pub label: String,
     /// The query text (the instance description).
     pub query: String,
     /// Target [w, d, h] in cm.
     pub target_size_cm: SizeCm,
-    /// Candidates in final-score order.
+    /// The top `text_top_k` by text score in final-score order, then, when the fallback ran,
+    /// the further candidates it examined in the order it examined them.
     pub candidates: Vec<RetrievalCandidate>,
     /// The chosen asset uid; absent when nothing passed the filters.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub chosen: Option<String>,
-    /// True when the top 5 were all filtered out and a further candidate was taken.
+    /// True when the top `final_top_k` were all filtered out and a further candidate was
+    /// taken.
     pub fallback: bool,
 }
 
@@ -263,13 +481,19 @@ pub struct RetrievedInstance {
 pub struct RetrievalCandidate {
     /// Asset uid.
     pub uid: String,
+    /// Rank by text score, from 0.
+    pub text_rank: u64,
     /// Cosine of the text embeddings.
     pub text_score: f64,
-    /// Cosine of the size vectors.
+    /// Cosine of the target size and the asset's [bbox.x, bbox.z, bbox.y].
     pub size_score: f64,
-    /// 0.9 · text + 0.1 · size.
+    /// Where the asset's size came from: `annotation` (its bbox), `mesh` (the asset index,
+    /// for want of a bbox) or `none`.
+    pub size_source: String,
+    /// text_weight · text + size_weight · size.
     pub final_score: f64,
-    /// Why the filters rejected it (`onTable false`, `mark_deletion`, `is_composite`).
+    /// Why the filters rejected it (`onTable false`, `mark_deletion`, `is_composite`,
+    /// `no annotation`, `no GLB in the library`, `invalid GLB: <code>`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rejected: Option<String>,
 }

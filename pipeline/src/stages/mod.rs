@@ -1,12 +1,21 @@
 //! The per-scene stages of `mesa run`, in pipeline order, as runner adapters over the pure
-//! functions of `mesa-stages`.
+//! functions of `mesa-stages`, and the dataset-level `mesa assets` ([`assets`]), which `mesa
+//! run` runs before them.
 
+pub mod assets;
 pub mod graph;
 pub mod lift;
+pub mod place;
+pub mod retrieve;
 
 use crate::runner::SceneStage;
 
 /// Every per-scene stage, in the order `mesa run` runs them.
 pub fn pipeline_stages() -> Vec<Box<dyn SceneStage>> {
-    vec![Box::new(lift::Lift), Box::new(graph::GraphStage::new())]
+    vec![
+        Box::new(lift::Lift),
+        Box::new(retrieve::RetrieveStage::new()),
+        Box::new(place::PlaceStage::new()),
+        Box::new(graph::GraphStage::new()),
+    ]
 }
