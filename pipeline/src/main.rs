@@ -9,7 +9,7 @@ use mesa_pipeline::cli::Cli;
 fn main() -> ExitCode {
     let cli = Cli::parse();
     init_logging(cli.verbose, cli.quiet);
-    quiet_caught_geometry_panics();
+    quiet_worker_panics();
     match app::run(cli) {
         Ok(code) => code,
         Err(e) => {
@@ -22,6 +22,27 @@ fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// Panics on mesa's worker threads (named `mesa-...`) are caught where they happen and
+/// reported with the scene or asset they concern (a failed marker, a warning); printing them
+/// again through the default hook, with a backtrace, only buries that report. Other threads
+/// keep the default hook; `MESA_PANIC_TRACE=1` restores it everywhere.
+fn quiet_worker_panics() {
+    if std::env::var_os("MESA_PANIC_TRACE").is_some() {
+        return;
+    }
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let worker = std::thread::current()
+            .name()
+            .is_some_and(|name| name.starts_with("mesa-"));
+        if worker {
+            tracing::debug!("caught panic on a worker: {info}");
+        } else {
+            default(info);
+        }
+    }));
 }
 
 fn init_logging(verbose: u8, quiet: bool) {
@@ -39,21 +60,4 @@ fn init_logging(verbose: u8, quiet: bool) {
         .with_target(false)
         .without_time()
         .init();
-}
-
-/// parry3d's V-HACD panics on some degenerate voxel sets; `mesa assets` catches that and retries
-/// with other parameters (`mesa_stages::assets::shapes`), so the default hook's message would
-/// only alarm: it goes to the debug log. Every other panic prints as usual.
-fn quiet_caught_geometry_panics() {
-    let default = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        if info
-            .location()
-            .is_some_and(|l| l.file().contains("parry3d"))
-        {
-            tracing::debug!("caught and retried: {info}");
-        } else {
-            default(info);
-        }
-    }));
 }
