@@ -40,8 +40,14 @@ pub fn layout_kind_of(value: &Value) -> &'static str {
 pub fn read_any_layout(path: &Path) -> anyhow::Result<AnyLayout> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("{}: cannot read", path.display()))?;
+    parse_any_layout(path, &text)
+}
+
+/// Parses the text of a layout file of any form (`path` names it in messages), validating it
+/// first and reporting every problem.
+pub fn parse_any_layout(path: &Path, text: &str) -> anyhow::Result<AnyLayout> {
     let value =
-        parse_lenient(&text).with_context(|| format!("{}: not valid JSON", path.display()))?;
+        parse_lenient(text).with_context(|| format!("{}: not valid JSON", path.display()))?;
     let kind_name = layout_kind_of(&value);
     let kind = Kind::by_name(kind_name).context("layout kinds are registered")?;
     let problems = kind.validate_value(&value);

@@ -5,9 +5,11 @@
 //! - [`stages`]: the per-scene stages registered for `mesa run`;
 //! - [`config`]: the `mesa.toml` configuration;
 //! - [`cli`] (clap types) and [`app`] (what each subcommand does);
-//! - [`fsio`]: atomic writes and digests; [`layouts`]: reading a layout of any form.
+//! - [`fsio`]: atomic writes and digests; [`layouts`]: reading a layout of any form;
+//! - [`chat`]: the OpenAI-compatible chat client, its reply cache and offline batches.
 
 pub mod app;
+pub mod chat;
 pub mod cli;
 pub mod config;
 pub mod fsio;
