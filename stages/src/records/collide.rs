@@ -63,7 +63,10 @@ pub fn penetration_depth_boxes(a: &YawBox, b: &YawBox) -> f64 {
     if depth <= 0.0 {
         return 0.0;
     }
-    let d = [b.center_cm[0] - a.center_cm[0], b.center_cm[1] - a.center_cm[1]];
+    let d = [
+        b.center_cm[0] - a.center_cm[0],
+        b.center_cm[1] - a.center_cm[1],
+    ];
     for u in a.axes().into_iter().chain(b.axes()) {
         let distance = (d[0] * u[0] + d[1] * u[1]).abs();
         let overlap = a.radius_along(u) + b.radius_along(u) - distance;
@@ -125,11 +128,23 @@ mod tests {
     #[test]
     fn axis_aligned_overlaps_are_the_least_overlap() {
         let a = cube([0.0, 0.0, 5.0], 10.0, 0.0);
-        assert_relative_eq!(penetration_depth_boxes(&a, &cube([8.0, 1.0, 5.0], 10.0, 0.0)), 2.0);
-        assert_eq!(penetration_depth_boxes(&a, &cube([10.0, 0.0, 5.0], 10.0, 0.0)), 0.0);
+        assert_relative_eq!(
+            penetration_depth_boxes(&a, &cube([8.0, 1.0, 5.0], 10.0, 0.0)),
+            2.0
+        );
+        assert_eq!(
+            penetration_depth_boxes(&a, &cube([10.0, 0.0, 5.0], 10.0, 0.0)),
+            0.0
+        );
         // Stacked: touching faces do not collide; sinking 1 cm does.
-        assert_eq!(penetration_depth_boxes(&a, &cube([0.0, 0.0, 15.0], 10.0, 0.0)), 0.0);
-        assert_relative_eq!(penetration_depth_boxes(&a, &cube([0.0, 0.0, 14.0], 10.0, 0.0)), 1.0);
+        assert_eq!(
+            penetration_depth_boxes(&a, &cube([0.0, 0.0, 15.0], 10.0, 0.0)),
+            0.0
+        );
+        assert_relative_eq!(
+            penetration_depth_boxes(&a, &cube([0.0, 0.0, 14.0], 10.0, 0.0)),
+            1.0
+        );
     }
 
     #[test]

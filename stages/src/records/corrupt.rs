@@ -14,8 +14,8 @@
 
 use std::collections::BTreeSet;
 
-use mesa_schemas::output::{compose_model_output, parse_model_output};
 use mesa_schemas::artifacts::TaskRecord;
+use mesa_schemas::output::{compose_model_output, parse_model_output};
 use mesa_schemas::rotation::normalize_deg;
 use mesa_schemas::LlmLayout;
 use rand::seq::index::sample;
@@ -34,7 +34,9 @@ use crate::tasks::scene::core_types;
 use crate::tasks::types::SceneTypes;
 
 /// A way to corrupt a chosen output.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Corruption {
     /// Perturb objects until a new colliding pair appears.
@@ -197,7 +199,12 @@ fn rng(seed: u64, what: &str, scene_id: &str, task_index: u32) -> ChaCha8Rng {
 }
 
 /// The corruptions to try for a prompt, in a seeded order.
-pub fn order(corruptions: &[Corruption], seed: u64, scene_id: &str, task_index: u32) -> Vec<Corruption> {
+pub fn order(
+    corruptions: &[Corruption],
+    seed: u64,
+    scene_id: &str,
+    task_index: u32,
+) -> Vec<Corruption> {
     let mut order = corruptions.to_vec();
     order.shuffle(&mut rng(seed, "order", scene_id, task_index));
     order
@@ -222,7 +229,8 @@ pub fn corrupt(
     let text = compose_model_output(&reasoning, &lines, &layout).map_err(|e| e.to_string())?;
     // The rejected output must read back as what was meant: a success of the parser, with the
     // corrupted layout and lines.
-    let parsed = parse_model_output(&text).map_err(|e| format!("the corrupted text does not parse: {e}"))?;
+    let parsed =
+        parse_model_output(&text).map_err(|e| format!("the corrupted text does not parse: {e}"))?;
     if parsed.layout != layout || parsed.graph_lines != lines {
         return Err("the corrupted text does not give back its layout and lines".to_owned());
     }
@@ -277,7 +285,10 @@ fn collision(
                 let dy = rng.random_range(-1.0..=1.0) * cfg.max_shift_fraction * depth;
                 object.position_cm.0[0] += dx;
                 object.position_cm.0[1] += dy;
-                changes.push(format!("moved {} by ({dx:.1}, {dy:.1}) cm", object.instance));
+                changes.push(format!(
+                    "moved {} by ({dx:.1}, {dy:.1}) cm",
+                    object.instance
+                ));
             } else if draw < cfg.position_probability + cfg.rotation_probability {
                 let turn = rng.random_range(15.0..=cfg.max_rotation_deg)
                     * if rng.random_bool(0.5) { 1.0 } else { -1.0 };
@@ -289,7 +300,11 @@ fn collision(
                 object.size_cm.0 = object.size_cm.0.map(|s| s * (1.0 + growth));
                 // The bottom stays where it was.
                 object.position_cm.0[2] += growth * height / 2.0;
-                changes.push(format!("grew {} by {:.0}%", object.instance, growth * 100.0));
+                changes.push(format!(
+                    "grew {} by {:.0}%",
+                    object.instance,
+                    growth * 100.0
+                ));
             }
             keep_inside(object, &layout.zone_cm.0);
         }
@@ -340,9 +355,8 @@ fn relation(
         .iter()
         .enumerate()
         .filter(|(_, line)| {
-            triplet_fields(line).is_some_and(|f| {
-                f.len() == 3 && WRONG_RELATION.iter().any(|(r, _)| *r == f[1])
-            })
+            triplet_fields(line)
+                .is_some_and(|f| f.len() == 3 && WRONG_RELATION.iter().any(|(r, _)| *r == f[1]))
         })
         .map(|(i, _)| i)
         .collect();
@@ -412,8 +426,7 @@ fn missing_object(
         .graph_lines
         .iter()
         .filter(|line| {
-            !triplet_fields(line)
-                .is_some_and(|fields| fields.iter().any(|f| removed.contains(f)))
+            !triplet_fields(line).is_some_and(|fields| fields.iter().any(|f| removed.contains(f)))
         })
         .cloned()
         .collect();

@@ -19,7 +19,9 @@ pub mod corrupt;
 pub mod split;
 pub mod write;
 
-use mesa_schemas::artifacts::{ChatMessage, DpoRecord, SftRecord, TaskRecord, TrlDpoRecord, TrlSftRecord};
+use mesa_schemas::artifacts::{
+    ChatMessage, DpoRecord, SftRecord, TaskRecord, TrlDpoRecord, TrlSftRecord,
+};
 use mesa_schemas::output::{compose_model_output, parse_model_output};
 use mesa_schemas::units::{PositionCm, SizeCm, ZoneCm};
 use mesa_schemas::LlmLayout;
@@ -238,7 +240,10 @@ pub fn trl_sft(record: &SftRecord) -> TrlSftRecord {
 /// The TRL conversational preference form of a DPO record.
 pub fn trl_dpo(record: &DpoRecord) -> TrlDpoRecord {
     TrlDpoRecord {
-        prompt: vec![message("user", user_turn(&record.instruction, &record.input))],
+        prompt: vec![message(
+            "user",
+            user_turn(&record.instruction, &record.input),
+        )],
         chosen: vec![message("assistant", record.chosen.clone())],
         rejected: vec![message("assistant", record.rejected.clone())],
     }

@@ -42,7 +42,11 @@ impl Default for SplitRatios {
 impl SplitRatios {
     pub(crate) fn problems(&self) -> Vec<String> {
         let mut problems = Vec::new();
-        for (name, value) in [("train", self.train), ("dpo", self.dpo), ("test", self.test)] {
+        for (name, value) in [
+            ("train", self.train),
+            ("dpo", self.dpo),
+            ("test", self.test),
+        ] {
             if !(0.0..=1.0).contains(&value) {
                 problems.push(format!(
                     "[records.split] {name} is {value} (expected 0 to 1)"
@@ -145,7 +149,11 @@ mod tests {
 
     #[test]
     fn sizes_follow_the_ratios_and_every_type_is_spread() {
-        let list = scenes(&[("office_table", 500), ("coffee_table", 300), ("bathroom_vanity", 200)]);
+        let list = scenes(&[
+            ("office_table", 500),
+            ("coffee_table", 300),
+            ("bathroom_vanity", 200),
+        ]);
         let splits = assign(&list, &SplitRatios::default(), 0);
         let count = |t: &str, s: Split| {
             list.iter()
@@ -155,7 +163,11 @@ mod tests {
         };
         assert_eq!(splits.iter().filter(|s| **s == Split::Train).count(), 800);
         assert_eq!(splits.iter().filter(|s| **s == Split::Dpo).count(), 100);
-        for (t, n) in [("office_table", 500), ("coffee_table", 300), ("bathroom_vanity", 200)] {
+        for (t, n) in [
+            ("office_table", 500),
+            ("coffee_table", 300),
+            ("bathroom_vanity", 200),
+        ] {
             let train = count(t, Split::Train) as f64;
             assert!((train - 0.8 * n as f64).abs() <= 1.0, "{t}: {train}");
             let dpo = count(t, Split::Dpo) as f64;
@@ -165,7 +177,11 @@ mod tests {
 
     #[test]
     fn small_datasets_still_get_a_dpo_scene() {
-        let list = scenes(&[("office_table", 4), ("kitchen_counter", 4), ("coffee_table", 4)]);
+        let list = scenes(&[
+            ("office_table", 4),
+            ("kitchen_counter", 4),
+            ("coffee_table", 4),
+        ]);
         let splits = assign(&list, &SplitRatios::default(), 7);
         assert_eq!(splits.iter().filter(|s| **s == Split::Train).count(), 10);
         assert_eq!(splits.iter().filter(|s| **s == Split::Dpo).count(), 1);

@@ -34,6 +34,15 @@ impl<W: Write> JsonArrayWriter<W> {
         Ok(())
     }
 
+    /// Appends one element already serialised as JSON text (one line, no trailing break).
+    pub fn push_raw(&mut self, json: &str) -> io::Result<()> {
+        self.out
+            .write_all(if self.count == 0 { b"\n" } else { b",\n" })?;
+        self.out.write_all(json.as_bytes())?;
+        self.count += 1;
+        Ok(())
+    }
+
     /// Elements written so far.
     pub fn count(&self) -> u64 {
         self.count
@@ -63,6 +72,14 @@ impl<W: Write> JsonLinesWriter<W> {
     /// Appends one line.
     pub fn push<T: Serialize>(&mut self, value: &T) -> io::Result<()> {
         serde_json::to_writer(&mut self.out, value).map_err(io::Error::other)?;
+        self.out.write_all(b"\n")?;
+        self.count += 1;
+        Ok(())
+    }
+
+    /// Appends one line already serialised as JSON text (no line break in it).
+    pub fn push_raw(&mut self, json: &str) -> io::Result<()> {
+        self.out.write_all(json.as_bytes())?;
         self.out.write_all(b"\n")?;
         self.count += 1;
         Ok(())
@@ -162,13 +179,19 @@ mod tests {
 
     #[test]
     fn arrays_are_valid_json_empty_or_not() {
-        let empty = JsonArrayWriter::new(Vec::new()).expect("w").finish().expect("f");
+        let empty = JsonArrayWriter::new(Vec::new())
+            .expect("w")
+            .finish()
+            .expect("f");
         assert_eq!(empty, b"[]\n");
         let mut w = JsonArrayWriter::new(Vec::new()).expect("w");
         w.push(&serde_json::json!({"a": "é"})).expect("push");
         w.push(&serde_json::json!({"a": 2})).expect("push");
         let bytes = w.finish().expect("finish");
-        assert_eq!(String::from_utf8(bytes.clone()).expect("utf8"), "[\n{\"a\":\"é\"},\n{\"a\":2}\n]\n");
+        assert_eq!(
+            String::from_utf8(bytes.clone()).expect("utf8"),
+            "[\n{\"a\":\"é\"},\n{\"a\":2}\n]\n"
+        );
         let back: Vec<serde_json::Value> = serde_json::from_slice(&bytes).expect("parses");
         assert_eq!(back.len(), 2);
     }

@@ -305,7 +305,11 @@ mod tests {
         assert_eq!(rendered.user, "A desk with Mug(1).");
         let err = PromptTemplate::parse("t.txt", "[user]\n{{tabel_type}}\n", &["table_type"])
             .expect_err("typo");
-        assert!(err.to_string().contains("unknown placeholder {{tabel_type}}"), "{err}");
+        assert!(
+            err.to_string()
+                .contains("unknown placeholder {{tabel_type}}"),
+            "{err}"
+        );
         let err = PromptTemplate::parse("t.txt", "hello\n[user]\nx\n", &[]).expect_err("stray");
         assert!(err.to_string().contains("line 1"), "{err}");
         assert!(PromptTemplate::parse("t.txt", "[system]\nx\n", &[]).is_err());

@@ -394,7 +394,10 @@ mod tests {
         let problems = check_reasoning(&short, &scene(), &[]);
         assert!(problems[0].contains("leave out Plant(1)"), "{problems:?}");
         let misplaced = check_reasoning(GALLERY_STYLE, &scene(), &["Carafe".into()]);
-        assert!(misplaced[0].contains("\"Carafe\" is not under"), "{misplaced:?}");
+        assert!(
+            misplaced[0].contains("\"Carafe\" is not under"),
+            "{misplaced:?}"
+        );
         let no_header = GALLERY_STYLE.replace("Core Task Objects:", "Task objects:");
         assert!(check_reasoning(&no_header, &scene(), &[])[0].contains("is missing"));
         let no_closing = GALLERY_STYLE.replace(
@@ -409,12 +412,19 @@ mod tests {
         let out = rewrite_counts(
             GALLERY_STYLE,
             &scene(),
-            &[("fruit".into(), 2), ("desk lamp".into(), 1), ("plant".into(), 1)],
+            &[
+                ("fruit".into(), 2),
+                ("desk lamp".into(), 1),
+                ("plant".into(), 1),
+            ],
         )
         .expect("rewrites");
         assert!(out.contains("**Core Task Objects:**  \nFruit(3), Bowl(2), Tray(1)\n\n"));
         // "Potted Plant" is the scene's `plant`, matched as the checks match it.
-        assert!(out.contains("**Environment Objects:**  \nCarafe(2)\n\nThe lamp"), "{out}");
+        assert!(
+            out.contains("**Environment Objects:**  \nCarafe(2)\n\nThe lamp"),
+            "{out}"
+        );
         let lists = read_lists(&out).expect("still readable");
         assert_eq!(lists.core.len(), 3);
     }

@@ -176,7 +176,14 @@ impl Writer<'_> {
         template.render(&values)
     }
 
-    fn reject(&mut self, call: CallKind, task_index: Option<u32>, attempt: u32, reasons: Vec<String>, reply: String) {
+    fn reject(
+        &mut self,
+        call: CallKind,
+        task_index: Option<u32>,
+        attempt: u32,
+        reasons: Vec<String>,
+        reply: String,
+    ) {
         self.rejects.push(TaskReject {
             schema: TASK_REJECT_SCHEMA.to_owned(),
             scene_id: self.input.scene_id.clone(),
@@ -247,7 +254,11 @@ pub fn write_scene_tasks(
     let min_objects = config.min_task_objects as usize;
     let generator = config.generator();
     let mut warnings = Vec::new();
-    let record = |index: usize, description: &str, views: &[String], draft: &TaskDraft, reasoning: String| TaskRecord {
+    let record = |index: usize,
+                  description: &str,
+                  views: &[String],
+                  draft: &TaskDraft,
+                  reasoning: String| TaskRecord {
         schema: TASKS_SCHEMA.to_owned(),
         scene_id: input.scene_id.clone(),
         task_index: index as u32,
@@ -367,16 +378,26 @@ pub fn write_scene_tasks(
         ],
     )?;
     let types = writer.types.clone();
-    let drafts = writer.call(CallKind::Tasks, &prompt, &[], true, None, |w, reply, attempt| {
-        let verdict = read_tasks_reply(reply, &types, min_objects)?;
-        for (i, json, reasons) in verdict.rejected {
-            w.reject(CallKind::Tasks, Some(i as u32), attempt, reasons, json);
-        }
-        if verdict.accepted.is_empty() {
-            return Err(vec!["no task of the reply passed validation (see the rejects of single tasks)".to_owned()]);
-        }
-        Ok(verdict.accepted)
-    })?;
+    let drafts = writer.call(
+        CallKind::Tasks,
+        &prompt,
+        &[],
+        true,
+        None,
+        |w, reply, attempt| {
+            let verdict = read_tasks_reply(reply, &types, min_objects)?;
+            for (i, json, reasons) in verdict.rejected {
+                w.reject(CallKind::Tasks, Some(i as u32), attempt, reasons, json);
+            }
+            if verdict.accepted.is_empty() {
+                return Err(vec![
+                    "no task of the reply passed validation (see the rejects of single tasks)"
+                        .to_owned(),
+                ]);
+            }
+            Ok(verdict.accepted)
+        },
+    )?;
     let mut drafts = drafts;
     if drafts.len() > count {
         warnings.push(format!(
@@ -406,7 +427,10 @@ pub fn write_scene_tasks(
             [
                 ("task_info", task_info_json(&info)),
                 ("task_types", SceneTypes::list(core.iter().copied())),
-                ("environment_types", SceneTypes::list(environment.iter().copied())),
+                (
+                    "environment_types",
+                    SceneTypes::list(environment.iter().copied()),
+                ),
             ],
         )?;
         let index = records.len() as u32;
@@ -419,9 +443,15 @@ pub fn write_scene_tasks(
             |_, reply, _| {
                 let mut problems = Vec::new();
                 if reply.finish_reason.as_deref() == Some("length") {
-                    problems.push("the reply was cut at max_tokens (finish_reason \"length\")".to_owned());
+                    problems.push(
+                        "the reply was cut at max_tokens (finish_reason \"length\")".to_owned(),
+                    );
                 }
-                problems.extend(check_reasoning(&reply.content, &types, &draft.objects_cluster));
+                problems.extend(check_reasoning(
+                    &reply.content,
+                    &types,
+                    &draft.objects_cluster,
+                ));
                 if problems.is_empty() {
                     Ok(reply.content.trim().to_owned())
                 } else {
@@ -430,7 +460,13 @@ pub fn write_scene_tasks(
             },
         );
         match result {
-            Ok(reasoning) => records.push(record(records.len(), &description, &view_files, draft, reasoning)),
+            Ok(reasoning) => records.push(record(
+                records.len(),
+                &description,
+                &view_files,
+                draft,
+                reasoning,
+            )),
             Err(TasksError::NoValidReply { attempts, .. }) => warnings.push(format!(
                 "task \"{}\" dropped: no reasoning reply passed validation in {attempts} attempts \
                  (see tasks/rejects.jsonl)",

@@ -318,7 +318,10 @@ impl TemplateScene<'_> {
                 // With three or more types the middle ones move in front of the last; with two,
                 // the second moves in front of the pushed one.
                 let (movers, anchor): (Vec<&ObjectType>, &ObjectType) = if picked.len() > 2 {
-                    (picked[1..picked.len() - 1].to_vec(), picked[picked.len() - 1])
+                    (
+                        picked[1..picked.len() - 1].to_vec(),
+                        picked[picked.len() - 1],
+                    )
                 } else {
                     (vec![picked[1]], pushed)
                 };
@@ -364,7 +367,12 @@ impl TemplateScene<'_> {
                 if let Some(c) = picked.get(2) {
                     goal.push(format!("Pick up {}", the(c)));
                     actions.push(format!("Pick({})", c.name));
-                    goal.push(format!("Place {} between {} and {}", the(c), the(a), the(b)));
+                    goal.push(format!(
+                        "Place {} between {} and {}",
+                        the(c),
+                        the(a),
+                        the(b)
+                    ));
                     actions.push(format!("PlaceAt(between {} and {})", a.name, b.name));
                 }
             }
@@ -408,7 +416,9 @@ impl TemplateScene<'_> {
             let cells: Vec<String> = {
                 let mut cells: Vec<String> = Vec::new();
                 for i in &t.instances {
-                    let cell = self.node(i).map_or("center".to_owned(), |n| n.is_at.clone());
+                    let cell = self
+                        .node(i)
+                        .map_or("center".to_owned(), |n| n.is_at.clone());
                     if !cells.contains(&cell) {
                         cells.push(cell);
                     }
@@ -483,7 +493,8 @@ impl TemplateScene<'_> {
                 core_names.join(", ")
             }
         ));
-        sentences.push("Based on this task analysis, the scene graph is arranged as follows:".into());
+        sentences
+            .push("Based on this task analysis, the scene graph is arranged as follows:".into());
         text.push_str(&sentences.join(" "));
         text
     }

@@ -184,7 +184,10 @@ pub fn plural(word: &str) -> String {
             return format!("{stem}ies");
         }
     }
-    if ["s", "x", "z", "ch", "sh"].iter().any(|e| word.ends_with(e)) {
+    if ["s", "x", "z", "ch", "sh"]
+        .iter()
+        .any(|e| word.ends_with(e))
+    {
         return format!("{word}es");
     }
     format!("{word}s")
@@ -237,9 +240,8 @@ mod tests {
         // `plates` and `plate` share a key: one type with two objects.
         assert_eq!(types.types.len(), 4);
         assert_eq!(types.types[0].count(), 2);
-        let names = |w: &str| -> Vec<String> {
-            types.matching(w).iter().map(|t| t.name.clone()).collect()
-        };
+        let names =
+            |w: &str| -> Vec<String> { types.matching(w).iter().map(|t| t.name.clone()).collect() };
         assert_eq!(names("Dinner Plates"), ["Plates"]);
         assert_eq!(names("Book"), ["Book"]);
         assert_eq!(names("Notebook Book"), ["Notebook Book"]);

@@ -233,7 +233,10 @@ pub fn split_action(action: &str) -> Option<(&str, Vec<&str>)> {
     let args = rest.strip_suffix(')')?;
     Some((
         name.trim(),
-        args.split(',').map(str::trim).filter(|a| !a.is_empty()).collect(),
+        args.split(',')
+            .map(str::trim)
+            .filter(|a| !a.is_empty())
+            .collect(),
     ))
 }
 
@@ -252,7 +255,11 @@ pub fn check_task(draft: &TaskDraft, scene: &SceneTypes, min_task_objects: usize
         objects_cluster: draft.objects_cluster.clone(),
     };
     for problem in info.problems() {
-        problems.push(format!("{}: {}", problem.path.replacen("$", "", 1), problem.problem));
+        problems.push(format!(
+            "{}: {}",
+            problem.path.replacen("$", "", 1),
+            problem.problem
+        ));
     }
     let type_names = || SceneTypes::list(&scene.types);
     for (i, action) in draft.action_sequence.iter().enumerate() {
@@ -352,12 +359,33 @@ mod tests {
         assert_eq!(verdict.accepted.len(), 1);
         assert_eq!(verdict.accepted[0].objects_cluster.len(), 3);
         let second = &verdict.rejected[0].2;
-        assert!(second.iter().any(|p| p.contains("unknown action \"Grab\"")), "{second:?}");
-        assert!(second.iter().any(|p| p.contains("names the instance mug_0")), "{second:?}");
+        assert!(
+            second.iter().any(|p| p.contains("unknown action \"Grab\"")),
+            "{second:?}"
+        );
+        assert!(
+            second
+                .iter()
+                .any(|p| p.contains("names the instance mug_0")),
+            "{second:?}"
+        );
         let third = &verdict.rejected[1].2;
-        assert!(third.iter().any(|p| p.contains("\"Sofa\" is no object type")), "{third:?}");
-        assert!(third.iter().any(|p| p.contains("\"Switch\" is no object type")), "{third:?}");
-        assert!(third.iter().any(|p| p.contains("expected at least 3")), "{third:?}");
+        assert!(
+            third
+                .iter()
+                .any(|p| p.contains("\"Sofa\" is no object type")),
+            "{third:?}"
+        );
+        assert!(
+            third
+                .iter()
+                .any(|p| p.contains("\"Switch\" is no object type")),
+            "{third:?}"
+        );
+        assert!(
+            third.iter().any(|p| p.contains("expected at least 3")),
+            "{third:?}"
+        );
     }
 
     #[test]
