@@ -50,6 +50,11 @@ impl std::fmt::Debug for ApiKey {
 }
 
 impl ApiKey {
+    /// A key given directly.
+    pub fn new(key: impl Into<String>) -> Self {
+        Self(key.into())
+    }
+
     /// The key in the environment variable `var`; `Ok(None)` when `var` is "" (no key sent).
     pub fn from_env(var: &str) -> Result<Option<Self>, String> {
         if var.is_empty() {
@@ -310,6 +315,17 @@ pub struct ChatClient {
     warnings: Mutex<Vec<String>>,
 }
 
+impl std::fmt::Debug for ChatClient {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ChatClient")
+            .field("endpoint", &self.endpoint)
+            .field("model", &self.config.model)
+            .field("key", &self.key)
+            .field("mode", &self.mode)
+            .finish_non_exhaustive()
+    }
+}
+
 impl ChatClient {
     /// A client of `config`'s endpoint with the dataset's cache. `Live` needs the key (when
     /// `api_key_env` names one); `CacheOnly` reads no key and sends nothing.
@@ -318,11 +334,16 @@ impl ChatClient {
             Mode::Live => ApiKey::from_env(&config.api_key_env)?,
             Mode::CacheOnly => None,
         };
+        Ok(Self::with_key(dataset, config, mode, key))
+    }
+
+    /// A client with the key given (`None`: no Authorization header).
+    pub fn with_key(dataset: &Path, config: &LlmConfig, mode: Mode, key: Option<ApiKey>) -> Self {
         let agent_config = ureq::Agent::config_builder()
             .timeout_global(Some(Duration::from_secs_f64(config.timeout_s.max(0.001))))
             .http_status_as_error(false)
             .build();
-        Ok(Self {
+        Self {
             agent: ureq::Agent::new_with_config(agent_config),
             endpoint: format!("{}/chat/completions", config.base_url.trim_end_matches('/')),
             key,
@@ -333,7 +354,7 @@ impl ChatClient {
             no_json_mode: AtomicBool::new(false),
             stats: ChatStats::default(),
             warnings: Mutex::new(Vec::new()),
-        })
+        }
     }
 
     /// The reply cache.

@@ -4,11 +4,12 @@
 //!
 //! Systematic stratified sampling: within each table type, scenes are ordered by the hash of
 //! the seed and the scene id and given their quantile `(j + 0.5) / n_type`; all scenes are then
-//! ordered by quantile (ties by table type, then hash) and the sequence is cut at the
-//! configured ratios (boundaries rounded to whole scenes). Each split so receives every table
-//! type in proportion, and the split sizes follow the ratios over the whole dataset, even when a
-//! table type has only a few scenes. Adding scenes can move others between splits:
-//! `records/split.json` records the assignment of each run.
+//! ordered by quantile (ties by table type, then hash) and the sequence is cut into the split
+//! sizes. Each split so receives every table type in proportion, and the split sizes follow the
+//! ratios over the whole dataset, even when a table type has only a few scenes. The sizes are
+//! the ratios apportioned by largest remainder, and a split with a positive ratio gets at least
+//! one scene when there are enough (so a small dataset still has DPO pairs). Adding scenes can
+//! move others between splits: `records/split.json` records the assignment of each run.
 
 use std::collections::BTreeMap;
 
@@ -119,9 +120,8 @@ pub fn assign(scenes: &[(String, String)], ratios: &SplitRatios, seed: u64) -> V
             .then_with(|| scenes[*a].0.cmp(&scenes[*b].0))
             .then_with(|| hashes[*a].cmp(&hashes[*b]))
     });
-    let total = scenes.len() as f64;
-    let train_end = (total * ratios.train).round() as usize;
-    let dpo_end = ((total * (ratios.train + ratios.dpo)).round() as usize).max(train_end);
+    let [train, dpo, _] = sizes(scenes.len(), ratios);
+    let (train_end, dpo_end) = (train, train + dpo);
     let mut splits = vec![Split::Test; scenes.len()];
     for (position, i) in sequence.into_iter().enumerate() {
         splits[i] = if position < train_end {
@@ -133,6 +133,46 @@ pub fn assign(scenes: &[(String, String)], ratios: &SplitRatios, seed: u64) -> V
         };
     }
     splits
+}
+
+/// The number of scenes of each split (train, dpo, test): `n · ratio` apportioned by largest
+/// remainder (ties to the earlier split), then every split with a positive ratio given one
+/// scene, taken from the largest, while it has more than one.
+pub fn sizes(n: usize, ratios: &SplitRatios) -> [usize; 3] {
+    let shares = [ratios.train, ratios.dpo, ratios.test];
+    let exact: Vec<f64> = shares.iter().map(|r| n as f64 * r).collect();
+    let mut sizes: [usize; 3] = [0; 3];
+    for (size, value) in sizes.iter_mut().zip(&exact) {
+        *size = value.floor() as usize;
+    }
+    let mut order: Vec<usize> = (0..3).collect();
+    order.sort_by(|a, b| {
+        let fa = exact[*a] - exact[*a].floor();
+        let fb = exact[*b] - exact[*b].floor();
+        fb.total_cmp(&fa).then(a.cmp(b))
+    });
+    let mut left = n.saturating_sub(sizes.iter().sum());
+    for k in order.iter().cycle().take(3 * n.max(1)) {
+        if left == 0 {
+            break;
+        }
+        if shares[*k] > 0.0 {
+            sizes[*k] += 1;
+            left -= 1;
+        }
+    }
+    for k in 0..3 {
+        if shares[k] > 0.0 && sizes[k] == 0 {
+            let largest = (0..3)
+                .max_by_key(|j| (sizes[*j], std::cmp::Reverse(*j)))
+                .unwrap_or(0);
+            if sizes[largest] > 1 {
+                sizes[largest] -= 1;
+                sizes[k] += 1;
+            }
+        }
+    }
+    sizes
 }
 
 #[cfg(test)]
@@ -188,7 +228,35 @@ mod tests {
         assert_eq!(splits.iter().filter(|s| **s == Split::Test).count(), 1);
     }
 
+    #[test]
+    fn sizes_apportion_by_largest_remainder_with_one_scene_per_split() {
+        let default = SplitRatios::default();
+        assert_eq!(sizes(1000, &default), [800, 100, 100]);
+        assert_eq!(sizes(7, &default), [5, 1, 1]);
+        assert_eq!(sizes(3, &default), [1, 1, 1]);
+        assert_eq!(sizes(2, &default), [1, 1, 0]);
+        assert_eq!(sizes(1, &default), [1, 0, 0]);
+        assert_eq!(sizes(0, &default), [0, 0, 0]);
+        let no_test = SplitRatios {
+            train: 0.9,
+            dpo: 0.1,
+            test: 0.0,
+        };
+        assert_eq!(sizes(5, &no_test), [4, 1, 0]);
+    }
+
     proptest! {
+        #[test]
+        fn sizes_add_up(n in 0usize..5000, a in 0.0f64..1.0, b in 0.0f64..1.0) {
+            let (train, dpo) = (a, (1.0 - a) * b);
+            let ratios = SplitRatios { train, dpo, test: 1.0 - train - dpo };
+            let got = sizes(n, &ratios);
+            prop_assert_eq!(got.iter().sum::<usize>(), n);
+            for (size, ratio) in got.iter().zip([train, dpo, 1.0 - train - dpo]) {
+                prop_assert!((*size as f64 - n as f64 * ratio).abs() <= 2.0);
+            }
+        }
+
         #[test]
         fn the_assignment_is_a_function_of_the_scene_set(
             n in 1usize..60, seed in 0u64..1000, rotate in 0usize..60
