@@ -308,7 +308,8 @@ fn batch_tasks(args: &TasksArgs, mut resolved: Resolved) -> anyhow::Result<ExitC
             let lines = write_batch(path, &requests)
                 .with_context(|| format!("{}: cannot write", path.display()))?;
             eprintln!(
-                "tasks: {lines} requests for {} scenes written to {} (OpenAI Batch JSONL; read                  the provider's output with --batch-in)",
+                "tasks: {lines} requests for {} scenes written to {} (OpenAI Batch JSONL; read \
+                 the provider's output with --batch-in)",
                 waiting.len(),
                 path.display()
             );
@@ -324,7 +325,11 @@ fn batch_tasks(args: &TasksArgs, mut resolved: Resolved) -> anyhow::Result<ExitC
         None => {}
     }
     let code = if complete.is_empty() {
-        eprintln!("tasks: no scene has all its replies yet");
+        if waiting.is_empty() {
+            eprintln!("tasks: every selected scene is done (--force redoes them)");
+        } else {
+            eprintln!("tasks: no scene has all its replies yet");
+        }
         ExitCode::from(EXIT_OK)
     } else {
         resolved.options.only = Some(complete);

@@ -47,8 +47,8 @@ pub fn load_prompts(dataset: &Path, prompts_dir: &str) -> Result<Prompts, String
 pub enum Computed {
     /// Every call answered.
     Done(SceneTasks),
-    /// Offline batch mode: this request's reply is still missing.
-    Pending(Box<ChatRequest>),
+    /// Offline batch mode: these requests' replies are still missing.
+    Pending(Vec<ChatRequest>),
 }
 
 /// Where the scenes of an offline-batch run stand.
@@ -211,7 +211,7 @@ impl TasksStage {
     pub fn plan_batch(&self, ctx: &StageContext<'_>, scenes: &[Scene], force: bool) -> BatchPlan {
         let digest = self.config_digest(ctx);
         let cache = DigestCache::default();
-        let planned: Vec<(String, Option<Option<ChatRequest>>)> = scenes
+        let planned: Vec<(String, Option<Vec<ChatRequest>>)> = scenes
             .par_iter()
             .map(|scene| {
                 if !force && scene_state(self, ctx, scene, &digest, &cache) == SceneState::Done {
@@ -219,8 +219,8 @@ impl TasksStage {
                 }
                 // A scene that fails for another reason runs, so its failure is recorded.
                 let pending = match self.compute(ctx, scene) {
-                    Ok(Computed::Pending(request)) => Some(*request),
-                    Ok(Computed::Done(_)) | Err(_) => None,
+                    Ok(Computed::Pending(requests)) => requests,
+                    Ok(Computed::Done(_)) | Err(_) => Vec::new(),
                 };
                 (scene.key(), Some(pending))
             })
@@ -229,10 +229,12 @@ impl TasksStage {
         for (key, state) in planned {
             match state {
                 None => {}
-                Some(None) => {
+                Some(requests) if requests.is_empty() => {
                     plan.complete.insert(key);
                 }
-                Some(Some(request)) => plan.pending.push((key, request)),
+                Some(requests) => plan
+                    .pending
+                    .extend(requests.into_iter().map(|r| (key.clone(), r))),
             }
         }
         plan
@@ -308,10 +310,10 @@ impl SceneStage for TasksStage {
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
         let tasks = match self.compute(ctx, scene)? {
             Computed::Done(tasks) => tasks,
-            Computed::Pending(request) => bail!(
-                "waiting for the reply to the {} call: write the next offline batch with \
-                 `mesa tasks --batch-out FILE` and read the provider's output with --batch-in",
-                request.call.name()
+            Computed::Pending(requests) => bail!(
+                "waiting for {} replies: write the next offline batch with `mesa tasks \
+                 --batch-out FILE` and read the provider's output with --batch-in",
+                requests.len()
             ),
         };
         let mut output = SceneOutput::new();

@@ -63,9 +63,10 @@ pub struct SceneTasks {
 /// Why a scene has no tasks.
 #[derive(Debug, thiserror::Error)]
 pub enum TasksError {
-    /// Offline batch mode: a reply is still missing; the request belongs to the next batch.
-    #[error("waiting for the reply to the {} call (offline batch mode)", .0.call.name())]
-    Pending(Box<ChatRequest>),
+    /// Offline batch mode: replies are still missing; the requests belong to the next batch
+    /// (the reasoning calls of all tasks at once, the other calls one by one).
+    #[error("waiting for {} replies (offline batch mode)", .0.len())]
+    Pending(Vec<ChatRequest>),
     /// The chat endpoint failed for good.
     #[error("the {call} call failed: {message}")]
     Chat {
@@ -198,7 +199,7 @@ impl Writer<'_> {
 
     fn ask(&self, request: &ChatRequest) -> Result<ChatReply, TasksError> {
         self.chat.complete(request).map_err(|e| match e {
-            ChatError::Pending(request) => TasksError::Pending(request),
+            ChatError::Pending(request) => TasksError::Pending(vec![*request]),
             ChatError::Failed(message) => TasksError::Chat {
                 call: request.call.name(),
                 message,
@@ -412,8 +413,10 @@ pub fn write_scene_tasks(
         ));
     }
 
-    // Call 3, per task: the reasoning text.
+    // Call 3, per task: the reasoning text. The tasks do not depend on each other: in batch
+    // mode every missing reply of this round is collected before the scene waits.
     let mut records = Vec::new();
+    let mut pending = Vec::new();
     for draft in &drafts {
         let info = task_info_of(draft, &description, &input.layout);
         let core = core_types(&types, &draft.objects_cluster);
@@ -433,7 +436,7 @@ pub fn write_scene_tasks(
                 ),
             ],
         )?;
-        let index = records.len() as u32;
+        let index = (records.len() + pending.len()) as u32;
         let result = writer.call(
             CallKind::Reasoning,
             &prompt,
@@ -467,6 +470,7 @@ pub fn write_scene_tasks(
                 draft,
                 reasoning,
             )),
+            Err(TasksError::Pending(mut requests)) => pending.append(&mut requests),
             Err(TasksError::NoValidReply { attempts, .. }) => warnings.push(format!(
                 "task \"{}\" dropped: no reasoning reply passed validation in {attempts} attempts \
                  (see tasks/rejects.jsonl)",
@@ -474,6 +478,9 @@ pub fn write_scene_tasks(
             )),
             Err(other) => return Err(other),
         }
+    }
+    if !pending.is_empty() {
+        return Err(TasksError::Pending(pending));
     }
     if records.is_empty() {
         return Err(TasksError::NoValidReply {
