@@ -1,13 +1,29 @@
 #!/usr/bin/env bash
-# Runs mesa's test suite. Installs what the tests need that cargo does not bring (the Khronos
-# glTF validator from npm) into scripts/node_modules, once.
+# Runs mesa's test suite. First installs, once, what the tests need that cargo does not bring:
+#   - a Python virtualenv with trimesh (PLY files are checked with it): .venv-tools/
+#   - the Khronos glTF validator from npm (every GLB we write is validated): scripts/node_modules/
+# Extra arguments go to `cargo test`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+root="$(pwd)"
 if [ ! -d ../shared/realdata ] && [ -z "${MESA_SHARED:-}" ]; then
   echo "error: the tests read real data from ../shared/realdata beside this repository (or set MESA_SHARED)" >&2
   exit 2
 fi
-if [ -f scripts/package.json ] && [ ! -d scripts/node_modules ]; then
-  (cd scripts && npm ci --no-audit --no-fund --loglevel=error)
+
+venv="$root/.venv-tools"
+if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import trimesh, numpy" 2>/dev/null; then
+  echo "test.sh: installing trimesh into $venv" >&2
+  python3 -m venv "$venv"
+  "$venv/bin/pip" install --quiet --disable-pip-version-check -r scripts/requirements-tools.txt
 fi
+export MESA_PYTHON="$venv/bin/python"
+
+if [ -f scripts/package.json ]; then
+  if [ ! -d scripts/node_modules ] || [ scripts/package-lock.json -nt scripts/node_modules ]; then
+    echo "test.sh: installing the npm packages of scripts/package.json" >&2
+    (cd scripts && npm ci --no-audit --no-fund --loglevel=error)
+  fi
+fi
+
 cargo test --workspace "$@"

@@ -149,7 +149,7 @@ fn replies_are_cached_by_request_so_asking_again_sends_nothing() {
     again.complete(&request("e")).expect("reply");
     assert_eq!(server.requests(), 2);
     // The cache holds neither the key nor the URL.
-    for (_, bytes) in common::snapshot(dir.path()) {
+    for (_, bytes) in common::all_files(dir.path()) {
         let text = String::from_utf8_lossy(&bytes);
         assert!(!text.contains(KEY) && !text.contains("127.0.0.1"), "{text}");
     }

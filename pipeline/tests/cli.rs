@@ -1,30 +1,14 @@
 //! End-to-end tests of the `mesa` binary: validate, convert, parse-output, configuration and
 //! exit codes. Real published records are read from ../shared/realdata.
 
+mod common;
+
+use common::{gallery, mesa};
+
 use std::path::{Path, PathBuf};
 
-use assert_cmd::Command;
 use predicates::prelude::*;
 use serde_json::Value;
-
-fn mesa() -> Command {
-    Command::cargo_bin("mesa").expect("the mesa binary")
-}
-
-fn gallery() -> Vec<PathBuf> {
-    let shared = std::env::var_os("MESA_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
-    let dir = shared.join("realdata/layouts/mesatask_gallery");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e} (the tests need ../shared/realdata)", dir.display()))
-        .map(|e| e.expect("entry").path())
-        .filter(|p| p.extension().is_some_and(|e| e == "json"))
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 7);
-    files
-}
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let path = dir.join(name);

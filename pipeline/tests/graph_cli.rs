@@ -3,33 +3,17 @@
 //! skip-done and redo, failures that stay with their scene). Published records are read from
 //! ../shared/realdata (or $MESA_SHARED).
 
+mod common;
+
+use common::{gallery, mesa};
+
 use std::path::{Path, PathBuf};
 
-use assert_cmd::Command;
 use mesa_schemas::convert::dataset_from_llm;
 use mesa_schemas::json::to_sorted_pretty;
 use mesa_schemas::{DatasetLayout, GalleryRecord, LlmLayout};
 use predicates::prelude::*;
 use serde_json::{json, Value};
-
-fn mesa() -> Command {
-    Command::cargo_bin("mesa").expect("the mesa binary")
-}
-
-fn gallery() -> Vec<PathBuf> {
-    let shared = std::env::var_os("MESA_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
-    let dir = shared.join("realdata/layouts/mesatask_gallery");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e} (the tests need ../shared/realdata)", dir.display()))
-        .map(|e| e.expect("entry").path())
-        .filter(|p| p.extension().is_some_and(|e| e == "json"))
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 7);
-    files
-}
 
 fn gallery_layout(path: &Path) -> LlmLayout {
     let record: GalleryRecord =

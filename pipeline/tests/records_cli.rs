@@ -68,7 +68,7 @@ fn lines<T: serde::de::DeserializeOwned>(path: &Path) -> Vec<T> {
 /// Each scene's layout as the records show it (LLM form, rounded to 0.1), by scene id.
 fn layouts(dir: &Path) -> BTreeMap<String, LlmLayout> {
     let mut out = BTreeMap::new();
-    for path in common::snapshot(dir)
+    for path in common::all_files(dir)
         .keys()
         .filter(|p| p.ends_with("coarse/layout.json"))
     {
@@ -119,7 +119,7 @@ fn sft_records_give_back_their_layouts_and_the_user_turn_has_the_pinned_bytes() 
         let scene = scene_of(&layouts, &parsed.layout);
         assert_eq!(parsed.layout, layouts[scene], "{scene}");
         let graph = std::fs::read_to_string(
-            common::snapshot(dir.path())
+            common::all_files(dir.path())
                 .keys()
                 .find(|k| k.contains(scene) && k.ends_with("graph/graph.txt"))
                 .map(|k| dir.path().join(k))
@@ -358,7 +358,7 @@ fn the_registry_and_the_split_are_what_trainers_and_people_read() {
         String::from_utf8_lossy(&out.stdout)
     );
     // The tasks are the template's, and say so.
-    for (path, bytes) in common::snapshot(dir.path()) {
+    for (path, bytes) in common::all_files(dir.path()) {
         if path.ends_with("tasks/tasks.jsonl") {
             let text = String::from_utf8(bytes).expect("utf8");
             for line in text.lines() {
@@ -373,7 +373,7 @@ fn the_registry_and_the_split_are_what_trainers_and_people_read() {
 #[test]
 fn records_are_skipped_when_current_and_identical_for_any_thread_count() {
     let dir = built();
-    let before = common::snapshot(&dir.path().join("records"));
+    let before = common::all_files(&dir.path().join("records"));
     let stderr = ok(&["records", "--progress", "off"], dir.path());
     assert!(stderr.contains("up to date"), "{stderr}");
     ok(
@@ -381,7 +381,7 @@ fn records_are_skipped_when_current_and_identical_for_any_thread_count() {
         dir.path(),
     );
     assert!(
-        common::snapshot(&dir.path().join("records")) == before,
+        common::all_files(&dir.path().join("records")) == before,
         "1 thread differs"
     );
     ok(
@@ -389,7 +389,7 @@ fn records_are_skipped_when_current_and_identical_for_any_thread_count() {
         dir.path(),
     );
     assert!(
-        common::snapshot(&dir.path().join("records")) == before,
+        common::all_files(&dir.path().join("records")) == before,
         "2 threads differ"
     );
     // A changed seed is a changed configuration: rebuilt, and the DPO corruptions change.
@@ -401,7 +401,7 @@ fn records_are_skipped_when_current_and_identical_for_any_thread_count() {
     let stderr = ok(&["records", "--progress", "off"], dir.path());
     assert!(!stderr.contains("up to date"), "{stderr}");
     // Editing a scene's layout makes its tasks stale: records leave the scene out and say so.
-    let layout = common::snapshot(dir.path())
+    let layout = common::all_files(dir.path())
         .keys()
         .find(|k| k.ends_with("coarse/layout.json"))
         .map(|k| dir.path().join(k))

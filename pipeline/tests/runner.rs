@@ -2,6 +2,10 @@
 //! change, failures that leave nothing behind, SIGKILL then resume, and byte-identical outputs
 //! for any thread count or shard split.
 
+mod common;
+
+use common::snapshot;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -79,32 +83,6 @@ fn run(dir: &Path, config: &Config, options: &RunOptions) -> mesa_pipeline::runn
         options,
     )
     .expect("run")
-}
-
-/// Every file under `scenes/` and `.mesa/markers/`, by relative path.
-fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
-        let Ok(entries) = std::fs::read_dir(dir) else {
-            return;
-        };
-        for entry in entries {
-            let path = entry.expect("entry").path();
-            if path.is_dir() {
-                walk(root, &path, out);
-            } else {
-                let rel = path
-                    .strip_prefix(root)
-                    .expect("prefix")
-                    .to_string_lossy()
-                    .into_owned();
-                out.insert(rel, std::fs::read(&path).expect("read"));
-            }
-        }
-    }
-    let mut out = BTreeMap::new();
-    walk(dir, &dir.join("scenes"), &mut out);
-    walk(dir, &dir.join(".mesa/markers"), &mut out);
-    out
 }
 
 fn reference(scenes: usize) -> (tempfile::TempDir, BTreeMap<String, Vec<u8>>) {

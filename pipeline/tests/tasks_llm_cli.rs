@@ -67,7 +67,7 @@ fn mesa() -> Command {
 
 /// The tasks files of every scene.
 fn task_files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    common::snapshot(dir)
+    common::all_files(dir)
         .into_iter()
         .filter(|(k, _)| k.starts_with("scenes/") && k.contains("/tasks/"))
         .collect()
@@ -190,7 +190,7 @@ fn the_direct_path_retries_rejects_caches_and_keeps_the_key_secret() {
     for text in [&stdout, &stderr, &stdout2, &stderr2] {
         assert!(!text.contains(KEY));
     }
-    for (path, bytes) in common::snapshot(dir.path()) {
+    for (path, bytes) in common::all_files(dir.path()) {
         assert!(
             !bytes.windows(KEY.len()).any(|w| w == KEY.as_bytes()),
             "{path} holds the key"

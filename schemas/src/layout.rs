@@ -106,19 +106,11 @@ impl DatasetLayout {
         if let Some(zone) = &self.restricted_zone_cm {
             crate::units::check_zone(zone, "$.restricted_zone", false, &mut problems);
         }
-        let mut seen = BTreeMap::new();
+        problems.extend(crate::validate::duplicate_instances(
+            self.objects.iter().map(|o| o.instance.as_str()),
+        ));
         for (i, object) in self.objects.iter().enumerate() {
             let at = format!("$.objects[{i}]");
-            if let Some(first) = seen.insert(object.instance.as_str(), i) {
-                problems.push(Problem::new(
-                    format!("{at}.instance"),
-                    format!(
-                        "duplicate instance \"{}\" (also objects[{first}])",
-                        object.instance
-                    ),
-                    "instance names unique within a layout",
-                ));
-            }
             let norm = crate::rotation::quat_norm(object.rotation.0);
             if (norm - 1.0).abs() > 1e-3 {
                 problems.push(Problem::new(

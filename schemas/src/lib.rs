@@ -18,6 +18,7 @@ pub mod convert;
 pub mod json;
 pub mod kinds;
 pub mod layout;
+pub mod layout_file;
 pub mod llm;
 pub mod output;
 pub mod rotation;

@@ -54,19 +54,9 @@ impl LlmLayout {
         if let Some(zone) = &self.sink_zone_cm {
             crate::units::check_zone(zone, "$.sink_zone", false, &mut problems);
         }
-        let mut seen = std::collections::BTreeMap::new();
-        for (i, object) in self.objects.iter().enumerate() {
-            if let Some(first) = seen.insert(object.instance.as_str(), i) {
-                problems.push(Problem::new(
-                    format!("$.objects[{i}].instance"),
-                    format!(
-                        "duplicate instance \"{}\" (also objects[{first}])",
-                        object.instance
-                    ),
-                    "instance names unique within a layout",
-                ));
-            }
-        }
+        problems.extend(crate::validate::duplicate_instances(
+            self.objects.iter().map(|o| o.instance.as_str()),
+        ));
         problems
     }
 }

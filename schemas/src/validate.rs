@@ -48,6 +48,22 @@ impl fmt::Display for Problem {
     }
 }
 
+/// Reports instance names used twice in `$.objects[i].instance`.
+pub fn duplicate_instances<'a>(names: impl Iterator<Item = &'a str>) -> Vec<Problem> {
+    let mut seen = std::collections::BTreeMap::new();
+    let mut problems = Vec::new();
+    for (i, name) in names.enumerate() {
+        if let Some(first) = seen.insert(name, i) {
+            problems.push(Problem::new(
+                format!("$.objects[{i}].instance"),
+                format!("duplicate instance \"{name}\" (also objects[{first}])"),
+                "instance names unique within a layout",
+            ));
+        }
+    }
+    problems
+}
+
 /// Appends a key to a JSON path, quoting keys that are not identifiers.
 pub fn path_key(path: &str, key: &str) -> String {
     let plain = !key.is_empty()

@@ -44,16 +44,14 @@ use std::fmt;
 
 use mesa_schemas::artifacts::{GraphArtifact, GraphEdge, GraphNode, GraphSpacing, GRAPH_SCHEMA};
 use mesa_schemas::convert::{category_of_instance, yaw_deg_of, TILT_EPSILON_DEG};
-use mesa_schemas::json::{parse_lenient, NONFINITE_PREFIX};
-use mesa_schemas::kinds::Kind;
+use mesa_schemas::layout_file::AnyLayout;
 use mesa_schemas::rotation::tilt_deg_from_quat_xyzw;
-
-use crate::annotations::Annotations;
-use mesa_schemas::{DatasetLayout, LlmLayout, Problem, LAYOUT_SCHEMA};
+use mesa_schemas::{DatasetLayout, LlmLayout, Problem};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use serde_json::Value;
 use thiserror::Error;
+
+use crate::annotations::Annotations;
 
 // ---------------------------------------------------------------------------------------------
 // Thresholds (SCENE_GRAPH.md). They are fixed: the published records were made with them.
@@ -440,27 +438,7 @@ pub enum GraphError {
 // ---------------------------------------------------------------------------------------------
 // Reading a layout file of any form.
 
-/// The form a layout file was recognised as.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LayoutForm {
-    /// A dataset layout (`layout.json`: quaternions, `retrieved_uid`).
-    Dataset,
-    /// An LLM layout (the model's output JSON: `z_rotation`).
-    Llm,
-    /// A published MesaTask record: its `scene_layout_json`.
-    GalleryRecord,
-}
-
-impl LayoutForm {
-    /// A short name for messages.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Dataset => "dataset layout",
-            Self::Llm => "LLM layout",
-            Self::GalleryRecord => "published record",
-        }
-    }
-}
+pub use mesa_schemas::layout_file::{layout_form_of, LayoutForm};
 
 /// A layout file read for the graph.
 #[derive(Debug, Clone, PartialEq)]
@@ -495,181 +473,43 @@ fn render_problems(problems: &[Problem]) -> String {
 /// shape, see [`layout_form_of`]), validates it, and returns the scene with objects in the
 /// file's order. Problems name the JSON path and, for objects, the instance.
 pub fn read_layout_text(text: &str) -> Result<LoadedLayout, LayoutReadError> {
-    let fail = |problems: Vec<Problem>| LayoutReadError { problems };
-    let value = parse_lenient(text).map_err(|e| {
-        fail(vec![Problem::new(
-            "$",
-            format!("is not valid JSON: {e}"),
-            "a layout JSON document",
-        )])
-    })?;
-    let Some(top) = value.as_object() else {
-        return Err(fail(vec![Problem::new(
-            "$",
-            mesa_schemas::validate::describe(&value),
-            "a JSON object: a dataset layout, an LLM layout or a published record",
-        )]));
-    };
-    if let Some(inner) = top.get("scene_layout_json") {
-        // The record's own structure first, then the layout inside it (which a record may
-        // store as a JSON string, out of the record schema's reach).
-        const AT: &str = "$.scene_layout_json";
-        let problems = validate_kind("gallery-record", &value);
-        if !problems.is_empty() {
-            return Err(fail(name_objects(
-                problems,
-                inner_layout(inner).as_ref(),
-                AT,
-            )));
-        }
-        let inner = inner_layout(inner).ok_or_else(|| {
-            fail(vec![Problem::new(
-                AT,
-                "is a string that is not JSON",
-                "an LLM layout, inline or as a JSON string",
-            )])
-        })?;
-        let problems: Vec<Problem> = validate_kind("llm-layout", &inner)
-            .into_iter()
-            .map(|mut p| {
-                p.path = p.path.replacen('$', AT, 1);
-                p
-            })
-            .collect();
-        if !problems.is_empty() {
-            return Err(fail(name_objects(problems, Some(&inner), AT)));
-        }
-        let layout: LlmLayout = typed(&inner)?;
-        return Ok(LoadedLayout {
+    let read = mesa_schemas::layout_file::read_layout_text(text)
+        .map_err(|problems| LayoutReadError { problems })?;
+    Ok(match read.layout {
+        AnyLayout::Llm(layout) => LoadedLayout {
             retrieved_uids: vec![String::new(); layout.objects.len()],
             scene: GraphScene::from_llm(&layout),
-            form: LayoutForm::GalleryRecord,
+            form: read.form,
             warnings: Vec::new(),
-        });
-    }
-    let dataset = layout_form_of(&value) == LayoutForm::Dataset;
-    let kind = if dataset { "layout" } else { "llm-layout" };
-    let problems = validate_kind(kind, &value);
-    if !problems.is_empty() {
-        return Err(fail(name_objects(problems, Some(&value), "$")));
-    }
-    if dataset {
-        let layout: DatasetLayout = typed(&value)?;
-        let warnings = layout
-            .objects
-            .iter()
-            .filter_map(|o| {
-                let tilt_deg = tilt_deg_from_quat_xyzw(o.rotation.0);
-                (tilt_deg > TILT_EPSILON_DEG).then(|| {
-                    format!(
-                        "{}: rotation is tilted by {tilt_deg:.3}°; the graph uses its footprint \
-                         turned by its yaw {:.3}° only",
-                        o.instance,
-                        yaw_deg_of(o)
-                    )
-                })
-            })
-            .collect();
-        Ok(LoadedLayout {
-            retrieved_uids: layout
+        },
+        AnyLayout::Dataset(layout) => {
+            let warnings = layout
                 .objects
                 .iter()
-                .map(|o| o.retrieved_uid.clone())
-                .collect(),
-            scene: GraphScene::from_dataset(&layout),
-            form: LayoutForm::Dataset,
-            warnings,
-        })
-    } else {
-        let layout: LlmLayout = typed(&value)?;
-        Ok(LoadedLayout {
-            retrieved_uids: vec![String::new(); layout.objects.len()],
-            scene: GraphScene::from_llm(&layout),
-            form: LayoutForm::Llm,
-            warnings: Vec::new(),
-        })
-    }
-}
-
-/// The form of a layout document, by the same rules as `mesa convert`: a `scene_layout_json`
-/// field makes a published record; `"schema": "mesa.layout/1"`, or a first object with
-/// `rotation` or `retrieved_uid`, a dataset layout; a first object with `z_rotation`, or a
-/// `sink_zone`, an LLM layout; anything else is read as a dataset layout.
-pub fn layout_form_of(value: &Value) -> LayoutForm {
-    if value.get("scene_layout_json").is_some() {
-        return LayoutForm::GalleryRecord;
-    }
-    if value.get("schema").and_then(Value::as_str) == Some(LAYOUT_SCHEMA) {
-        return LayoutForm::Dataset;
-    }
-    let first = value
-        .get("objects")
-        .and_then(Value::as_array)
-        .and_then(|objects| objects.first());
-    match first {
-        Some(o) if o.get("rotation").is_some() || o.get("retrieved_uid").is_some() => {
-            LayoutForm::Dataset
-        }
-        Some(o) if o.get("z_rotation").is_some() => LayoutForm::Llm,
-        _ if value.get("sink_zone").is_some() => LayoutForm::Llm,
-        _ => LayoutForm::Dataset,
-    }
-}
-
-fn validate_kind(kind: &str, value: &Value) -> Vec<Problem> {
-    match Kind::by_name(kind) {
-        Some(kind) => kind.validate_value(value),
-        None => vec![Problem::new(
-            "$",
-            format!("mesa knows no kind \"{kind}\""),
-            "a known kind",
-        )],
-    }
-}
-
-fn typed<T: serde::de::DeserializeOwned>(value: &Value) -> Result<T, LayoutReadError> {
-    serde_json::from_value(value.clone()).map_err(|e| LayoutReadError {
-        problems: vec![Problem::new(
-            "$",
-            format!("does not parse: {e}"),
-            "a layout",
-        )],
-    })
-}
-
-/// The layout inside a record's `scene_layout_json` (inline, or a JSON string), if it parses.
-fn inner_layout(inner: &Value) -> Option<Value> {
-    match inner {
-        Value::String(text) => parse_lenient(text).ok(),
-        other => Some(other.clone()),
-    }
-}
-
-/// Adds the instance name to problems located inside `<root>.objects[i]`.
-fn name_objects(problems: Vec<Problem>, layout: Option<&Value>, root: &str) -> Vec<Problem> {
-    let objects = layout
-        .and_then(|l| l.get("objects"))
-        .and_then(Value::as_array);
-    let prefix = format!("{root}.objects[");
-    problems
-        .into_iter()
-        .map(|mut problem| {
-            let index = problem
-                .path
-                .strip_prefix(&prefix)
-                .and_then(|rest| rest.split(']').next())
-                .and_then(|i| i.parse::<usize>().ok());
-            let instance = index
-                .and_then(|i| objects?.get(i))
-                .and_then(|o| o.get("instance"))
-                .and_then(Value::as_str)
-                .filter(|name| !name.starts_with(NONFINITE_PREFIX));
-            if let Some(instance) = instance {
-                problem.problem = format!("{instance}: {}", problem.problem);
+                .filter_map(|o| {
+                    let tilt_deg = tilt_deg_from_quat_xyzw(o.rotation.0);
+                    (tilt_deg > TILT_EPSILON_DEG).then(|| {
+                        format!(
+                            "{}: rotation is tilted by {tilt_deg:.3}°; the graph uses its \
+                             footprint turned by its yaw {:.3}° only",
+                            o.instance,
+                            yaw_deg_of(o)
+                        )
+                    })
+                })
+                .collect();
+            LoadedLayout {
+                retrieved_uids: layout
+                    .objects
+                    .iter()
+                    .map(|o| o.retrieved_uid.clone())
+                    .collect(),
+                scene: GraphScene::from_dataset(&layout),
+                form: read.form,
+                warnings,
             }
-            problem
-        })
-        .collect()
+        }
+    })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -2379,7 +2219,7 @@ mod tests {
         assert!(artifact.equally_spaced.is_empty());
         let json = serde_json::to_value(&artifact).expect("serialises");
         assert!(json.get("equally_spaced").is_none());
-        let problems = Kind::by_name("graph")
+        let problems = mesa_schemas::Kind::by_name("graph")
             .expect("graph kind")
             .validate_value(&json);
         assert!(problems.is_empty(), "{problems:?}");

@@ -8,9 +8,9 @@ use mesa_schemas::convert::llm_from_dataset;
 use mesa_schemas::LlmLayout;
 
 use crate::fsio::sha256_hex;
-use crate::layouts::{parse_any_layout, AnyLayout};
 use crate::runner::Scene;
 use crate::stages::graph::LAYOUT_CANDIDATES;
+use mesa_schemas::layout_file::{read_layout_text, AnyLayout};
 
 /// The scene graph files, relative to the scene folder.
 pub const GRAPH_TXT: &str = "graph/graph.txt";
@@ -91,7 +91,18 @@ pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
         )
     })?;
     let mut warnings = Vec::new();
-    let layout = match parse_any_layout(&path, &text)? {
+    let read = read_layout_text(&text).map_err(|problems| {
+        let lines: Vec<String> = problems
+            .iter()
+            .map(|p| format!("{}: {p}", path.display()))
+            .collect();
+        anyhow!(
+            "{} is not a valid layout:\n{}",
+            path.display(),
+            lines.join("\n")
+        )
+    })?;
+    let layout = match read.layout {
         AnyLayout::Dataset(dataset) => {
             let converted = llm_from_dataset(&dataset);
             warnings.extend(

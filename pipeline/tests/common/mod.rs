@@ -1,8 +1,10 @@
-//! Shared pieces of the pipeline's integration tests: a local OpenAI-compatible chat server
-//! (a real HTTP/1.1 server on 127.0.0.1, one thread per connection) answering from a handler,
-//! and a "model" that answers mesa's three prompts validly by reading them.
-#![allow(dead_code)]
+//! Helpers shared by the CLI tests: the `mesa` binary, the published records in
+//! ../shared/realdata, byte snapshots of a dataset's outputs, a local OpenAI-compatible chat
+//! server (a real HTTP/1.1 server on 127.0.0.1, one thread per connection) answering from a
+//! handler, and a "model" that answers mesa's three prompts validly by reading them.
+#![allow(dead_code)] // Each test file uses its own subset.
 
+use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
@@ -11,7 +13,62 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use assert_cmd::Command;
 use serde_json::{json, Value};
+
+/// The `mesa` binary under test.
+pub fn mesa() -> Command {
+    Command::cargo_bin("mesa").expect("the mesa binary")
+}
+
+/// `../shared` beside the repository (or `$MESA_SHARED`).
+pub fn shared() -> PathBuf {
+    std::env::var_os("MESA_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"))
+}
+
+/// The 7 published MesaTask gallery records, sorted.
+pub fn gallery() -> Vec<PathBuf> {
+    let dir = shared().join("realdata/layouts/mesatask_gallery");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e} (the tests need ../shared/realdata)", dir.display()))
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 7);
+    files
+}
+
+/// Every file under `scenes/` and `.mesa/markers/` of a dataset, by relative path.
+pub fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return;
+        };
+        for entry in entries {
+            let path = entry.expect("entry").path();
+            if path.is_dir() {
+                walk(root, &path, out);
+            } else {
+                let rel = path
+                    .strip_prefix(root)
+                    .expect("prefix")
+                    .to_string_lossy()
+                    .into_owned();
+                out.insert(rel, std::fs::read(&path).expect("read"));
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(dir, &dir.join("scenes"), &mut out);
+    walk(dir, &dir.join(".mesa/markers"), &mut out);
+    out
+}
+
+// ---------------------------------------------------------------------------------------------
+// A local chat server.
 
 /// A request the server received.
 #[derive(Debug, Clone)]
@@ -354,22 +411,6 @@ pub fn completion_body(content: &str) -> Value {
 // ---------------------------------------------------------------------------------------------
 // Datasets.
 
-/// The published gallery records (`$MESA_SHARED/realdata/...`, default `../../shared`).
-pub fn gallery_paths() -> Vec<PathBuf> {
-    let shared = std::env::var_os("MESA_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
-    let dir = shared.join("realdata/layouts/mesatask_gallery");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e} (the tests need ../shared/realdata)", dir.display()))
-        .map(|e| e.expect("entry").path())
-        .filter(|p| p.extension().is_some_and(|e| e == "json"))
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 7);
-    files
-}
-
 /// Writes a dataset whose scenes have only a layout: the seven published layouts, converted to
 /// the dataset form (sorted by footprint, as mesa writes layouts), each as
 /// `scenes/<table_type>/<table_type>_000<k>/coarse/layout.json`, spread over table types.
@@ -384,7 +425,7 @@ pub fn gallery_dataset(dir: &Path) {
         "kitchen_counter",
         "coffee_table",
     ];
-    for (k, path) in gallery_paths().iter().enumerate() {
+    for (k, path) in gallery().iter().enumerate() {
         let record: mesa_schemas::GalleryRecord =
             serde_json::from_str(&std::fs::read_to_string(path).expect("read")).expect("record");
         let llm = record.scene_layout_json.resolve().expect("layout");
@@ -407,9 +448,10 @@ pub fn gallery_dataset(dir: &Path) {
     }
 }
 
-/// Every file under `dir`, relative path → bytes (for comparing runs and scanning for secrets).
-pub fn snapshot(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
-    let mut out = std::collections::BTreeMap::new();
+/// Every file under `dir`, relative path → bytes (for comparing record files and scanning a
+/// whole dataset for secrets).
+pub fn all_files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
     let mut stack = vec![dir.to_owned()];
     while let Some(d) = stack.pop() {
         for entry in std::fs::read_dir(&d).expect("list") {

@@ -20,6 +20,13 @@
 //! `outlier_window_px`) instead of a k-d tree, since the cloud is organised. Distances are
 //! divided by the pixel footprint at the point's depth (depth / fx), so that near and far parts
 //! of one object are judged alike. A point with no neighbour at all is an outlier.
+//!
+//! Before that, a connectivity rule removes what a local statistic cannot: a band of mask
+//! pixels that bled onto the background is dense in itself. The eroded mask's pixels are split
+//! into components, neighbouring pixels (4-connected) joining when their depths differ by at
+//! most `max(component_jump_m, component_jump_relative · depth)`; the largest component is kept
+//! with every component at least `component_min_fraction` of its size (an object split in two
+//! by an occluder keeps both halves).
 
 pub mod inputs;
 pub mod ply;
@@ -54,6 +61,13 @@ pub struct LiftConfig {
     pub erode_px: u32,
     /// Radius in pixels of the neighbourhood of the outlier rule.
     pub outlier_window_px: u32,
+    /// Neighbouring pixels belong to one surface when their depths differ by at most this many
+    /// metres (or the relative jump below, whichever is larger).
+    pub component_jump_m: f64,
+    /// The same limit relative to the depth.
+    pub component_jump_relative: f64,
+    /// Components smaller than this fraction of the largest are dropped as bleed.
+    pub component_min_fraction: f64,
     /// A point is an outlier when its mean neighbour distance exceeds the instance's mean by
     /// this many standard deviations.
     pub outlier_std_ratio: f64,
@@ -80,6 +94,9 @@ impl Default for LiftConfig {
             default_fov_x_deg: 60.0,
             erode_px: 2,
             outlier_window_px: 2,
+            component_jump_m: 0.01,
+            component_jump_relative: 0.02,
+            component_min_fraction: 0.1,
             outlier_std_ratio: 2.0,
             plane_threshold_m: 0.005,
             plane_iterations: 400,
@@ -461,6 +478,7 @@ fn remove_outliers(
         let (u, v) = (*p as usize % w - u0, *p as usize / w - v0);
         grid[v * bw + u] = i as u32;
     }
+    let (points, grid, bled) = keep_main_components(points, grid, bw, config);
     let r = config.outlier_window_px as isize;
     let mut scores = Vec::with_capacity(points.len());
     for &(p, x) in &points {
@@ -496,7 +514,7 @@ fn remove_outliers(
     }
     let finite: Vec<f64> = scores.iter().copied().filter(|s| s.is_finite()).collect();
     if finite.is_empty() {
-        return (Vec::new(), points.len());
+        return (Vec::new(), points.len() + bled);
     }
     let mean = finite.iter().sum::<f64>() / finite.len() as f64;
     let var = finite.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / finite.len() as f64;
@@ -507,8 +525,77 @@ fn remove_outliers(
         .filter(|(_, s)| **s <= limit)
         .map(|(p, _)| *p)
         .collect();
-    let removed = points.len() - kept.len();
+    let removed = points.len() - kept.len() + bled;
     (kept, removed)
+}
+
+/// A back-projected pixel: its row-major index and its camera-frame point (metres).
+type PixelPoint = (u32, Vector3<f64>);
+
+/// The connectivity rule of the module docs: returns the kept points, their grid (same box)
+/// and how many points were dropped.
+fn keep_main_components(
+    points: Vec<PixelPoint>,
+    grid: Vec<u32>,
+    bw: usize,
+    config: &LiftConfig,
+) -> (Vec<PixelPoint>, Vec<u32>, usize) {
+    let n = points.len();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn find(parent: &mut [u32], mut i: u32) -> u32 {
+        while parent[i as usize] != i {
+            parent[i as usize] = parent[parent[i as usize] as usize];
+            i = parent[i as usize];
+        }
+        i
+    }
+    let joined = |a: &Vector3<f64>, b: &Vector3<f64>| {
+        let limit = config
+            .component_jump_m
+            .max(config.component_jump_relative * a.z.min(b.z));
+        (a.z - b.z).abs() <= limit
+    };
+    for (cell, &i) in grid.iter().enumerate() {
+        if i == u32::MAX {
+            continue;
+        }
+        let right = (cell % bw + 1 < bw).then(|| grid[cell + 1]);
+        let down = grid.get(cell + bw).copied();
+        for j in [right, down].into_iter().flatten() {
+            if j != u32::MAX && joined(&points[i as usize].1, &points[j as usize].1) {
+                let (a, b) = (find(&mut parent, i), find(&mut parent, j));
+                if a != b {
+                    // The smaller root wins, so the result does not depend on visiting order.
+                    let (lo, hi) = (a.min(b), a.max(b));
+                    parent[hi as usize] = lo;
+                }
+            }
+        }
+    }
+    let roots: Vec<u32> = (0..n as u32).map(|i| find(&mut parent, i)).collect();
+    let mut sizes = std::collections::HashMap::<u32, usize>::new();
+    for &r in &roots {
+        *sizes.entry(r).or_default() += 1;
+    }
+    let largest = sizes.values().copied().max().unwrap_or(0);
+    let minimum = (config.component_min_fraction * largest as f64).ceil() as usize;
+    if sizes.values().all(|&s| s >= minimum) {
+        return (points, grid, 0);
+    }
+    let mut remap = vec![u32::MAX; n];
+    let mut kept = Vec::with_capacity(n);
+    for (i, point) in points.into_iter().enumerate() {
+        if sizes[&roots[i]] >= minimum {
+            remap[i] = kept.len() as u32;
+            kept.push(point);
+        }
+    }
+    let dropped = n - kept.len();
+    let grid = grid
+        .into_iter()
+        .map(|i| if i == u32::MAX { i } else { remap[i as usize] })
+        .collect();
+    (kept, grid, dropped)
 }
 
 /// A fitted plane n·p + offset = 0 in the camera frame, n toward the camera.
