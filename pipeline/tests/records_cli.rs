@@ -21,7 +21,7 @@ use mesa_stages::records::corrupt::{triplet_fields, WRONG_RELATION};
 use mesa_stages::records::round_layout;
 use mesa_stages::tasks::reasoning::check_reasoning;
 use mesa_stages::tasks::types::SceneTypes;
-use serde_json::Value;
+use serde_json::{json, Value};
 
 fn mesa() -> Command {
     Command::cargo_bin("mesa").expect("the mesa binary")
@@ -475,4 +475,68 @@ fn mesa_run_writes_the_records_after_the_scene_stages() {
         .output()
         .expect("runs");
     assert!(String::from_utf8_lossy(&out.stderr).contains("records: not run by a shard"));
+}
+
+#[test]
+fn llamafactory_and_trl_read_the_files() {
+    // The `datasets` library as the trainers use it; required when MESA_REQUIRE_TOOLS is set
+    // (as in CI), skipped loudly otherwise.
+    let required = std::env::var_os("MESA_REQUIRE_TOOLS").is_some();
+    let Some(python) = std::env::var_os("MESA_PYTHON") else {
+        assert!(
+            !required,
+            "MESA_PYTHON is not set: scripts/test.sh sets it to a Python with `datasets`"
+        );
+        eprintln!(
+            "SKIPPED: reading the records with `datasets` (set MESA_PYTHON to a Python with \
+             the datasets library; scripts/test.sh does)"
+        );
+        return;
+    };
+    let dir = built();
+    let records = dir.path().join("records");
+    let cache = tempfile::tempdir().expect("tempdir");
+    let out = std::process::Command::new(&python)
+        .arg(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/read_records.py"))
+        .arg(&records)
+        .env("HF_DATASETS_CACHE", cache.path())
+        .env("HF_DATASETS_OFFLINE", "1")
+        .output()
+        .expect("python runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() && stderr.contains("No module named 'datasets'") && !required {
+        eprintln!("SKIPPED: {python:?} has no `datasets` library (scripts/test.sh installs it)");
+        return;
+    }
+    assert!(out.status.success(), "read_records.py: {stderr}");
+    let summary: Value = serde_json::from_slice(&out.stdout).expect("a JSON summary");
+    let sft: Vec<SftRecord> = read(&records.join("sft.json"));
+    let dpo: Vec<DpoRecord> = read(&records.join("dpo.json"));
+    let factory = &summary["llamafactory"];
+    for (name, rows, ranking) in [
+        ("mesa_sft", 20, false),
+        ("mesa_test", 5, false),
+        ("mesa_dpo", 20, true),
+        ("mesa_sft_trl", 20, false),
+        ("mesa_test_trl", 5, false),
+    ] {
+        assert_eq!(factory[name]["rows"], rows, "{name}");
+        assert_eq!(factory[name]["ranking"], ranking, "{name}");
+    }
+    assert_eq!(
+        factory["mesa_dpo"]["columns"],
+        json!(["chosen", "input", "instruction", "rejected"])
+    );
+    // The user turn LLaMA-Factory builds is exactly instruction + "\n" + input.
+    let turn = |r: &SftRecord| format!("{}\n{}", r.instruction, r.input);
+    assert_eq!(factory["mesa_sft"]["first_user_turn"], turn(&sft[0]));
+    assert_eq!(factory["mesa_sft_trl"]["first_user_turn"], turn(&sft[0]));
+    assert_eq!(
+        factory["mesa_dpo"]["first_user_turn"],
+        format!("{}\n{}", dpo[0].instruction, dpo[0].input)
+    );
+    let trl = &summary["trl"];
+    assert_eq!(trl["trl_sft.jsonl"]["rows"], 20);
+    assert_eq!(trl["trl_dpo.jsonl"]["rows"], 20);
+    assert_eq!(trl["trl_sft.jsonl"]["first_user_turn"], turn(&sft[0]));
 }
