@@ -34,6 +34,7 @@ use mesa_stages::records::{
 use mesa_stages::tasks::prompts::{layout_instruction, LAYOUT_GENERATION};
 use rayon::prelude::*;
 use serde::Serialize;
+use sha2::{Digest as _, Sha256};
 
 use crate::config::{Config, ProgressMode};
 use crate::fsio::{sha256_hex, write_atomic, AtomicFile};
@@ -107,14 +108,14 @@ pub fn instruction(dataset: &Path, config: &RecordsConfig) -> Result<String, Str
     layout_instruction(&text).map_err(|e| format!("[records] layout_prompt: {e}"))
 }
 
-/// A scene found with tasks, and the digests of what its records read.
+/// A scene, and the digest of what its records read (or why it has no records).
 struct Planned {
     scene: Scene,
-    inputs: Result<Vec<(String, String)>, String>,
+    inputs: Result<String, String>,
 }
 
 fn plan_scene(scene: Scene) -> Planned {
-    let inputs = (|| -> Result<Vec<(String, String)>, String> {
+    let inputs = (|| -> Result<String, String> {
         let tasks_path = scene.path(TASKS_FILE);
         if !tasks_path.is_file() {
             return Err(format!("no {TASKS_FILE} (run `mesa tasks`)"));
@@ -126,7 +127,7 @@ fn plan_scene(scene: Scene) -> Planned {
             let path = scene.path(rel);
             let bytes = std::fs::read(&path)
                 .map_err(|e| format!("{rel}: cannot read: {e} (run the stage that writes it)"))?;
-            digests.push((scene.rel(rel), sha256_hex(&bytes)));
+            digests.push(format!("{rel} {}", sha256_hex(&bytes)));
             if rel == TASKS_FILE {
                 tasks_text = String::from_utf8(bytes).map_err(|_| format!("{rel}: not UTF-8"))?;
             }
@@ -139,14 +140,14 @@ fn plan_scene(scene: Scene) -> Planned {
             .ok_or_else(|| format!("{TASKS_FILE} is empty (rerun `mesa tasks`)"))?;
         let record: TaskRecord = serde_json::from_str(first)
             .map_err(|e| format!("{TASKS_FILE}:1: not a mesa.tasks/1 record: {e}"))?;
-        if record.layout != layout_rel || record.layout_sha256 != digests[1].1 {
+        if record.layout != layout_rel || !digests[1].ends_with(&record.layout_sha256) {
             return Err(format!(
                 "{TASKS_FILE} was written for another version of the layout ({} then, {layout_rel} \
                  now; rerun `mesa tasks`)",
                 record.layout
             ));
         }
-        Ok(digests)
+        Ok(sha256_hex(digests.join("\n").as_bytes()))
     })();
     Planned { scene, inputs }
 }
@@ -326,21 +327,27 @@ pub fn run_records(
     // 1. Which scenes have current tasks, and the digests of what their records read.
     let planned: Vec<Planned> = pool.install(|| scenes.into_par_iter().map(plan_scene).collect());
     let mut summary = RecordsSummary::default();
-    let mut inputs_listing = Vec::with_capacity(planned.len());
+    // One line per scene, in scene order, into one digest: nothing per scene stays in memory.
+    let mut inputs = Sha256::new();
     let mut included = Vec::new();
     for plan in planned {
+        let key = plan.scene.key();
         match plan.inputs {
-            Ok(digests) => {
-                inputs_listing.push(serde_json::json!([plan.scene.key(), digests]));
+            Ok(digest) => {
+                inputs.update(format!("{key} {digest}\n"));
                 included.push(plan.scene);
             }
             Err(why) => {
-                inputs_listing.push(serde_json::json!([plan.scene.key(), why]));
-                summary.excluded.insert(plan.scene.key(), why);
+                inputs.update(format!("{key} excluded: {why}\n"));
+                summary.excluded.insert(key, why);
             }
         }
     }
-    let inputs_digest = sha256_hex(&serde_json::to_vec(&inputs_listing)?);
+    let inputs_digest: String = inputs
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
     let config_digest = config_digest(config, &instruction);
     let marker_path = dataset.join(MARKER_FILE);
     let out_dir = dataset.join(RECORDS_DIR);
