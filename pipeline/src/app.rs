@@ -12,7 +12,9 @@ use mesa_schemas::json::to_sorted_pretty;
 use mesa_schemas::output::parse_model_output;
 use mesa_schemas::{kinds, validate_text, Kind};
 
-use crate::cli::{BackendArg, GraphArgs, RecordsArgs, StatusArgs, TasksArgs, ValidateArgs};
+use crate::cli::{
+    AssetsArgs, BackendArg, DemoArgs, GraphArgs, RecordsArgs, StatusArgs, TasksArgs, ValidateArgs,
+};
 use crate::cli::{Cli, Command, ConvertArgs, LayoutForm, ParseOutputArgs, RunArgs, StageArgs};
 use crate::config::{annotated_toml, Config};
 use crate::fsio::{write_atomic, DigestCache};
@@ -43,7 +45,17 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Validate(args) => validate(args),
         Command::Convert(args) => convert(args),
         Command::ParseOutput(args) => parse_output(args),
+        Command::Demo(args) => demo(args, cli.quiet),
         Command::Lift(args) => run_one(&crate::stages::lift::Lift, &resolve(&args, cli.quiet)?),
+        Command::Assets(args) => assets(args, cli.quiet),
+        Command::Retrieve(args) => run_one(
+            &crate::stages::retrieve::RetrieveStage::new(),
+            &resolve(&args, cli.quiet)?,
+        ),
+        Command::Place(args) => run_one(
+            &crate::stages::place::PlaceStage::new(),
+            &resolve(&args, cli.quiet)?,
+        ),
         Command::Graph(args) => graph(args, cli.quiet),
         Command::Tasks(args) => tasks(args, cli.quiet),
         Command::Records(args) => records(args, cli.quiet),
@@ -134,6 +146,27 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     )
     .with_context(|| format!("{}: cannot write .mesa/", resolved.dataset.display()))?;
     let mut failed = false;
+    // The asset index is a dataset-level step: it comes before the per-scene stages that read
+    // it. With --shard, every shard would index the library at once: it must run before them.
+    let library = resolved.dataset.join(crate::stages::assets::LIBRARY);
+    if resolved.options.shard.count > 1 {
+        eprintln!(
+            "assets: not run by `mesa run --shard` (every shard would index the library): run              `mesa assets {}` once before the shards",
+            resolved.dataset.display()
+        );
+    } else if library.is_dir() {
+        let summary = crate::stages::assets::index_library(
+            &resolved.dataset,
+            &resolved.config,
+            &assets_options(&resolved.options),
+        )?;
+        eprint!("{}", crate::stages::assets::format_summary(&summary));
+    } else {
+        eprintln!(
+            "assets: {} does not exist: no asset index (retrieve and place need one)",
+            library.display()
+        );
+    }
     for stage in &stages {
         let code = run_one(stage.as_ref(), &resolved)?;
         failed |= code != ExitCode::SUCCESS;
@@ -342,6 +375,50 @@ fn batch_tasks(args: &TasksArgs, mut resolved: Resolved) -> anyhow::Result<ExitC
     })
 }
 
+fn assets_options(options: &RunOptions) -> crate::stages::assets::AssetsOptions {
+    crate::stages::assets::AssetsOptions {
+        jobs: options.jobs,
+        force: options.force,
+        progress: options.progress,
+        progress_interval: options.progress_interval,
+    }
+}
+
+fn assets(args: AssetsArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let stage = StageArgs {
+        dataset: args.dataset.clone(),
+        scenes: None,
+        jobs: args.jobs,
+        shard: Some(Shard::default()),
+        force: args.force,
+        config: args.config.clone(),
+        progress: args.progress,
+    };
+    let resolved = resolve(&stage, quiet)?;
+    // Under a Slurm array, one task indexes the library; the others have nothing to do.
+    if let Some(shard) = Shard::from_slurm_env().map_err(UsageError)? {
+        if shard.index != 0 {
+            eprintln!(
+                "assets: the library is indexed by array task 0 (this is task {shard}): nothing                  to do here"
+            );
+            return Ok(ExitCode::SUCCESS);
+        }
+    }
+    let summary = crate::stages::assets::index_library(
+        &resolved.dataset,
+        &resolved.config,
+        &assets_options(&resolved.options),
+    )?;
+    eprint!("{}", crate::stages::assets::format_summary(&summary));
+    Ok(ExitCode::from(
+        if args.strict && !summary.invalid.is_empty() {
+            EXIT_FAILED
+        } else {
+            EXIT_OK
+        },
+    ))
+}
+
 fn graph(args: GraphArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     if let Some(layout) = &args.layout {
         return crate::stages::graph::print_layout_graph(
@@ -358,6 +435,49 @@ fn graph(args: GraphArgs, quiet: bool) -> anyhow::Result<ExitCode> {
         resolved.config.graph.equally_spaced = true;
     }
     run_one(&crate::stages::graph::GraphStage::new(), &resolved)
+}
+
+fn demo(args: DemoArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    use mesa_stages::demo::{write_demo, DemoError, DemoOptions};
+    let options = DemoOptions::default()
+        .with_scenes(args.scenes)
+        .with_seed(args.seed)
+        .with_overwrite(args.force);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.jobs)
+        .build()
+        .context("cannot start the worker threads")?;
+    let started = std::time::Instant::now();
+    let summary =
+        pool.install(|| write_demo(&args.dir, &options))
+            .map_err(|e| -> anyhow::Error {
+                match e {
+                    DemoError::Options(_)
+                    | DemoError::NotEmpty { .. }
+                    | DemoError::NotADemo { .. } => UsageError(e.to_string()).into(),
+                    other => other.into(),
+                }
+            })?;
+    if !quiet {
+        let objects: usize = summary.scenes.iter().map(|s| s.objects).sum();
+        let types: std::collections::BTreeSet<&str> = summary
+            .scenes
+            .iter()
+            .map(|s| s.table_type.as_str())
+            .collect();
+        eprintln!(
+            "mesa demo: {} scenes over {} table types ({objects} objects), {} assets ({} used in \
+             scenes, {} categories) written to {} in {:.1} s",
+            summary.scenes.len(),
+            types.len(),
+            summary.assets,
+            summary.scene_assets,
+            summary.categories,
+            summary.dir.display(),
+            started.elapsed().as_secs_f64()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn status(args: StatusArgs) -> anyhow::Result<ExitCode> {

@@ -38,8 +38,21 @@ pub enum Command {
     Convert(ConvertArgs),
     /// Parse a model output text (reasoning, scene graph, marker, layout JSON).
     ParseOutput(ParseOutputArgs),
+    /// Write a synthetic dataset workspace with ground truth: procedural assets, photos,
+    /// depth, masks, cameras and instances, and the true layouts.
+    Demo(DemoArgs),
     /// Depth maps and instance masks → point clouds, the table frame, and object boxes.
     Lift(StageArgs),
+    /// Index the asset library (assets/index/): per asset its bounds in the table frame,
+    /// counts, materials and validity, its collision shapes, and the text index. Unchanged
+    /// assets are not re-indexed.
+    Assets(AssetsArgs),
+    /// Choose an asset for every lifted instance by text and size, MesaTask's recipe
+    /// (coarse/retrieval.json).
+    Retrieve(StageArgs),
+    /// Scale each retrieved asset isometrically into its lifted box: the coarse layout
+    /// (coarse/layout.json).
+    Place(StageArgs),
     /// Extract the scene graph of every scene (graph/graph.json and graph/graph.txt), or print
     /// the triplets of one layout file with --layout.
     Graph(GraphArgs),
@@ -78,6 +91,29 @@ pub struct StageArgs {
     pub progress: Option<ProgressArg>,
 }
 
+/// `mesa assets`.
+#[derive(Debug, Args, Clone)]
+pub struct AssetsArgs {
+    /// The dataset folder (holds assets/library/<uid>.glb and assets/annotations.json).
+    pub dataset: PathBuf,
+    /// Worker threads (default: [run] jobs of mesa.toml; 0 = one per core).
+    #[arg(short, long, value_name = "N")]
+    pub jobs: Option<usize>,
+    /// Re-index every asset, even those whose GLB, annotation and configuration are unchanged.
+    #[arg(long)]
+    pub force: bool,
+    /// The configuration file (default: DATASET/mesa.toml when it exists).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Progress display (default: [run] progress of mesa.toml).
+    #[arg(long, value_enum)]
+    pub progress: Option<ProgressArg>,
+    /// Exit with code 1 when some asset is invalid (by default invalid assets are listed, and
+    /// retrieval never chooses them).
+    #[arg(long)]
+    pub strict: bool,
+}
+
 /// `--progress`.
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum ProgressArg {
@@ -111,6 +147,26 @@ pub struct RunArgs {
     /// Print the resolved configuration (every key, documented) and exit.
     #[arg(long)]
     pub print_config: bool,
+}
+
+/// `mesa demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// The folder to write (created if needed; new, empty, or an earlier `mesa demo` output).
+    pub dir: PathBuf,
+    /// Number of scenes; they cycle through the six table types.
+    #[arg(long, value_name = "N", default_value_t = 20)]
+    pub scenes: usize,
+    /// The seed every random choice derives from (with the scene id).
+    #[arg(long, value_name = "S", default_value_t = 7)]
+    pub seed: u64,
+    /// Replace an earlier `mesa demo` output made with other options (its assets/, scenes/
+    /// and mesa.toml are deleted first; a folder `mesa demo` did not write is never touched).
+    #[arg(long)]
+    pub force: bool,
+    /// Worker threads (0 = one per core); the output does not depend on it.
+    #[arg(short, long, value_name = "N", default_value_t = 0)]
+    pub jobs: usize,
 }
 
 /// `mesa status`.

@@ -22,6 +22,12 @@ pub struct Config {
     pub run: RunConfig,
     /// `mesa lift`: depth and masks to point clouds, the table frame and boxes.
     pub lift: mesa_stages::lift::LiftConfig,
+    /// `mesa assets`: the asset index (bounds, validity, collision shapes, text index).
+    pub assets: mesa_stages::assets::AssetsConfig,
+    /// `mesa retrieve`: an asset per instance by text and size (MesaTask's recipe).
+    pub retrieve: mesa_stages::retrieve::RetrieveConfig,
+    /// `mesa place`: each asset scaled isometrically into its lifted box.
+    pub place: mesa_stages::place::PlaceConfig,
     /// `mesa graph`: the rule-based scene graph (SCENE_GRAPH.md).
     pub graph: mesa_stages::graph::GraphConfig,
     /// `mesa tasks`: task instructions and reasoning texts (the template writer or a chat
@@ -114,7 +120,10 @@ impl Config {
 
     /// Parses TOML text; the error message names the line and key.
     pub fn from_toml(text: &str) -> Result<Self, String> {
-        toml::from_str(text).map_err(|e| e.to_string())
+        let config: Self = toml::from_str(text).map_err(|e| e.to_string())?;
+        // Values that parse but cannot work: refused before any work starts.
+        config.retrieve.check().map_err(|e| format!("{e} "))?;
+        Ok(config)
     }
 }
 

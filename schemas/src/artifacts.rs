@@ -13,6 +13,12 @@ use crate::units::{PositionCm, SizeCm, ZoneCm};
 pub const LIFT_SCHEMA: &str = "mesa.lift/1";
 /// Schema id of `coarse/retrieval.json`.
 pub const RETRIEVAL_SCHEMA: &str = "mesa.retrieval/1";
+/// Schema id of `assets/index/assets.json`.
+pub const ASSET_INDEX_SCHEMA: &str = "mesa.asset-index/1";
+/// Schema id of `assets/index/text.json`.
+pub const TEXT_INDEX_SCHEMA: &str = "mesa.text-index/1";
+/// Schema id of `assets/index/shapes/<uid>.json`.
+pub const SHAPES_SCHEMA: &str = "mesa.shapes/1";
 /// Schema id of `qa/check.json`.
 pub const CHECK_SCHEMA: &str = "mesa.check/1";
 /// Schema id of `graph/graph.json`.
@@ -224,6 +230,190 @@ pub struct LiftStats {
 }
 
 // ---------------------------------------------------------------------------------------------
+// assets
+
+/// `assets/index/assets.json`: every GLB of `assets/library/`, read once, with its verdict.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AssetIndexArtifact {
+    /// `mesa.asset-index/1`.
+    pub schema: String,
+    /// SHA-256 of the `[assets]` configuration the records were made with.
+    pub config_digest: String,
+    /// One record per GLB in `assets/library/`, by uid (the file name without `.glb`).
+    pub assets: BTreeMap<String, AssetRecord>,
+    /// Uids of `annotations.json` that have no GLB in the library.
+    pub annotated_without_glb: Vec<String>,
+}
+
+/// What `mesa assets` found in one GLB.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AssetRecord {
+    /// The GLB, relative to the dataset: `assets/library/<uid>.glb`.
+    pub file: String,
+    /// Size of the GLB in bytes.
+    pub glb_bytes: u64,
+    /// SHA-256 of the GLB.
+    pub glb_sha256: String,
+    /// SHA-256 of everything the record depends on (the GLB, the asset's annotation, the
+    /// `[assets]` configuration, the index version): an unchanged digest means the record is
+    /// reused as it is.
+    pub inputs_sha256: String,
+    /// Whether the asset can be retrieved and placed.
+    pub valid: bool,
+    /// Why it cannot, with how to fix it (invalid assets only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// A short code for the reason: a glTF-Validator code for a damaged container
+    /// (`GLB_LENGTH_MISMATCH`, ...), else `not_glb`, `gltf1`, `json`, `version`, `invalid_gltf`,
+    /// `unsupported_extension`, `external_uri`, `data`, `draco`, `no_mesh`, `zero_size_axis`,
+    /// `io` (the file cannot be read), `internal`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason_code: Option<String>,
+    /// Whether `annotations.json` has an entry for it.
+    pub annotated: bool,
+    /// The geometry, when the GLB could be read.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub geometry: Option<AssetGeometry>,
+    /// The collision shapes, when they were computed (valid assets).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shapes: Option<ShapesRef>,
+    /// Things that do not make the asset invalid.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
+}
+
+/// The geometry of an asset in its table-aligned frame: the glTF frame turned to the table
+/// frame (`x = X, y = -Z, z = Y`: front toward -y, the observer) and then by the front
+/// alignment yaw, metres, origin at the asset's glTF origin.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AssetGeometry {
+    /// Yaw about +z applied after the glTF → table conversion to bring the asset's front to -y,
+    /// degrees (0 unless `[assets] front_alignment` uses the annotation).
+    pub front_yaw_deg: f64,
+    /// Minimum corner of the bounding box, metres.
+    pub bounds_min_m: [f64; 3],
+    /// Maximum corner of the bounding box, metres.
+    pub bounds_max_m: [f64; 3],
+    /// [width (x), depth (y), height (z)] of the bounding box, metres.
+    pub size_m: [f64; 3],
+    /// Extents along glTF X, Y (up), Z before any alignment, metres: the frame annotation
+    /// bboxes are written in.
+    pub gltf_extents_m: [f64; 3],
+    /// Triangles placed (a mesh used by two nodes counts twice).
+    pub triangles: u64,
+    /// Vertices placed.
+    pub vertices: u64,
+    /// Triangle primitives placed.
+    pub primitives: u64,
+    /// Nodes that place a mesh.
+    pub mesh_instances: u64,
+    /// Material names (`material_<i>` for unnamed ones).
+    pub materials: Vec<String>,
+    /// Materials with a base colour texture.
+    pub textured_materials: u64,
+    /// Textures.
+    pub textures: u64,
+    /// MIME type of each embedded image.
+    pub images: Vec<String>,
+    /// `asset.generator` of the GLB.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generator: Option<String>,
+    /// Whether geometry was Draco-compressed (and decoded).
+    pub draco: bool,
+    /// Whether a mesh is skinned (read at its rest pose).
+    pub skinned: bool,
+    /// `extensionsRequired` of the GLB.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub extensions_required: Vec<String>,
+}
+
+/// Where an asset's collision shapes are.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ShapesRef {
+    /// The shapes file, relative to the dataset: `assets/index/shapes/<uid>.json`.
+    pub file: String,
+    /// SHA-256 of the shapes file.
+    pub sha256: String,
+    /// Convex parts of the decomposition.
+    pub parts: u64,
+}
+
+/// `assets/index/shapes/<uid>.json`: an asset's collision shapes for `mesa check`, in the
+/// asset's table-aligned frame ([`AssetGeometry`]), metres.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ShapesArtifact {
+    /// `mesa.shapes/1`.
+    pub schema: String,
+    /// The asset.
+    pub uid: String,
+    /// SHA-256 of the GLB the shapes were made from.
+    pub glb_sha256: String,
+    /// The convex hull of the whole asset.
+    pub hull: ConvexPart,
+    /// The convex decomposition: parts whose union follows the asset's shape, cavities
+    /// included (a bowl's inside stays empty).
+    pub parts: Vec<ConvexPart>,
+    /// How the parts were made.
+    pub decomposition: Decomposition,
+}
+
+/// One convex shape: the convex hull of its points.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ConvexPart {
+    /// The hull's vertices, metres.
+    pub points_m: Vec<[f64; 3]>,
+    /// Its volume, cubic metres.
+    pub volume_m3: f64,
+}
+
+/// The parameters of a convex decomposition.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Decomposition {
+    /// `vhacd` (parry3d's V-HACD); `convex` when the asset is a closed mesh filling its
+    /// hull (the hull is its one part); `hull` when the decomposition failed and the parts are
+    /// the single hull (the asset's warnings say why).
+    pub method: String,
+    /// Voxels along the longest axis.
+    pub resolution: u32,
+    /// Maximum concavity of a part.
+    pub concavity: f64,
+    /// Most parts allowed.
+    pub max_parts: u32,
+}
+
+/// `assets/index/text.json`: the asset texts and their features for the built-in lexical
+/// encoder.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TextIndexArtifact {
+    /// `mesa.text-index/1`.
+    pub schema: String,
+    /// The encoder, `lexical/1`.
+    pub encoder: String,
+    /// Per annotated asset with a description or a category, by uid.
+    pub documents: BTreeMap<String, TextDocument>,
+    /// In how many documents each feature occurs.
+    pub document_frequency: BTreeMap<String, u64>,
+}
+
+/// The text of one asset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TextDocument {
+    /// The text encoded (the category, then the description).
+    pub text: String,
+    /// Raw feature weights (before inverse document frequency).
+    pub features: BTreeMap<String, f64>,
+}
+
+// ---------------------------------------------------------------------------------------------
 // retrieve
 
 /// `coarse/retrieval.json`: the candidates of every instance, with their scores.
@@ -234,10 +424,32 @@ pub struct RetrievalArtifact {
     pub schema: String,
     /// The scene id.
     pub scene_id: String,
-    /// The text encoder used: `lexical` or `features`.
+    /// The text encoder used: `lexical/1` or `features` (with the embedding width, like
+    /// `features/768`).
     pub encoder: String,
+    /// The recipe's parameters.
+    pub recipe: RetrievalRecipe,
+    /// Assets the text ranking ran over.
+    pub candidate_assets: u64,
     /// Per instance, in instance order.
     pub instances: Vec<RetrievedInstance>,
+}
+
+/// The parameters of the retrieval recipe (SPEC 5.2; MesaTask's values are the defaults).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RetrievalRecipe {
+    /// Candidates kept by text score (20).
+    pub text_top_k: u32,
+    /// Candidates kept by final score, among which the first unfiltered is chosen (5).
+    pub final_top_k: u32,
+    /// Weight of the text score (0.9).
+    pub text_weight: f64,
+    /// Weight of the size score (0.1).
+    pub size_weight: f64,
+    /// Whether further candidates are taken when the filters reject the whole top
+    /// `final_top_k` (mesa's fallback; MesaTask's code gives up).
+    pub fallback: bool,
 }
 
 /// The retrieval of one instance.
@@ -246,16 +458,22 @@ pub struct RetrievalArtifact {
 pub struct RetrievedInstance {
     /// The instance name.
     pub instance: String,
+    /// Its id in `instances.json`.
+    pub mask_id: u32,
+    /// Its label.
+    pub label: String,
     /// The query text (the instance description).
     pub query: String,
     /// Target [w, d, h] in cm.
     pub target_size_cm: SizeCm,
-    /// Candidates in final-score order.
+    /// The top `text_top_k` by text score in final-score order, then, when the fallback ran,
+    /// the further candidates it examined in the order it examined them.
     pub candidates: Vec<RetrievalCandidate>,
     /// The chosen asset uid; absent when nothing passed the filters.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub chosen: Option<String>,
-    /// True when the top 5 were all filtered out and a further candidate was taken.
+    /// True when the top `final_top_k` were all filtered out and a further candidate was
+    /// taken.
     pub fallback: bool,
 }
 
@@ -265,13 +483,19 @@ pub struct RetrievedInstance {
 pub struct RetrievalCandidate {
     /// Asset uid.
     pub uid: String,
+    /// Rank by text score, from 0.
+    pub text_rank: u64,
     /// Cosine of the text embeddings.
     pub text_score: f64,
-    /// Cosine of the size vectors.
+    /// Cosine of the target size and the asset's [bbox.x, bbox.z, bbox.y].
     pub size_score: f64,
-    /// 0.9 · text + 0.1 · size.
+    /// Where the asset's size came from: `annotation` (its bbox), `mesh` (the asset index,
+    /// for want of a bbox) or `none`.
+    pub size_source: String,
+    /// text_weight · text + size_weight · size.
     pub final_score: f64,
-    /// Why the filters rejected it (`onTable false`, `mark_deletion`, `is_composite`).
+    /// Why the filters rejected it (`onTable false`, `mark_deletion`, `is_composite`,
+    /// `no annotation`, `no GLB in the library`, `invalid GLB: <code>`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rejected: Option<String>,
 }
@@ -604,4 +828,175 @@ pub enum MarkerStatus {
     Done,
     /// The scene failed; no output of this run was written.
     Failed,
+}
+
+// ---------------------------------------------------------------------------------------------
+// demo ground truth
+
+/// Schema id of a demo scene's `truth/scene.json`.
+pub const TRUTH_SCENE_SCHEMA: &str = "mesa.truth-scene/1";
+/// Schema id of a demo scene's `truth/instances.json`.
+pub const TRUTH_INSTANCES_SCHEMA: &str = "mesa.truth-instances/1";
+
+/// `truth/scene.json` of a `mesa demo` scene: how its inputs were made, so that every stage
+/// can be measured against the truth (the layout itself is `truth/layout.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthScene {
+    /// `mesa.truth-scene/1`.
+    pub schema: String,
+    /// The scene id, like `office_table_0001`.
+    pub scene_id: String,
+    /// The table type, like `office_table`.
+    pub table_type: String,
+    /// The `--seed` the scene was made with.
+    pub seed: u64,
+    /// A one-sentence description of the scene, as the scene-writing step would give it.
+    pub environment: String,
+    /// The camera that took the photo (exact intrinsics, also for a FOV-only `camera.json`).
+    pub camera: TruthCamera,
+    /// Rigid transform taking camera-frame points (OpenCV, metres) to the table frame
+    /// (metres), row-major 4×4.
+    pub table_from_camera: [[f64; 4]; 4],
+    /// The table.
+    pub table: TruthTable,
+    /// How `input/depth.*` was made from the true depth.
+    pub depth: TruthDepth,
+    /// How the masks were written.
+    pub masks: TruthMasks,
+}
+
+/// The exact camera of a demo photo.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthCamera {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Focal length along x in pixels.
+    pub fx: f64,
+    /// Focal length along y in pixels.
+    pub fy: f64,
+    /// Principal point x in pixels.
+    pub cx: f64,
+    /// Principal point y in pixels.
+    pub cy: f64,
+    /// Horizontal field of view in degrees.
+    pub fov_x_deg: f64,
+    /// What `input/camera.json` states: `intrinsics` or `fov` (then the principal point is
+    /// the image centre `(width / 2, height / 2)` and `fx = fy`).
+    pub camera_json: String,
+    /// Camera pitch below the horizontal, degrees (the camera has no yaw or roll).
+    pub pitch_deg: f64,
+}
+
+/// The table of a demo scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthTable {
+    /// Its label in `instances.json`.
+    pub label: String,
+    /// Its description in `instances.json`.
+    pub description: String,
+    /// Height of the top above the floor, metres.
+    pub height_m: f64,
+    /// Thickness of the top, metres.
+    pub top_thickness_m: f64,
+    /// The placement zone (the whole top) [x_min, x_max, y_min, y_max] in cm.
+    #[serde(rename = "item_placement_zone")]
+    pub zone_cm: ZoneCm,
+    /// The sink's restricted zone in cm, for a bathroom vanity.
+    #[serde(
+        rename = "restricted_zone",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub restricted_zone_cm: Option<ZoneCm>,
+    /// Distance from the table's back edge to the wall behind it, metres.
+    pub wall_gap_m: f64,
+}
+
+/// How a demo depth map departs from the true depth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthDepth {
+    /// The depth file, relative to the scene folder.
+    pub file: String,
+    /// `sensor` (a structured-light camera: noise growing with distance, holes, mixed pixels
+    /// at edges, millimetre steps) or `estimator` (a metric monocular estimator: a global
+    /// scale error, smooth low-frequency error, edges blurred across objects).
+    pub model: String,
+    /// Global scale: away from edges, stored depth ≈ `scale` · true depth.
+    pub scale: f64,
+    /// Per-pixel noise σ(d) = `sigma_constant_m` + `sigma_linear` · d + `sigma_quadratic_per_m`
+    /// · (d − 0.4 m)², in metres.
+    pub sigma_constant_m: f64,
+    /// See `sigma_constant_m`.
+    pub sigma_linear: f64,
+    /// See `sigma_constant_m` (per metre).
+    pub sigma_quadratic_per_m: f64,
+    /// Largest absolute value of the smooth low-frequency error, relative to depth.
+    pub smooth_error_relative: f64,
+    /// Storage step, metres (0.001 for a 16-bit millimetre PNG, 0 for float32).
+    pub quantization_m: f64,
+    /// Pixels with a valid depth.
+    pub valid_px: u64,
+    /// Pixels without a measurement (0, NaN, inf or negative).
+    pub invalid_px: u64,
+    /// Pixels at depth edges whose value mixes foreground and background (flying pixels).
+    pub mixed_px: u64,
+}
+
+/// How the masks of a demo scene were written.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthMasks {
+    /// `label_png` (`input/masks.png`) or `instance_pngs` (`input/masks/<id>.png`).
+    pub form: String,
+    /// Bits per label of `masks.png` (8 or 16); 8 for binary instance masks.
+    pub bit_depth: u8,
+    /// How far instance masks were grown beyond the visible region, pixels (so neighbours'
+    /// masks overlap, as segmentation masks do); 0 for a label image.
+    pub dilation_px: u32,
+    /// Objects with fewer visible pixels than this were left out of the scene.
+    pub min_visible_px: u32,
+}
+
+/// `truth/instances.json` of a `mesa demo` scene: what each mask id is.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthInstances {
+    /// `mesa.truth-instances/1`.
+    pub schema: String,
+    /// The scene id.
+    pub scene_id: String,
+    /// One entry per id of `input/instances.json`, in id order.
+    pub instances: Vec<TruthInstance>,
+}
+
+/// The truth about one mask id.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TruthInstance {
+    /// The id in `instances.json` and the masks.
+    pub id: u32,
+    /// The label given in `instances.json`.
+    pub label: String,
+    /// True for the table.
+    pub support: bool,
+    /// The object's instance in `truth/layout.json` (absent for the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instance: Option<String>,
+    /// The asset placed there (absent for the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uid: Option<String>,
+    /// The asset's category (absent for the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub category: Option<String>,
+    /// The instance it rests on or in (absent when it stands on the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rests_on: Option<String>,
+    /// Pixels where it is the visible surface.
+    pub visible_px: u64,
 }

@@ -4,15 +4,35 @@
 //!
 //! - [`lift`]: depth and masks to point clouds, the table frame and boxes (SPEC 5.1).
 //! - [`annotations`]: the asset annotations (`assets/annotations.json`, SPEC 5.2).
+//! - [`glb_read`]: library assets (GLB) read into triangles, Draco included (SPEC 5.2).
+//! - [`assets`]: what `mesa assets` learns from each library asset (SPEC 5.2).
+//! - [`text`]: the built-in lexical text encoder of retrieval.
+//! - [`retrieve`]: an asset per instance by text and size, MesaTask's recipe (SPEC 5.2).
+//! - [`place`]: isometric placement into the lifted boxes, the coarse layout (SPEC 5.3).
 //! - [`graph`]: the rule-based scene graph (SPEC 5.7, `SCENE_GRAPH.md`).
+//! - [`demo`]: `mesa demo`, a synthetic dataset workspace with ground truth.
+//! - [`mesh`]: triangle meshes, transforms, bounds and frame conversions.
+//! - [`glb_write`]: writing GLB files (embedded PNG textures, materials, node hierarchies).
+//! - [`raster`]: a CPU z-buffer rasterizer (depth in metres, instance ids, shaded colour).
+//! - [`image_io`]: PNG encoding and decoding.
 //! - [`tasks`]: task instructions and reasoning texts, from a chat model or the built-in
 //!   template writer (SPEC 5.8).
 //! - [`records`]: SFT and DPO training records, the corruptions, the split (SPEC 5.9).
 //! - [`seeding`]: seeded random generators per scene and purpose.
 
 pub mod annotations;
+pub mod assets;
+pub mod demo;
+pub mod glb_read;
+pub mod glb_write;
 pub mod graph;
+pub mod image_io;
 pub mod lift;
+pub mod mesh;
+pub mod place;
+pub mod raster;
 pub mod records;
+pub mod retrieve;
 pub mod seeding;
 pub mod tasks;
+pub mod text;

@@ -1,9 +1,13 @@
 //! The per-scene stages of `mesa run`, in pipeline order, as runner adapters over the pure
-//! functions of `mesa-stages`.
+//! functions of `mesa-stages`, and the dataset-level `mesa assets` ([`assets`]), which `mesa
+//! run` runs before them.
 
+pub mod assets;
 pub mod graph;
 pub mod lift;
+pub mod place;
 pub mod records;
+pub mod retrieve;
 pub mod scene_docs;
 pub mod tasks;
 
@@ -14,6 +18,8 @@ use crate::runner::SceneStage;
 pub fn pipeline_stages() -> Vec<Box<dyn SceneStage>> {
     vec![
         Box::new(lift::Lift),
+        Box::new(retrieve::RetrieveStage::new()),
+        Box::new(place::PlaceStage::new()),
         Box::new(graph::GraphStage::new()),
         Box::new(tasks::TasksStage::new()),
     ]

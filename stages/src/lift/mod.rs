@@ -81,6 +81,9 @@ pub struct LiftConfig {
     pub plane_min_inlier_fraction: f64,
     /// Fewest table (or background) points with valid depth to fit a plane on.
     pub plane_min_points: u32,
+    /// The table is the plane with at least this fraction of the objects' points on its camera
+    /// side (objects stand on it); other planes (a cabinet front) are set aside.
+    pub plane_min_objects_above: f64,
     /// Percentile (0-50) of the table points that bounds the placement zone on each side.
     pub zone_percentile: f64,
     /// Fewest points an instance may keep after filtering.
@@ -103,6 +106,7 @@ impl Default for LiftConfig {
             plane_max_points: 20_000,
             plane_min_inlier_fraction: 0.3,
             plane_min_points: 500,
+            plane_min_objects_above: 0.8,
             zone_percentile: 0.5,
             min_points: 10,
         }
@@ -218,7 +222,24 @@ pub fn lift_scene(
         .step_by(plane_pixels.len().div_ceil(PLANE_PIXELS).max(1))
         .filter_map(|&p| back_project(&depth, &k, p))
         .collect();
-    let plane = fit_plane(&plane_points, scene_id, seed, config, source)?;
+    let object_pixels: Vec<u32> = instances
+        .iter()
+        .filter(|i| !i.support)
+        .flat_map(|i| masks.pixels[&i.id].iter().copied())
+        .collect();
+    let object_points: Vec<Vector3<f64>> = object_pixels
+        .iter()
+        .step_by(object_pixels.len().div_ceil(20_000).max(1))
+        .filter_map(|&p| back_project(&depth, &k, p))
+        .collect();
+    let plane = fit_plane(
+        &plane_points,
+        &object_points,
+        scene_id,
+        seed,
+        config,
+        source,
+    )?;
     let frame = TableFrame::new(&plane, &plane_points, config)?;
 
     let mut lifted = Vec::new();
@@ -623,9 +644,16 @@ fn scene_rng(scene_id: &str, seed: u64) -> rand_chacha::ChaCha8Rng {
     rand_chacha::ChaCha8Rng::seed_from_u64(h ^ seed.rotate_left(17))
 }
 
-/// RANSAC plane fit with a least-squares refinement.
+/// The table plane: RANSAC with a least-squares refinement, sequential over planes.
+///
+/// The table is the plane the objects stand on, so a candidate is accepted only when at least
+/// `plane_min_objects_above` of the objects' points (`objects`, camera frame) lie on its camera
+/// side. A table mask that also covers a cabinet front (kitchen counters, vanities) gives a
+/// vertical plane first; its inliers are then set aside and the next plane is fitted, up to
+/// three planes. With no objects, the first plane is the table.
 pub fn fit_plane(
     points: &[Vector3<f64>],
+    objects: &[Vector3<f64>],
     scene_id: &str,
     seed: u64,
     config: &LiftConfig,
@@ -642,8 +670,82 @@ pub fn fit_plane(
     let stride = points
         .len()
         .div_ceil(config.plane_max_points.max(3) as usize);
-    let sample: Vec<Vector3<f64>> = points.iter().step_by(stride).copied().collect();
+    let mut remaining: Vec<Vector3<f64>> = points.iter().step_by(stride).copied().collect();
     let mut rng = scene_rng(scene_id, seed);
+    let threshold = config.plane_threshold_m;
+    let mut rejected = Vec::new();
+    for attempt in 0..3 {
+        let Some((n, d)) = ransac_once(&remaining, &mut rng, config) else {
+            break;
+        };
+        let residuals: Vec<f64> = remaining
+            .iter()
+            .map(|p| (n.dot(p) + d).abs())
+            .filter(|r| *r < threshold)
+            .collect();
+        let fraction = residuals.len() as f64 / remaining.len() as f64;
+        if fraction < config.plane_min_inlier_fraction {
+            if attempt == 0 {
+                return Err(LiftError::NoPlane(format!(
+                    "the best plane explains {:.0}% of {} {source} points within {} mm \
+                     (expected at least {:.0}%: check the depth scale, or mark the table with \
+                     \"support\": true)",
+                    fraction * 100.0,
+                    remaining.len(),
+                    threshold * 1000.0,
+                    config.plane_min_inlier_fraction * 100.0
+                )));
+            }
+            break;
+        }
+        let above = if objects.is_empty() {
+            1.0
+        } else {
+            objects
+                .iter()
+                .filter(|p| n.dot(p) + d > -2.0 * threshold)
+                .count() as f64
+                / objects.len() as f64
+        };
+        if above >= config.plane_min_objects_above {
+            let rmse =
+                (residuals.iter().map(|r| r * r).sum::<f64>() / residuals.len() as f64).sqrt();
+            return Ok(Plane {
+                normal: n,
+                offset_m: d,
+                inliers: residuals.len(),
+                inlier_fraction: fraction,
+                rmse_m: rmse,
+            });
+        }
+        rejected.push(format!(
+            "a plane through {:.0}% of the {source} points has {:.0}% of the object points on \
+             its camera side",
+            fraction * 100.0,
+            above * 100.0
+        ));
+        remaining.retain(|p| (n.dot(p) + d).abs() >= threshold);
+        if remaining.len() < (config.plane_min_points as usize).max(3) {
+            break;
+        }
+    }
+    Err(LiftError::NoPlane(format!(
+        "no plane has the objects standing on it ({}; expected at least {:.0}%: check the \
+         masks of the table and the objects)",
+        rejected.join("; "),
+        config.plane_min_objects_above * 100.0
+    )))
+}
+
+/// One RANSAC plane with two least-squares refinements, oriented toward the camera.
+fn ransac_once(
+    sample: &[Vector3<f64>],
+    rng: &mut rand_chacha::ChaCha8Rng,
+    config: &LiftConfig,
+) -> Option<(Vector3<f64>, f64)> {
+    if sample.len() < 3 {
+        return None;
+    }
     let threshold = config.plane_threshold_m;
     // Hypotheses are scored on an evenly spread subset; the winner is refined on the sample.
     let scoring: Vec<Vector3<f64>> = sample
@@ -671,13 +773,7 @@ pub fn fit_plane(
             best = Some((count, n, d));
         }
     }
-    let Some((_, mut n, mut d)) = best else {
-        return Err(LiftError::NoPlane(format!(
-            "the {} {source} points are collinear",
-            sample.len()
-        )));
-    };
-    // Two rounds of least squares on the inliers of the current plane.
+    let (_, mut n, mut d) = best?;
     for _ in 0..2 {
         let inliers: Vec<&Vector3<f64>> = sample
             .iter()
@@ -706,30 +802,7 @@ pub fn fit_plane(
         n = -n;
         d = -d;
     }
-    let residuals: Vec<f64> = sample
-        .iter()
-        .map(|p| (n.dot(p) + d).abs())
-        .filter(|r| *r < threshold)
-        .collect();
-    let fraction = residuals.len() as f64 / sample.len() as f64;
-    if fraction < config.plane_min_inlier_fraction {
-        return Err(LiftError::NoPlane(format!(
-            "the best plane explains {:.0}% of {} {source} points within {} mm (expected at \
-             least {:.0}%: check the depth scale, or mark the table with \"support\": true)",
-            fraction * 100.0,
-            sample.len(),
-            threshold * 1000.0,
-            config.plane_min_inlier_fraction * 100.0
-        )));
-    }
-    let rmse = (residuals.iter().map(|r| r * r).sum::<f64>() / residuals.len() as f64).sqrt();
-    Ok(Plane {
-        normal: n,
-        offset_m: d,
-        inliers: residuals.len(),
-        inlier_fraction: fraction,
-        rmse_m: rmse,
-    })
+    Some((n, d))
 }
 
 /// The table frame in the camera frame.
@@ -849,7 +922,8 @@ mod tests {
                 rng.random_range(0.5..1.5),
             ));
         }
-        let plane = fit_plane(&points, "s", 0, &LiftConfig::default(), "support").expect("plane");
+        let plane =
+            fit_plane(&points, &[], "s", 0, &LiftConfig::default(), "support").expect("plane");
         assert!(plane.normal.dot(&n) > 0.9999, "{:?}", plane.normal);
         assert!((plane.offset_m - d).abs() < 1e-3);
         assert!(plane.inlier_fraction > 0.7);

@@ -1,0 +1,105 @@
+//! `mesa place`: the runner adapter of [`mesa_stages::place`]: `coarse/lift.json`,
+//! `coarse/retrieval.json` and the asset index → `coarse/layout.json`.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+use anyhow::{anyhow, bail};
+use mesa_schemas::artifacts::{AssetIndexArtifact, LiftArtifact, RetrievalArtifact};
+use mesa_stages::annotations::Annotations;
+use mesa_stages::place::place_scene;
+
+use super::assets::{ANNOTATIONS, INDEX};
+use super::retrieve::read_json;
+use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
+
+/// What placement reads once per dataset and run.
+struct Library {
+    index: AssetIndexArtifact,
+    annotations: Annotations,
+}
+
+/// The `place` stage.
+#[derive(Default)]
+pub struct PlaceStage {
+    libraries: Mutex<BTreeMap<PathBuf, Result<Arc<Library>, String>>>,
+}
+
+impl PlaceStage {
+    /// A stage with nothing loaded yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    fn library(&self, ctx: &StageContext<'_>) -> anyhow::Result<Arc<Library>> {
+        let mut cache = self
+            .libraries
+            .lock()
+            .map_err(|_| anyhow!("internal error: the library cache is poisoned"))?;
+        let entry = cache.entry(ctx.dataset.to_owned()).or_insert_with(|| {
+            let load = || -> anyhow::Result<Library> {
+                let index = read_json(&ctx.dataset.join(INDEX), "run `mesa assets` to write it")?;
+                let path = ctx.dataset.join(ANNOTATIONS);
+                let annotations = if path.exists() {
+                    Annotations::read(&path)?
+                } else {
+                    Annotations::default()
+                };
+                Ok(Library { index, annotations })
+            };
+            load().map(Arc::new).map_err(|e| format!("{e:#}"))
+        });
+        match entry {
+            Ok(library) => Ok(Arc::clone(library)),
+            Err(message) => bail!("{message}"),
+        }
+    }
+}
+
+impl SceneStage for PlaceStage {
+    fn name(&self) -> &'static str {
+        "place"
+    }
+
+    fn inputs(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
+        let mut inputs = vec![
+            scene.rel("coarse/lift.json"),
+            scene.rel("coarse/retrieval.json"),
+            INDEX.to_owned(),
+        ];
+        if ctx.dataset.join(ANNOTATIONS).exists() {
+            inputs.push(ANNOTATIONS.to_owned());
+        }
+        Ok(inputs)
+    }
+
+    fn config_digest(&self, ctx: &StageContext<'_>) -> String {
+        digest_of(&ctx.config.place)
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
+        let lift: LiftArtifact = read_json(
+            &scene.path("coarse/lift.json"),
+            "run `mesa lift` to write it",
+        )?;
+        let retrieval: RetrievalArtifact = read_json(
+            &scene.path("coarse/retrieval.json"),
+            "run `mesa retrieve` to write it",
+        )?;
+        let library = self.library(ctx)?;
+        let placed = place_scene(
+            &lift,
+            &retrieval,
+            &library.index,
+            &library.annotations,
+            &ctx.config.place,
+        )?;
+        let mut out = SceneOutput::new();
+        out.add_json("coarse/layout.json", &placed.layout)?;
+        for warning in placed.warnings {
+            out.warn(warning);
+        }
+        Ok(out)
+    }
+}

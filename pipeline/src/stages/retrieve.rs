@@ -1,0 +1,165 @@
+//! `mesa retrieve`: the runner adapter of [`mesa_stages::retrieve`]: `coarse/lift.json` and the
+//! asset index → `coarse/retrieval.json`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use anyhow::{anyhow, bail, Context as _};
+use mesa_schemas::artifacts::{AssetIndexArtifact, LiftArtifact, TextIndexArtifact};
+use mesa_stages::annotations::Annotations;
+use mesa_stages::retrieve::features::FeatureMatrix;
+use mesa_stages::retrieve::lexical::LexicalIndex;
+use mesa_stages::retrieve::{
+    query_embeddings, query_text, retrieve_scene, Catalog, Encoder, Query, TextScorer,
+};
+use serde::de::DeserializeOwned;
+
+use super::assets::{ANNOTATIONS, INDEX, TEXT_INDEX};
+use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
+
+/// The asset embeddings of the `features` encoder, relative to the dataset.
+pub const TEXT_FEATURES: &str = "assets/text_features.npy";
+/// The uid of each row of [`TEXT_FEATURES`], relative to the dataset.
+pub const TEXT_UIDS: &str = "assets/text_uids.json";
+/// Query embeddings of a scene's instances (optional), relative to the scene.
+pub const QUERY_FEATURES: &str = "input/query_features.npy";
+
+/// Reads a JSON artifact, naming the file in every error.
+pub fn read_json<T: DeserializeOwned>(path: &Path, hint: &str) -> anyhow::Result<T> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read ({hint})", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e} ({hint})", path.display()))
+}
+
+/// The asset side of retrieval, loaded once per dataset and run.
+struct Library {
+    scorer: TextScorer,
+    catalog: Catalog,
+}
+
+/// The `retrieve` stage.
+#[derive(Default)]
+pub struct RetrieveStage {
+    libraries: Mutex<BTreeMap<PathBuf, Result<Arc<Library>, String>>>,
+}
+
+impl RetrieveStage {
+    /// A stage with nothing loaded yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    fn library(&self, ctx: &StageContext<'_>) -> anyhow::Result<Arc<Library>> {
+        let mut cache = self
+            .libraries
+            .lock()
+            .map_err(|_| anyhow!("internal error: the library cache is poisoned"))?;
+        let entry = cache.entry(ctx.dataset.to_owned()).or_insert_with(|| {
+            load_library(ctx)
+                .map(Arc::new)
+                .map_err(|e| format!("{e:#}"))
+        });
+        match entry {
+            Ok(library) => Ok(Arc::clone(library)),
+            Err(message) => bail!("{message}"),
+        }
+    }
+}
+
+fn load_library(ctx: &StageContext<'_>) -> anyhow::Result<Library> {
+    let index: AssetIndexArtifact =
+        read_json(&ctx.dataset.join(INDEX), "run `mesa assets` to write it")?;
+    let annotations_path = ctx.dataset.join(ANNOTATIONS);
+    let annotations = if annotations_path.exists() {
+        Annotations::read(&annotations_path)?
+    } else {
+        Annotations::default()
+    };
+    let scorer = match ctx.config.retrieve.encoder {
+        Encoder::Lexical => {
+            let text: TextIndexArtifact = read_json(
+                &ctx.dataset.join(TEXT_INDEX),
+                "run `mesa assets` to write it",
+            )?;
+            TextScorer::Lexical(LexicalIndex::new(&text))
+        }
+        Encoder::Features => TextScorer::Features(FeatureMatrix::read(
+            &ctx.dataset.join(TEXT_FEATURES),
+            &ctx.dataset.join(TEXT_UIDS),
+        )?),
+    };
+    let catalog = Catalog::new(scorer.uids(), &annotations, &index);
+    if catalog.choosable() == 0 {
+        bail!(
+            "no asset can be chosen: none of the {} assets of the {} encoder has an annotation, \
+             a valid GLB and passes the filters (see {INDEX})",
+            scorer.uids().len(),
+            scorer.name()
+        );
+    }
+    Ok(Library { scorer, catalog })
+}
+
+impl SceneStage for RetrieveStage {
+    fn name(&self) -> &'static str {
+        "retrieve"
+    }
+
+    fn inputs(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
+        let mut inputs = vec![scene.rel("coarse/lift.json"), INDEX.to_owned()];
+        if ctx.dataset.join(ANNOTATIONS).exists() {
+            inputs.push(ANNOTATIONS.to_owned());
+        }
+        match ctx.config.retrieve.encoder {
+            Encoder::Lexical => inputs.push(TEXT_INDEX.to_owned()),
+            Encoder::Features => {
+                inputs.push(TEXT_FEATURES.to_owned());
+                inputs.push(TEXT_UIDS.to_owned());
+                inputs.push(scene.rel("input/instances.json"));
+                if scene.path(QUERY_FEATURES).exists() {
+                    inputs.push(scene.rel(QUERY_FEATURES));
+                }
+            }
+        }
+        Ok(inputs)
+    }
+
+    fn config_digest(&self, ctx: &StageContext<'_>) -> String {
+        digest_of(&ctx.config.retrieve)
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
+        let lift: LiftArtifact = read_json(
+            &scene.path("coarse/lift.json"),
+            "run `mesa lift` to write it",
+        )?;
+        let library = self.library(ctx)?;
+        let config = &ctx.config.retrieve;
+        let queries: Vec<Query> = match config.encoder {
+            Encoder::Lexical => lift
+                .instances
+                .iter()
+                .map(|i| Query::Text(query_text(i, config)))
+                .collect(),
+            Encoder::Features => {
+                let sidecar = scene.path(QUERY_FEATURES);
+                query_embeddings(
+                    &scene.path("input/instances.json"),
+                    sidecar.exists().then_some(sidecar.as_path()),
+                    &lift,
+                )?
+                .into_iter()
+                .map(Query::Embedding)
+                .collect()
+            }
+        };
+        let retrieved = retrieve_scene(&lift, &queries, &library.scorer, &library.catalog, config)?;
+        let mut out = SceneOutput::new();
+        out.add_json("coarse/retrieval.json", &retrieved.artifact)?;
+        for warning in retrieved.warnings {
+            out.warn(warning);
+        }
+        Ok(out)
+    }
+}

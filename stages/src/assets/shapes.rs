@@ -1,0 +1,189 @@
+//! Collision shapes for `mesa check`: the convex hull of an asset and a convex decomposition
+//! (parry3d's V-HACD), so that a bowl's or a cup's inside stays empty instead of being filled
+//! by one hull.
+
+use mesa_schemas::artifacts::{ConvexPart, Decomposition};
+use parry3d::math::Point;
+use parry3d::transformation::try_convex_hull;
+use parry3d::transformation::vhacd::{VHACDParameters, VHACD};
+use parry3d::transformation::voxelization::FillMode;
+
+use super::AssetsConfig;
+
+/// The hull and the parts of one asset.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Shapes {
+    /// The convex hull of the whole asset.
+    pub hull: ConvexPart,
+    /// The convex decomposition.
+    pub parts: Vec<ConvexPart>,
+    /// How the parts were made.
+    pub decomposition: Decomposition,
+    /// Why the decomposition fell back to the hull, if it did.
+    pub warning: Option<String>,
+}
+
+/// The volume enclosed by a closed triangle mesh (divergence theorem), cubic metres.
+fn volume(points: &[Point<f32>], triangles: &[[u32; 3]]) -> f64 {
+    let p = |i: u32| {
+        let v = points[i as usize];
+        [f64::from(v.x), f64::from(v.y), f64::from(v.z)]
+    };
+    let mut six_v = 0.0;
+    for t in triangles {
+        let (a, b, c) = (p(t[0]), p(t[1]), p(t[2]));
+        six_v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+            + a[2] * (b[0] * c[1] - b[1] * c[0]);
+    }
+    (six_v / 6.0).abs()
+}
+
+/// `v` rounded to a multiple of `precision_m`, computed so that it prints short (0.4043, not
+/// 0.40430000000000005).
+fn round(v: f32, precision_m: f64) -> f64 {
+    let v = f64::from(v);
+    if precision_m > 0.0 {
+        let scale = (1.0 / precision_m).round();
+        (v * scale).round() / scale
+    } else {
+        v
+    }
+}
+
+/// The volume of a mesh that is closed once coincident vertices are merged (every edge shared
+/// by exactly two triangles); `None` for an open mesh, whose divergence-theorem volume means
+/// nothing (a single-surface bowl would look as full as its hull).
+pub fn closed_volume(positions_m: &[[f64; 3]], triangles: &[[u32; 3]]) -> Option<f64> {
+    use std::collections::HashMap;
+    // Seams split vertices that share a position: weld them (to 0.1 µm).
+    let mut welded: HashMap<[i64; 3], u32> = HashMap::new();
+    let ids: Vec<u32> = positions_m
+        .iter()
+        .map(|p| {
+            let key = p.map(|v| (v * 1e7).round() as i64);
+            let next = welded.len() as u32;
+            *welded.entry(key).or_insert(next)
+        })
+        .collect();
+    let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+    for t in triangles {
+        let [a, b, c] = t.map(|i| ids[i as usize]);
+        if a == b || b == c || a == c {
+            continue;
+        }
+        for (u, v) in [(a, b), (b, c), (c, a)] {
+            *edges.entry((u.min(v), u.max(v))).or_default() += 1;
+        }
+    }
+    if edges.is_empty() || edges.values().any(|n| *n != 2) {
+        return None;
+    }
+    let mut six_v = 0.0;
+    for t in triangles {
+        let [a, b, c] = t.map(|i| positions_m[i as usize]);
+        six_v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+            + a[2] * (b[0] * c[1] - b[1] * c[0]);
+    }
+    Some((six_v / 6.0).abs())
+}
+
+/// A closed mesh filling at least this fraction of its hull is taken as convex: its hull is
+/// its one part (V-HACD would cut even a cube, for voxelisation error).
+const CONVEX_FILL: f64 = 0.98;
+
+fn part(points: &[Point<f32>], triangles: &[[u32; 3]], precision_m: f64) -> ConvexPart {
+    ConvexPart {
+        points_m: points
+            .iter()
+            .map(|p| {
+                [
+                    round(p.x, precision_m),
+                    round(p.y, precision_m),
+                    round(p.z, precision_m),
+                ]
+            })
+            .collect(),
+        volume_m3: volume(points, triangles),
+    }
+}
+
+/// The shapes of a triangle mesh given in the asset's table-aligned frame (metres). `None`
+/// when the points span no volume (the caller has already rejected flat assets).
+pub fn collision_shapes(
+    positions_m: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    config: &AssetsConfig,
+) -> Option<Shapes> {
+    // f32 is parry3d's precision: 0.1 µm at a metre, far below the collision tolerances.
+    let points: Vec<Point<f32>> = positions_m
+        .iter()
+        .map(|p| Point::new(p[0] as f32, p[1] as f32, p[2] as f32))
+        .collect();
+    let (hull_points, hull_triangles) = try_convex_hull(&points).ok()?;
+    if hull_triangles.is_empty() {
+        return None;
+    }
+    let hull = part(&hull_points, &hull_triangles, config.shape_precision_m);
+    let decomposition = Decomposition {
+        method: "vhacd".to_owned(),
+        resolution: config.vhacd_resolution,
+        concavity: config.vhacd_concavity,
+        max_parts: config.vhacd_max_parts,
+    };
+    if hull.volume_m3 > 0.0
+        && closed_volume(positions_m, triangles).is_some_and(|v| v >= CONVEX_FILL * hull.volume_m3)
+    {
+        return Some(Shapes {
+            parts: vec![hull.clone()],
+            hull,
+            decomposition: Decomposition {
+                method: "convex".to_owned(),
+                ..decomposition
+            },
+            warning: None,
+        });
+    }
+    let params = VHACDParameters {
+        resolution: config.vhacd_resolution,
+        concavity: config.vhacd_concavity as f32,
+        max_convex_hulls: config.vhacd_max_parts,
+        fill_mode: FillMode::FloodFill {
+            detect_cavities: false,
+        },
+        ..VHACDParameters::default()
+    };
+    // V-HACD must not take a whole indexing run down on a mesh it cannot handle.
+    let decomposed = std::panic::catch_unwind(|| {
+        let vhacd = VHACD::decompose(&params, &points, triangles, true);
+        vhacd.compute_exact_convex_hulls(&points, triangles)
+    });
+    let parts: Vec<ConvexPart> = match decomposed {
+        Ok(hulls) => hulls
+            .iter()
+            .filter(|(p, t)| !p.is_empty() && !t.is_empty())
+            .map(|(p, t)| part(p, t, config.shape_precision_m))
+            .collect(),
+        Err(_) => Vec::new(),
+    };
+    if parts.is_empty() {
+        return Some(Shapes {
+            parts: vec![hull.clone()],
+            hull,
+            decomposition: Decomposition {
+                method: "hull".to_owned(),
+                ..decomposition
+            },
+            warning: Some(
+                "the convex decomposition failed on this mesh: its collision shape is the \
+                 convex hull (cavities are filled)"
+                    .to_owned(),
+            ),
+        });
+    }
+    Some(Shapes {
+        hull,
+        parts,
+        decomposition,
+        warning: None,
+    })
+}

@@ -1,0 +1,286 @@
+//! Indexing synthetic assets: frames, sizes, validity, collision shapes.
+
+use approx::assert_abs_diff_eq;
+use parry3d::math::Point;
+use parry3d::query::PointQuery;
+use parry3d::shape::ConvexPolyhedron;
+
+use super::synthetic::Mesh;
+use super::*;
+use crate::annotations::BboxExtents;
+
+fn index(mesh: &Mesh, annotation: Option<&AssetAnnotation>, config: &AssetsConfig) -> IndexedAsset {
+    index_asset("uid", "digest", &mesh.to_glb(1.0), annotation, config)
+}
+
+fn contains(part: &mesa_schemas::artifacts::ConvexPart, p: [f64; 3]) -> bool {
+    let points: Vec<Point<f32>> = part
+        .points_m
+        .iter()
+        .map(|q| Point::new(q[0] as f32, q[1] as f32, q[2] as f32))
+        .collect();
+    ConvexPolyhedron::from_convex_hull(&points).is_some_and(|hull| {
+        hull.contains_local_point(&Point::new(p[0] as f32, p[1] as f32, p[2] as f32))
+    })
+}
+
+#[test]
+fn a_box_is_measured_in_the_table_frame() {
+    // glTF X = 0.1 wide, Y = 0.2 tall, Z = 0.3 deep (toward the viewer).
+    let indexed = index(
+        &Mesh::cuboid([0.1, 0.2, 0.3]),
+        None,
+        &AssetsConfig::default(),
+    );
+    assert_eq!(indexed.invalid, None);
+    let g = indexed.geometry.expect("geometry");
+    assert_abs_diff_eq!(g.size_m[0], 0.1, epsilon = 1e-6);
+    assert_abs_diff_eq!(g.size_m[1], 0.3, epsilon = 1e-6);
+    assert_abs_diff_eq!(g.size_m[2], 0.2, epsilon = 1e-6);
+    assert_abs_diff_eq!(g.gltf_extents_m[1], 0.2, epsilon = 1e-6);
+    // glTF +Z (the front) is table -y: the box spans y in [-0.15, 0.15], z in [0, 0.2].
+    assert_abs_diff_eq!(g.bounds_min_m[2], 0.0, epsilon = 1e-9);
+    assert_abs_diff_eq!(g.bounds_max_m[1], 0.15, epsilon = 1e-6);
+    assert_eq!(g.triangles, 12);
+    assert_eq!(g.vertices, 8);
+    assert_eq!(g.materials, ["surface"]);
+    let shapes = indexed.shapes.expect("shapes");
+    assert_abs_diff_eq!(shapes.hull.volume_m3, 0.1 * 0.2 * 0.3, epsilon = 1e-5);
+    // A closed convex mesh is its own hull: one part.
+    assert_eq!(shapes.decomposition.method, "convex");
+    assert_eq!(shapes.parts.len(), 1);
+}
+
+#[test]
+fn the_front_view_turns_the_asset() {
+    let front = AssetAnnotation {
+        front_view: Some(1),
+        ..AssetAnnotation::default()
+    };
+    let config = AssetsConfig {
+        front_alignment: FrontAlignment::FrontView,
+        ..AssetsConfig::default()
+    };
+    let g = index(&Mesh::cuboid([0.1, 0.2, 0.3]), Some(&front), &config)
+        .geometry
+        .expect("geometry");
+    assert_eq!(g.front_yaw_deg, -90.0);
+    // A quarter turn swaps width and depth.
+    assert_abs_diff_eq!(g.size_m[0], 0.3, epsilon = 1e-6);
+    assert_abs_diff_eq!(g.size_m[1], 0.1, epsilon = 1e-6);
+    // The glTF convention ignores frontView.
+    let g = index(
+        &Mesh::cuboid([0.1, 0.2, 0.3]),
+        Some(&front),
+        &AssetsConfig::default(),
+    )
+    .geometry
+    .expect("geometry");
+    assert_eq!(g.front_yaw_deg, 0.0);
+    let bad = AssetAnnotation {
+        front_view: Some(9),
+        ..AssetAnnotation::default()
+    };
+    let indexed = index(&Mesh::cuboid([0.1, 0.2, 0.3]), Some(&bad), &config);
+    assert!(
+        indexed.warnings.iter().any(|w| w.contains("frontView 9")),
+        "{:?}",
+        indexed.warnings
+    );
+}
+
+#[test]
+fn the_table_aligned_frame_follows_spec_section_2() {
+    // glTF (X, Y, Z) = (0.3, 0.05, -0.2) is the table point (0.3, 0.2, 0.05).
+    assert_eq!(
+        table_aligned_from_gltf([0.3, 0.05, -0.2], 0.0),
+        [0.3, 0.2, 0.05]
+    );
+    // A yaw of +90° turns +x to +y.
+    let p = table_aligned_from_gltf([1.0, 0.0, 0.0], 90.0);
+    assert_abs_diff_eq!(p[0], 0.0, epsilon = 1e-12);
+    assert_abs_diff_eq!(p[1], 1.0, epsilon = 1e-12);
+}
+
+#[test]
+fn a_centimetre_model_under_a_scaled_node_is_in_metres() {
+    let cm = Mesh::cuboid([10.0, 20.0, 30.0]).to_glb(0.01);
+    let g = index_asset("uid", "d", &cm, None, &AssetsConfig::default())
+        .geometry
+        .expect("geometry");
+    assert_abs_diff_eq!(g.size_m[2], 0.2, epsilon = 1e-6);
+    // Without the scale it would be implausible, and says so.
+    let big = index_asset(
+        "uid",
+        "d",
+        &Mesh::cuboid([10.0, 20.0, 30.0]).to_glb(1.0),
+        None,
+        &AssetsConfig::default(),
+    );
+    assert!(
+        big.warnings.iter().any(|w| w.contains("centimetres")),
+        "{:?}",
+        big.warnings
+    );
+}
+
+#[test]
+fn a_flat_asset_is_invalid() {
+    let flat = Mesh::cuboid([0.2, 0.0, 0.3]);
+    let indexed = index(&flat, None, &AssetsConfig::default());
+    let (code, reason) = indexed.invalid.expect("invalid");
+    assert_eq!(code, "zero_size_axis");
+    assert!(
+        reason.starts_with("the asset is flat: its extent along z (height) is 0.0000 mm"),
+        "{reason}"
+    );
+    assert!(indexed.shapes.is_none());
+    assert!(indexed.geometry.is_some());
+}
+
+#[test]
+fn an_unreadable_glb_is_invalid_with_the_readers_reason() {
+    let indexed = index_asset(
+        "uid",
+        "d",
+        b"glTF\x01\x00\x00\x00",
+        None,
+        &AssetsConfig::default(),
+    );
+    let (code, reason) = indexed.invalid.expect("invalid");
+    assert_eq!(code, "GLB_UNEXPECTED_END_OF_HEADER");
+    assert!(
+        reason.contains("fewer than the 12-byte GLB header"),
+        "{reason}"
+    );
+    assert!(indexed.geometry.is_none());
+}
+
+#[test]
+fn a_bbox_that_disagrees_with_the_mesh_is_a_warning() {
+    let annotation = AssetAnnotation {
+        bbox: Some(BboxExtents {
+            x: 0.1,
+            y: 0.4,
+            z: 0.3,
+        }),
+        ..AssetAnnotation::default()
+    };
+    let indexed = index(
+        &Mesh::cuboid([0.1, 0.2, 0.3]),
+        Some(&annotation),
+        &AssetsConfig::default(),
+    );
+    assert_eq!(indexed.warnings.len(), 1, "{:?}", indexed.warnings);
+    assert!(
+        indexed.warnings[0].contains("Y 0.4000 m vs 0.2000 m"),
+        "{:?}",
+        indexed.warnings
+    );
+}
+
+/// Containers keep their cavity: a point inside a bowl or a cup, above its floor, is inside the
+/// convex hull but in no part of the decomposition; a point in the wall is in some part.
+#[test]
+fn the_decomposition_of_a_vessel_keeps_its_cavity() {
+    for (name, radius, height) in [("bowl", 0.08, 0.06), ("cup", 0.04, 0.10)] {
+        let vessel = Mesh::vessel(radius, height, 0.006, 0.008);
+        let indexed = index(&vessel, None, &AssetsConfig::default());
+        let shapes = indexed.shapes.expect("shapes");
+        assert_eq!(shapes.decomposition.method, "vhacd", "{name}");
+        assert!(
+            shapes.parts.len() > 1,
+            "{name}: {} parts",
+            shapes.parts.len()
+        );
+        for cavity in [
+            [radius / 3.0, radius / 4.0, height * 0.6],
+            [-radius / 3.0, 0.01, height * 0.5],
+            [0.01, -radius / 2.0, height * 0.8],
+        ] {
+            assert!(contains(&shapes.hull, cavity), "{name}");
+            assert!(
+                !shapes.parts.iter().any(|p| contains(p, cavity)),
+                "{name}: the cavity is filled at {cavity:?}"
+            );
+        }
+        // The wall and the floor are solid (points off the axis: the parts of a solid of
+        // revolution meet there, with gaps far below a millimetre).
+        let wall = [radius - 0.003, 0.002, height * 0.6];
+        assert!(
+            shapes.parts.iter().any(|p| contains(p, wall)),
+            "{name}: the wall is missing"
+        );
+        let floor = [0.01, 0.005, 0.004];
+        assert!(
+            shapes.parts.iter().any(|p| contains(p, floor)),
+            "{name}: the floor is missing"
+        );
+        let total: f64 = shapes.parts.iter().map(|p| p.volume_m3).sum();
+        assert!(
+            total < 0.6 * shapes.hull.volume_m3,
+            "{name}: parts {total} vs hull {}",
+            shapes.hull.volume_m3
+        );
+    }
+}
+
+#[test]
+fn the_text_index_holds_category_and_description() {
+    let annotations = Annotations::parse(
+        r#"{"u1": {"category": "coffee_mug", "description": "A white porcelain cup."},
+            "u2": {"description": "A ceramic vase."},
+            "u3": {"mass": 1.0}}"#,
+    )
+    .expect("annotations");
+    let index = build_text_index(&annotations, &AssetsConfig::default());
+    assert_eq!(index.encoder, "lexical/1");
+    assert_eq!(index.documents.keys().collect::<Vec<_>>(), ["u1", "u2"]);
+    assert_eq!(
+        index.documents["u1"].text,
+        "coffee mug. A white porcelain cup."
+    );
+    assert_eq!(index.document_frequency["c:ceramic"], 2);
+    assert_eq!(index.document_frequency["w:mug"], 1);
+    let without = build_text_index(
+        &annotations,
+        &AssetsConfig {
+            text_includes_category: false,
+            ..AssetsConfig::default()
+        },
+    );
+    assert_eq!(without.documents["u1"].text, "A white porcelain cup.");
+}
+
+#[test]
+fn only_closed_meshes_have_a_volume() {
+    let closed = Mesh::cuboid([1.0, 2.0, 3.0]);
+    let v = shapes::closed_volume(&closed.positions, &closed.triangles).expect("closed");
+    assert_abs_diff_eq!(v, 6.0, epsilon = 1e-9);
+    // Drop the top face: open.
+    let open = Mesh {
+        triangles: closed.triangles[..2]
+            .iter()
+            .chain(&closed.triangles[4..])
+            .copied()
+            .collect(),
+        ..closed.clone()
+    };
+    assert_eq!(
+        shapes::closed_volume(&open.positions, &open.triangles),
+        None
+    );
+    // Every triangle with its own vertices (seams everywhere, as in Box.glb): welded.
+    let seamed = Mesh {
+        positions: closed
+            .triangles
+            .iter()
+            .flat_map(|t| t.map(|i| closed.positions[i as usize]))
+            .collect(),
+        triangles: (0..closed.triangles.len() as u32)
+            .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+            .collect(),
+    };
+    let v = shapes::closed_volume(&seamed.positions, &seamed.triangles).expect("welded");
+    assert_abs_diff_eq!(v, 6.0, epsilon = 1e-9);
+}

@@ -1,0 +1,996 @@
+//! A CPU z-buffer rasterizer: pinhole cameras with OpenCV intrinsics, per-pixel depth in
+//! metres, instance ids, and a shaded colour image (base colour with texture sampling,
+//! Lambert + Blinn-Phong lighting, a directional shadow map, supersampled anti-aliasing).
+//!
+//! Camera convention (SPEC section 2): OpenCV, x right, y down, z forward. Pixel `(u, v)` with
+//! integer indices is sampled at exactly `(u, v)` in image coordinates, so a pixel with depth
+//! `d` back-projects to `((u - cx) d / fx, (v - cy) d / fy, d)`. Depth is the camera-frame z,
+//! not the distance along the ray.
+//!
+//! The renderer first fills a visibility buffer (depth, drawn item, triangle, perspective-
+//! correct barycentrics) and shades only what is visible. It is single-threaded and
+//! deterministic: ties in depth keep the item drawn first.
+
+use std::sync::Arc;
+
+use crate::mesh::{add3, cross3, dot3, normalize3, scale3, sub3, Aabb, Affine3, TriMesh};
+
+/// Pinhole intrinsics in pixels (OpenCV convention).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PinholeCamera {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Focal length along x, pixels.
+    pub fx: f64,
+    /// Focal length along y, pixels.
+    pub fy: f64,
+    /// Principal point x, pixels.
+    pub cx: f64,
+    /// Principal point y, pixels.
+    pub cy: f64,
+}
+
+impl PinholeCamera {
+    /// Square pixels and the principal point at the image centre `(width / 2, height / 2)`,
+    /// with the focal length that gives a horizontal field of view of `fov_x_deg`.
+    pub fn from_fov_x_deg(width: u32, height: u32, fov_x_deg: f64) -> Self {
+        let f = width as f64 / 2.0 / (fov_x_deg.to_radians() / 2.0).tan();
+        Self {
+            width,
+            height,
+            fx: f,
+            fy: f,
+            cx: width as f64 / 2.0,
+            cy: height as f64 / 2.0,
+        }
+    }
+
+    /// The horizontal field of view in degrees.
+    pub fn fov_x_deg(&self) -> f64 {
+        2.0 * (self.width as f64 / 2.0 / self.fx).atan().to_degrees()
+    }
+
+    /// The camera of the same view at `factor` times the resolution, whose pixel `(U, V)`
+    /// samples the base image at `((U - (factor - 1) / 2) / factor, ...)`: the `factor ×
+    /// factor` block of a base pixel is centred on that pixel.
+    pub fn supersampled(&self, factor: u32) -> Self {
+        let k = factor as f64;
+        Self {
+            width: self.width * factor,
+            height: self.height * factor,
+            fx: self.fx * k,
+            fy: self.fy * k,
+            cx: self.cx * k + (k - 1.0) / 2.0,
+            cy: self.cy * k + (k - 1.0) / 2.0,
+        }
+    }
+
+    /// Projects a camera-frame point to pixel coordinates; `None` behind the camera.
+    pub fn project(&self, p_camera: [f64; 3]) -> Option<[f64; 2]> {
+        (p_camera[2] > 0.0).then(|| {
+            [
+                self.fx * p_camera[0] / p_camera[2] + self.cx,
+                self.fy * p_camera[1] / p_camera[2] + self.cy,
+            ]
+        })
+    }
+
+    /// The camera-frame point seen at pixel `(u, v)` with depth `depth_m`.
+    pub fn back_project(&self, u: f64, v: f64, depth_m: f64) -> [f64; 3] {
+        [
+            (u - self.cx) * depth_m / self.fx,
+            (v - self.cy) * depth_m / self.fy,
+            depth_m,
+        ]
+    }
+}
+
+/// An sRGB RGBA8 texture.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Texture {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Row-major RGBA bytes, sRGB encoded.
+    pub rgba: Vec<u8>,
+}
+
+impl Texture {
+    /// Bilinear sample with repeat wrapping at glTF texture coordinates (v down), linear RGB.
+    pub fn sample_linear_rgb(&self, uv: [f32; 2]) -> [f32; 3] {
+        let lut = srgb_to_linear_lut();
+        let (w, h) = (self.width as i64, self.height as i64);
+        if w == 0 || h == 0 {
+            return [1.0; 3];
+        }
+        let x = uv[0] as f64 * w as f64 - 0.5;
+        let y = uv[1] as f64 * h as f64 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        let pow2 = (w & (w - 1)) == 0 && (h & (h - 1)) == 0;
+        let texel = |xi: i64, yi: i64| -> [f32; 3] {
+            let (xi, yi) = if pow2 {
+                ((xi & (w - 1)) as usize, (yi & (h - 1)) as usize)
+            } else {
+                (xi.rem_euclid(w) as usize, yi.rem_euclid(h) as usize)
+            };
+            let o = (yi * self.width as usize + xi) * 4;
+            [
+                lut[self.rgba[o] as usize],
+                lut[self.rgba[o + 1] as usize],
+                lut[self.rgba[o + 2] as usize],
+            ]
+        };
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let (a, b, c, d) = (
+            texel(x0, y0),
+            texel(x0 + 1, y0),
+            texel(x0, y0 + 1),
+            texel(x0 + 1, y0 + 1),
+        );
+        std::array::from_fn(|i| {
+            let top = a[i] + (b[i] - a[i]) * fx;
+            let bottom = c[i] + (d[i] - c[i]) * fx;
+            top + (bottom - top) * fy
+        })
+    }
+}
+
+/// How a surface looks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SurfaceMaterial {
+    /// Linear RGB base colour (multiplied with the texture).
+    pub base_color: [f32; 3],
+    /// Base-colour texture, sampled with the mesh's texture coordinates.
+    pub texture: Option<Arc<Texture>>,
+    /// Roughness in [0, 1]: low values give a small bright highlight.
+    pub roughness: f32,
+}
+
+impl SurfaceMaterial {
+    /// An untextured material.
+    pub fn plain(base_color: [f32; 3], roughness: f32) -> Self {
+        Self {
+            base_color,
+            texture: None,
+            roughness,
+        }
+    }
+}
+
+/// One mesh to draw.
+#[derive(Debug, Clone)]
+pub struct DrawItem<'a> {
+    /// The triangles, in their own frame.
+    pub mesh: &'a TriMesh,
+    /// Where the mesh is.
+    pub world_from_mesh: Affine3,
+    /// How it looks.
+    pub material: &'a SurfaceMaterial,
+    /// The id written to the instance buffer (0 is reserved for "nothing").
+    pub instance: u32,
+    /// Whether it casts shadows.
+    pub casts_shadow: bool,
+}
+
+/// A light infinitely far away.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectionalLight {
+    /// Unit vector from the scene toward the light, world frame.
+    pub toward_light_world: [f64; 3],
+    /// Linear RGB intensity.
+    pub color: [f32; 3],
+    /// Whether it casts shadows (only the first shadowed light does).
+    pub casts_shadow: bool,
+}
+
+/// The lights of a shaded render.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lighting {
+    /// World up vector (for the hemisphere ambient term).
+    pub up_world: [f64; 3],
+    /// Ambient light from above, linear RGB.
+    pub sky_color: [f32; 3],
+    /// Ambient light from below, linear RGB.
+    pub ground_color: [f32; 3],
+    /// Directional lights.
+    pub lights: Vec<DirectionalLight>,
+    /// World region the shadow map covers; outside it nothing is shadowed.
+    pub shadow_region: Option<Aabb>,
+    /// Shadow map resolution (texels per side).
+    pub shadow_map_px: u32,
+    /// Colour where nothing is drawn, sRGB.
+    pub background_srgb: [u8; 3],
+}
+
+impl Default for Lighting {
+    fn default() -> Self {
+        Self {
+            up_world: [0.0, 0.0, 1.0],
+            sky_color: [0.42, 0.42, 0.45],
+            ground_color: [0.18, 0.17, 0.16],
+            lights: vec![DirectionalLight {
+                toward_light_world: normalize3([-0.35, -0.45, 0.82]),
+                color: [0.85, 0.83, 0.8],
+                casts_shadow: true,
+            }],
+            shadow_region: None,
+            shadow_map_px: 2048,
+            background_srgb: [255, 255, 255],
+        }
+    }
+}
+
+/// Nearest depth the perspective camera keeps, metres.
+const NEAR_M: f64 = 1e-3;
+
+/// What each pixel sees.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VisibilityBuffer {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Camera-frame depth in metres (`f32::INFINITY` where nothing is drawn).
+    pub depth_m: Vec<f32>,
+    /// Index of the drawn item (`u32::MAX` where nothing is drawn).
+    pub item: Vec<u32>,
+    /// Index of the triangle within the item's mesh.
+    pub triangle: Vec<u32>,
+    /// Perspective-correct barycentric coordinates (b1, b2) within that triangle.
+    pub barycentric: Vec<[f32; 2]>,
+}
+
+impl VisibilityBuffer {
+    fn new(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
+        Self {
+            width,
+            height,
+            depth_m: vec![f32::INFINITY; n],
+            item: vec![u32::MAX; n],
+            triangle: vec![0; n],
+            barycentric: vec![[0.0; 2]; n],
+        }
+    }
+
+    /// Instance ids per pixel (0 where nothing is drawn), from the items' `instance` fields.
+    pub fn instance_ids(&self, items: &[DrawItem<'_>]) -> Vec<u32> {
+        self.item
+            .iter()
+            .map(|&i| {
+                if i == u32::MAX {
+                    0
+                } else {
+                    items[i as usize].instance
+                }
+            })
+            .collect()
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Projection {
+    Perspective(PinholeCamera),
+    /// `sx = (x - x0) / texel`, `sy = (y - y0) / texel`, depth = z.
+    Orthographic {
+        x0: f64,
+        y0: f64,
+        texel: f64,
+    },
+}
+
+#[derive(Clone, Copy)]
+struct ClipVertex {
+    p: [f64; 3],
+    bary: [f64; 3],
+}
+
+fn lerp_clip(a: &ClipVertex, b: &ClipVertex, t: f64) -> ClipVertex {
+    ClipVertex {
+        p: add3(a.p, scale3(sub3(b.p, a.p), t)),
+        bary: add3(a.bary, scale3(sub3(b.bary, a.bary), t)),
+    }
+}
+
+/// Clips a triangle against `z >= near` (Sutherland–Hodgman); 0, 3 or 4 vertices.
+fn clip_near(tri: [ClipVertex; 3], near: f64, out: &mut Vec<ClipVertex>) {
+    out.clear();
+    for i in 0..3 {
+        let a = &tri[i];
+        let b = &tri[(i + 1) % 3];
+        let (ina, inb) = (a.p[2] >= near, b.p[2] >= near);
+        if ina {
+            out.push(*a);
+        }
+        if ina != inb {
+            let t = (near - a.p[2]) / (b.p[2] - a.p[2]);
+            out.push(lerp_clip(a, b, t));
+        }
+    }
+}
+
+fn rasterize_into(
+    buffer: &mut VisibilityBuffer,
+    projection: Projection,
+    frame_from_world: &Affine3,
+    items: &[DrawItem<'_>],
+    only_shadow_casters: bool,
+) {
+    let (w, h) = (buffer.width as i64, buffer.height as i64);
+    let mut polygon = Vec::with_capacity(4);
+    for (item_index, item) in items.iter().enumerate() {
+        if only_shadow_casters && !item.casts_shadow {
+            continue;
+        }
+        let frame_from_mesh = frame_from_world.mul(&item.world_from_mesh);
+        let points: Vec<[f64; 3]> = item
+            .mesh
+            .positions
+            .iter()
+            .map(|p| frame_from_mesh.apply_point([p[0] as f64, p[1] as f64, p[2] as f64]))
+            .collect();
+        for (t, tri) in item.mesh.triangles.iter().enumerate() {
+            let corners = [
+                ClipVertex {
+                    p: points[tri[0] as usize],
+                    bary: [1.0, 0.0, 0.0],
+                },
+                ClipVertex {
+                    p: points[tri[1] as usize],
+                    bary: [0.0, 1.0, 0.0],
+                },
+                ClipVertex {
+                    p: points[tri[2] as usize],
+                    bary: [0.0, 0.0, 1.0],
+                },
+            ];
+            match projection {
+                Projection::Perspective(_) => {
+                    if corners.iter().all(|c| c.p[2] < NEAR_M) {
+                        continue;
+                    }
+                    clip_near(corners, NEAR_M, &mut polygon);
+                }
+                Projection::Orthographic { .. } => {
+                    polygon.clear();
+                    polygon.extend_from_slice(&corners);
+                }
+            }
+            for k in 1..polygon.len().saturating_sub(1) {
+                let fan = [polygon[0], polygon[k], polygon[k + 1]];
+                raster_triangle(buffer, projection, &fan, item_index as u32, t as u32, w, h);
+            }
+        }
+    }
+}
+
+fn raster_triangle(
+    buffer: &mut VisibilityBuffer,
+    projection: Projection,
+    v: &[ClipVertex; 3],
+    item: u32,
+    triangle: u32,
+    w: i64,
+    h: i64,
+) {
+    let screen: [[f64; 2]; 3] = std::array::from_fn(|i| match projection {
+        Projection::Perspective(cam) => [
+            cam.fx * v[i].p[0] / v[i].p[2] + cam.cx,
+            cam.fy * v[i].p[1] / v[i].p[2] + cam.cy,
+        ],
+        Projection::Orthographic { x0, y0, texel } => {
+            [(v[i].p[0] - x0) / texel, (v[i].p[1] - y0) / texel]
+        }
+    });
+    let area = (screen[1][0] - screen[0][0]) * (screen[2][1] - screen[0][1])
+        - (screen[1][1] - screen[0][1]) * (screen[2][0] - screen[0][0]);
+    if area.abs() < 1e-12 || !area.is_finite() {
+        return;
+    }
+    let min_x = screen.iter().map(|s| s[0]).fold(f64::INFINITY, f64::min);
+    let max_x = screen
+        .iter()
+        .map(|s| s[0])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let min_y = screen.iter().map(|s| s[1]).fold(f64::INFINITY, f64::min);
+    let max_y = screen
+        .iter()
+        .map(|s| s[1])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let x_start = (min_x.ceil() as i64).max(0);
+    let x_end = (max_x.floor() as i64).min(w - 1);
+    let y_start = (min_y.ceil() as i64).max(0);
+    let y_end = (max_y.floor() as i64).min(h - 1);
+    if x_start > x_end || y_start > y_end {
+        return;
+    }
+    let inv_area = 1.0 / area;
+    let perspective = matches!(projection, Projection::Perspective(_));
+    let inv_z: [f64; 3] = std::array::from_fn(|i| 1.0 / v[i].p[2]);
+    // Barycentric l_k(x, y) = (a_k x + b_k y + c_k) / area for the edge opposite corner k.
+    let coefficients = |p: [f64; 2], q: [f64; 2]| {
+        let a = -(q[1] - p[1]) * inv_area;
+        let b = (q[0] - p[0]) * inv_area;
+        let c = (-(q[0] - p[0]) * p[1] + (q[1] - p[1]) * p[0]) * inv_area;
+        (a, b, c)
+    };
+    let edges = [
+        coefficients(screen[1], screen[2]),
+        coefficients(screen[2], screen[0]),
+        coefficients(screen[0], screen[1]),
+    ];
+    let with_attributes = !buffer.item.is_empty();
+    for y in y_start..=y_end {
+        let py = y as f64;
+        // The span of x where every barycentric is non-negative.
+        let (mut lo, mut hi) = (x_start as f64, x_end as f64);
+        let mut empty = false;
+        let mut row = [(0.0, 0.0); 3];
+        for (k, &(a, b, c)) in edges.iter().enumerate() {
+            let offset = b * py + c;
+            row[k] = (a, offset);
+            if a > 0.0 {
+                lo = lo.max(-offset / a);
+            } else if a < 0.0 {
+                hi = hi.min(-offset / a);
+            } else if offset < 0.0 {
+                empty = true;
+            }
+        }
+        if empty || lo > hi + 1.0 {
+            continue;
+        }
+        // One pixel of slack each side; the exact test below decides.
+        let x_lo = ((lo.ceil() as i64) - 1).max(x_start);
+        let x_hi = ((hi.floor() as i64) + 1).min(x_end);
+        for x in x_lo..=x_hi {
+            let px = x as f64;
+            let l0 = row[0].0 * px + row[0].1;
+            let l1 = row[1].0 * px + row[1].1;
+            let l2 = row[2].0 * px + row[2].1;
+            if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
+                continue;
+            }
+            let (depth, mu) = if perspective {
+                let q = [l0 * inv_z[0], l1 * inv_z[1], l2 * inv_z[2]];
+                let sum = q[0] + q[1] + q[2];
+                if sum <= 0.0 {
+                    continue;
+                }
+                (1.0 / sum, [q[0] / sum, q[1] / sum, q[2] / sum])
+            } else {
+                (
+                    l0 * v[0].p[2] + l1 * v[1].p[2] + l2 * v[2].p[2],
+                    [l0, l1, l2],
+                )
+            };
+            let o = (y * w + x) as usize;
+            let depth32 = depth as f32;
+            if depth32 < buffer.depth_m[o] {
+                buffer.depth_m[o] = depth32;
+                if with_attributes {
+                    buffer.item[o] = item;
+                    buffer.triangle[o] = triangle;
+                    let b: [f64; 3] = std::array::from_fn(|k| {
+                        mu[0] * v[0].bary[k] + mu[1] * v[1].bary[k] + mu[2] * v[2].bary[k]
+                    });
+                    buffer.barycentric[o] = [b[1] as f32, b[2] as f32];
+                }
+            }
+        }
+    }
+}
+
+/// Fills a visibility buffer for a perspective camera at `camera_from_world`.
+pub fn visibility(
+    camera: &PinholeCamera,
+    camera_from_world: &Affine3,
+    items: &[DrawItem<'_>],
+) -> VisibilityBuffer {
+    let mut buffer = VisibilityBuffer::new(camera.width, camera.height);
+    rasterize_into(
+        &mut buffer,
+        Projection::Perspective(*camera),
+        camera_from_world,
+        items,
+        false,
+    );
+    buffer
+}
+
+struct ShadowMap {
+    light_from_world: Affine3,
+    x0: f64,
+    y0: f64,
+    texel: f64,
+    buffer: VisibilityBuffer,
+}
+
+impl ShadowMap {
+    fn build(
+        light: &DirectionalLight,
+        region: &Aabb,
+        size_px: u32,
+        items: &[DrawItem<'_>],
+    ) -> Self {
+        // Light frame: z along the light's travel (depth grows away from the light).
+        let z = scale3(normalize3(light.toward_light_world), -1.0);
+        let helper = if z[2].abs() < 0.9 {
+            [0.0, 0.0, 1.0]
+        } else {
+            [1.0, 0.0, 0.0]
+        };
+        let x = normalize3(cross3(helper, z));
+        let y = cross3(z, x);
+        let light_from_world = Affine3 {
+            linear: [x, y, z],
+            translation: [0.0; 3],
+        };
+        let bounds = region.transformed(&light_from_world);
+        let extent = (bounds.max[0] - bounds.min[0]).max(bounds.max[1] - bounds.min[1]);
+        let texel = (extent / size_px.max(1) as f64).max(1e-6);
+        let (x0, y0) = (bounds.min[0], bounds.min[1]);
+        // Depth only: no item, triangle or barycentric planes.
+        let mut buffer = VisibilityBuffer {
+            width: size_px,
+            height: size_px,
+            depth_m: vec![f32::INFINITY; size_px as usize * size_px as usize],
+            item: Vec::new(),
+            triangle: Vec::new(),
+            barycentric: Vec::new(),
+        };
+        rasterize_into(
+            &mut buffer,
+            Projection::Orthographic { x0, y0, texel },
+            &light_from_world,
+            items,
+            true,
+        );
+        Self {
+            light_from_world,
+            x0,
+            y0,
+            texel,
+            buffer,
+        }
+    }
+
+    /// Fraction of light reaching `p_world` (percentage-closer filtering over the 2×2 texels
+    /// around it, bilinearly weighted).
+    fn light_fraction(&self, p_world: [f64; 3], normal_world: [f64; 3]) -> f32 {
+        // Offset along the normal and a depth bias keep surfaces from shadowing themselves.
+        let p = add3(p_world, scale3(normal_world, 1.5 * self.texel));
+        let q = self.light_from_world.apply_point(p);
+        let sx = (q[0] - self.x0) / self.texel - 0.5;
+        let sy = (q[1] - self.y0) / self.texel - 0.5;
+        let size = self.buffer.width as i64;
+        let (x0, y0) = (sx.floor() as i64, sy.floor() as i64);
+        if x0 < 0 || y0 < 0 || x0 + 1 >= size || y0 + 1 >= size {
+            return 1.0;
+        }
+        let (fx, fy) = ((sx - x0 as f64) as f32, (sy - y0 as f64) as f32);
+        let bias = (2.0 * self.texel + 1e-3) as f32;
+        let depth = q[2] as f32 - bias;
+        let lit = |x: i64, y: i64| -> f32 {
+            if depth <= self.buffer.depth_m[(y * size + x) as usize] {
+                1.0
+            } else {
+                0.0
+            }
+        };
+        let top = lit(x0, y0) * (1.0 - fx) + lit(x0 + 1, y0) * fx;
+        let bottom = lit(x0, y0 + 1) * (1.0 - fx) + lit(x0 + 1, y0 + 1) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+}
+
+fn srgb_to_linear_lut() -> &'static [f32; 256] {
+    static LUT: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    LUT.get_or_init(|| {
+        std::array::from_fn(|i| {
+            let c = i as f32 / 255.0;
+            if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            }
+        })
+    })
+}
+
+/// Converts a linear value in [0, 1] to an sRGB byte.
+pub fn linear_to_srgb_u8(c: f32) -> u8 {
+    static LUT: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+    let lut = LUT.get_or_init(|| {
+        (0..=4096)
+            .map(|i| {
+                let c = i as f32 / 4096.0;
+                let s = if c <= 0.0031308 {
+                    12.92 * c
+                } else {
+                    1.055 * c.powf(1.0 / 2.4) - 0.055
+                };
+                (s * 255.0 + 0.5).clamp(0.0, 255.0) as u8
+            })
+            .collect()
+    });
+    let i = (c.clamp(0.0, 1.0) * 4096.0 + 0.5) as usize;
+    lut[i.min(4096)]
+}
+
+/// Converts an sRGB byte to a linear value in [0, 1].
+pub fn srgb_u8_to_linear(c: u8) -> f32 {
+    srgb_to_linear_lut()[c as usize]
+}
+
+/// A shaded render: the visibility buffer and its colour image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShadedRender {
+    /// What each pixel sees.
+    pub visibility: VisibilityBuffer,
+    /// Row-major sRGB RGB bytes.
+    pub rgb: Vec<u8>,
+}
+
+/// Renders a shaded colour image (and its visibility buffer) at the camera's resolution.
+pub fn render_shaded(
+    camera: &PinholeCamera,
+    camera_from_world: &Affine3,
+    items: &[DrawItem<'_>],
+    lighting: &Lighting,
+) -> ShadedRender {
+    let visibility = visibility(camera, camera_from_world, items);
+    let world_from_camera = camera_from_world.inverse().unwrap_or(Affine3::IDENTITY);
+    let camera_center_world = world_from_camera.translation;
+    let shadow = lighting
+        .lights
+        .iter()
+        .find(|l| l.casts_shadow)
+        .zip(lighting.shadow_region.as_ref())
+        .map(|(light, region)| ShadowMap::build(light, region, lighting.shadow_map_px, items));
+    let shadow_light = lighting.lights.iter().position(|l| l.casts_shadow);
+
+    // Per-item world-space vertices and normals, computed once.
+    // (positions, normals) in the world frame.
+    type WorldVertices = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+    let world: Vec<WorldVertices> = items
+        .iter()
+        .map(|item| {
+            let m = &item.world_from_mesh;
+            let nm = m.normal_matrix().unwrap_or(m.linear);
+            let positions = item
+                .mesh
+                .positions
+                .iter()
+                .map(|p| m.apply_point([p[0] as f64, p[1] as f64, p[2] as f64]))
+                .collect();
+            let normals = item
+                .mesh
+                .normals
+                .iter()
+                .map(|n| {
+                    let n = [n[0] as f64, n[1] as f64, n[2] as f64];
+                    normalize3([dot3(nm[0], n), dot3(nm[1], n), dot3(nm[2], n)])
+                })
+                .collect();
+            (positions, normals)
+        })
+        .collect();
+
+    let bg = lighting.background_srgb;
+    let mut rgb = vec![0u8; camera.width as usize * camera.height as usize * 3];
+    for (o, &item_index) in visibility.item.iter().enumerate() {
+        if item_index == u32::MAX {
+            rgb[o * 3..o * 3 + 3].copy_from_slice(&bg);
+            continue;
+        }
+        let item = &items[item_index as usize];
+        let (positions, normals) = &world[item_index as usize];
+        let tri = item.mesh.triangles[visibility.triangle[o] as usize];
+        let [b1, b2] = visibility.barycentric[o].map(|b| b as f64);
+        let b0 = 1.0 - b1 - b2;
+        let weights = [b0, b1, b2];
+        let interp = |arr: &[[f64; 3]]| -> [f64; 3] {
+            std::array::from_fn(|k| {
+                (0..3)
+                    .map(|j| weights[j] * arr[tri[j] as usize][k])
+                    .sum::<f64>()
+            })
+        };
+        let p = interp(positions);
+        let mut n = normalize3(interp(normals));
+        let to_eye = normalize3(sub3(camera_center_world, p));
+        if dot3(n, to_eye) < 0.0 {
+            n = scale3(n, -1.0);
+        }
+        let material = item.material;
+        let mut albedo = material.base_color;
+        if let (Some(texture), true) = (&material.texture, item.mesh.has_uvs()) {
+            let uv: [f32; 2] = std::array::from_fn(|k| {
+                (0..3)
+                    .map(|j| weights[j] as f32 * item.mesh.uvs[tri[j] as usize][k])
+                    .sum::<f32>()
+            });
+            let t = texture.sample_linear_rgb(uv);
+            albedo = [albedo[0] * t[0], albedo[1] * t[1], albedo[2] * t[2]];
+        }
+        let up = dot3(n, lighting.up_world) as f32;
+        let hemi = 0.5 + 0.5 * up;
+        let mut color: [f32; 3] = std::array::from_fn(|k| {
+            albedo[k] * (lighting.sky_color[k] * hemi + lighting.ground_color[k] * (1.0 - hemi))
+        });
+        // Blinn-Phong exponent from roughness.
+        let shininess =
+            (2.0 / material.roughness.clamp(0.05, 1.0).powi(4) - 2.0).clamp(1.0, 4096.0);
+        let specular_strength = 0.35 * (1.0 - material.roughness.clamp(0.0, 1.0)).powi(2);
+        for (li, light) in lighting.lights.iter().enumerate() {
+            let l = normalize3(light.toward_light_world);
+            let ndotl = dot3(n, l).max(0.0) as f32;
+            if ndotl <= 0.0 {
+                continue;
+            }
+            let visible = match (&shadow, shadow_light) {
+                (Some(map), Some(s)) if s == li => map.light_fraction(p, n),
+                _ => 1.0,
+            };
+            if visible <= 0.0 {
+                continue;
+            }
+            let half = normalize3(add3(l, to_eye));
+            // Schlick's rational stand-in for x^n: cheap, and close where it matters.
+            let x = dot3(n, half).max(0.0) as f32;
+            let spec = x / (shininess - shininess * x + x) * specular_strength;
+            for k in 0..3 {
+                color[k] += light.color[k] * visible * (albedo[k] * ndotl + spec * ndotl.sqrt());
+            }
+        }
+        for k in 0..3 {
+            rgb[o * 3 + k] = linear_to_srgb_u8(color[k]);
+        }
+    }
+    ShadedRender { visibility, rgb }
+}
+
+/// Renders a shaded image at `factor × factor` samples per pixel and averages each block (in
+/// linear light), for an anti-aliased photo at the camera's own resolution.
+pub fn render_shaded_supersampled(
+    camera: &PinholeCamera,
+    camera_from_world: &Affine3,
+    items: &[DrawItem<'_>],
+    lighting: &Lighting,
+    factor: u32,
+) -> Vec<u8> {
+    let factor = factor.max(1);
+    let big = camera.supersampled(factor);
+    let render = render_shaded(&big, camera_from_world, items, lighting);
+    if factor == 1 {
+        return render.rgb;
+    }
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let bw = big.width as usize;
+    let f = factor as usize;
+    let norm = 1.0 / (f * f) as f32;
+    let mut out = vec![0u8; w * h * 3];
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = [0f32; 3];
+            for dy in 0..f {
+                for dx in 0..f {
+                    let o = ((y * f + dy) * bw + x * f + dx) * 3;
+                    for (k, a) in acc.iter_mut().enumerate() {
+                        *a += srgb_u8_to_linear(render.rgb[o + k]);
+                    }
+                }
+            }
+            for k in 0..3 {
+                out[(y * w + x) * 3 + k] = linear_to_srgb_u8(acc[k] * norm);
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    fn camera() -> PinholeCamera {
+        PinholeCamera {
+            width: 64,
+            height: 48,
+            fx: 50.0,
+            fy: 50.0,
+            cx: 31.5,
+            cy: 23.5,
+        }
+    }
+
+    #[test]
+    fn a_plane_facing_the_camera_has_its_exact_depth() {
+        // A 2 m wide square at z = 1.5 m in the camera frame.
+        let mut quad = TriMesh::cuboid([2.0, 2.0, 0.0001]);
+        quad = quad.transformed(&Affine3::from_translation([0.0, 0.0, 1.5]));
+        let material = SurfaceMaterial::plain([0.5; 3], 0.5);
+        let items = [DrawItem {
+            mesh: &quad,
+            world_from_mesh: Affine3::IDENTITY,
+            material: &material,
+            instance: 7,
+            casts_shadow: false,
+        }];
+        let vis = visibility(&camera(), &Affine3::IDENTITY, &items);
+        let ids = vis.instance_ids(&items);
+        assert!(ids.iter().all(|&i| i == 7));
+        for d in &vis.depth_m {
+            assert_abs_diff_eq!(*d as f64, 1.5 - 0.00005, epsilon = 1e-5);
+        }
+    }
+
+    #[test]
+    fn a_tilted_plane_back_projects_onto_itself() {
+        // The plane z = 2 + 0.5 x (camera frame), seen through every pixel.
+        let mut plane = TriMesh::cuboid([6.0, 6.0, 0.0]);
+        plane.triangles.truncate(0);
+        let corners = [[-3.0, -3.0], [3.0, -3.0], [3.0, 3.0], [-3.0, 3.0]];
+        plane.positions.clear();
+        plane.normals.clear();
+        plane.uvs.clear();
+        for [x, y] in corners {
+            plane
+                .positions
+                .push([x as f32, y as f32, (2.0 + 0.5 * x) as f32]);
+            plane.normals.push([0.0, 0.0, 1.0]);
+        }
+        plane.triangles = vec![[0, 1, 2], [0, 2, 3]];
+        let material = SurfaceMaterial::plain([0.5; 3], 0.5);
+        let items = [DrawItem {
+            mesh: &plane,
+            world_from_mesh: Affine3::IDENTITY,
+            material: &material,
+            instance: 1,
+            casts_shadow: false,
+        }];
+        let cam = camera();
+        let vis = visibility(&cam, &Affine3::IDENTITY, &items);
+        for v in 0..cam.height {
+            for u in 0..cam.width {
+                let d = vis.depth_m[(v * cam.width + u) as usize] as f64;
+                let p = cam.back_project(u as f64, v as f64, d);
+                assert_abs_diff_eq!(p[2], 2.0 + 0.5 * p[0], epsilon = 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn nearer_objects_hide_farther_ones_and_clipping_keeps_geometry_behind_the_eye_out() {
+        let near = TriMesh::cuboid([0.2, 0.2, 0.2])
+            .transformed(&Affine3::from_translation([0.0, 0.0, 1.0]));
+        // A floor-like plane crossing the camera plane (z from -5 to 5).
+        let floor = TriMesh::cuboid([10.0, 0.01, 10.0])
+            .transformed(&Affine3::from_translation([0.0, 0.5, 0.0]));
+        let material = SurfaceMaterial::plain([0.5; 3], 0.5);
+        let items = [
+            DrawItem {
+                mesh: &floor,
+                world_from_mesh: Affine3::IDENTITY,
+                material: &material,
+                instance: 1,
+                casts_shadow: true,
+            },
+            DrawItem {
+                mesh: &near,
+                world_from_mesh: Affine3::IDENTITY,
+                material: &material,
+                instance: 2,
+                casts_shadow: true,
+            },
+        ];
+        let cam = camera();
+        let vis = visibility(&cam, &Affine3::IDENTITY, &items);
+        let ids = vis.instance_ids(&items);
+        let centre = (24 * cam.width + 32) as usize;
+        assert_eq!(ids[centre], 2);
+        assert_abs_diff_eq!(vis.depth_m[centre] as f64, 0.9, epsilon = 1e-4);
+        // Bottom rows see the floor (y = 0.495 m below the axis), top rows see nothing.
+        let bottom = ((cam.height - 1) * cam.width + 5) as usize;
+        assert_eq!(ids[bottom], 1);
+        let d = vis.depth_m[bottom] as f64;
+        let p = cam.back_project(5.0, (cam.height - 1) as f64, d);
+        assert_abs_diff_eq!(p[1], 0.495, epsilon = 1e-4);
+        assert_eq!(ids[5], 0);
+    }
+
+    #[test]
+    fn shading_is_deterministic_and_shadows_darken() {
+        // Looking straight at a wall 2 m away with a box sticking out of it toward the
+        // camera; "up" is toward the camera and the light comes from +x.
+        let wall = TriMesh::cuboid([4.0, 4.0, 0.01])
+            .transformed(&Affine3::from_translation([0.0, 0.0, 2.005]));
+        let block = TriMesh::cuboid([0.3, 0.3, 0.2])
+            .transformed(&Affine3::from_translation([0.0, 0.0, 1.9]));
+        let material = SurfaceMaterial::plain([0.6; 3], 0.8);
+        let items = [
+            DrawItem {
+                mesh: &wall,
+                world_from_mesh: Affine3::IDENTITY,
+                material: &material,
+                instance: 1,
+                casts_shadow: true,
+            },
+            DrawItem {
+                mesh: &block,
+                world_from_mesh: Affine3::IDENTITY,
+                material: &material,
+                instance: 2,
+                casts_shadow: true,
+            },
+        ];
+        let lighting = Lighting {
+            up_world: [0.0, 0.0, -1.0],
+            lights: vec![DirectionalLight {
+                toward_light_world: normalize3([0.6, 0.0, -1.0]),
+                color: [1.0; 3],
+                casts_shadow: true,
+            }],
+            shadow_region: Aabb::from_points([[-1.0, -1.0, 1.5], [1.0, 1.0, 2.1]]),
+            shadow_map_px: 512,
+            ..Default::default()
+        };
+        let cam = camera();
+        let a = render_shaded_supersampled(&cam, &Affine3::IDENTITY, &items, &lighting, 2);
+        let b = render_shaded_supersampled(&cam, &Affine3::IDENTITY, &items, &lighting, 2);
+        assert_eq!(a, b);
+        // The shadow falls 0.12 m to the left of the block on the wall: wall pixels at
+        // x = -0.22 m are shadowed, at x = +0.22 m they are lit.
+        let vis = visibility(&cam, &Affine3::IDENTITY, &items);
+        let ids = vis.instance_ids(&items);
+        let row = 24u32;
+        let (left, right) = (26u32, 37u32);
+        assert_eq!(ids[(row * cam.width + left) as usize], 1);
+        assert_eq!(ids[(row * cam.width + right) as usize], 1);
+        let lum = |u: u32| a[((row * cam.width + u) * 3) as usize] as i32;
+        assert!(
+            lum(left) + 20 < lum(right),
+            "left {} right {}",
+            lum(left),
+            lum(right)
+        );
+    }
+
+    #[test]
+    fn textures_are_sampled_with_repeat() {
+        let t = Texture {
+            width: 2,
+            height: 1,
+            rgba: vec![0, 0, 0, 255, 255, 255, 255, 255],
+        };
+        assert_abs_diff_eq!(t.sample_linear_rgb([0.25, 0.5])[0], 0.0, epsilon = 1e-6);
+        assert_abs_diff_eq!(t.sample_linear_rgb([0.75, 0.5])[0], 1.0, epsilon = 1e-6);
+        assert_abs_diff_eq!(t.sample_linear_rgb([1.75, 0.5])[0], 1.0, epsilon = 1e-6);
+        assert_eq!(linear_to_srgb_u8(1.0), 255);
+        assert_eq!(linear_to_srgb_u8(0.0), 0);
+        assert_eq!(linear_to_srgb_u8(srgb_u8_to_linear(128)), 128);
+    }
+
+    #[test]
+    fn supersampled_camera_is_centred_on_base_pixels() {
+        let cam = camera();
+        let big = cam.supersampled(2);
+        // The 2×2 block of base pixel (10, 7) is (20..22, 14..16); its centre (20.5, 14.5)
+        // must look along the same ray as (10, 7).
+        let p = cam.back_project(10.0, 7.0, 1.0);
+        let q = big.back_project(20.5, 14.5, 1.0);
+        assert_abs_diff_eq!(p[0], q[0], epsilon = 1e-12);
+        assert_abs_diff_eq!(p[1], q[1], epsilon = 1e-12);
+        assert_abs_diff_eq!(
+            PinholeCamera::from_fov_x_deg(640, 480, 60.0).fov_x_deg(),
+            60.0,
+            epsilon = 1e-9
+        );
+    }
+}
