@@ -65,23 +65,29 @@ fn lines<T: serde::de::DeserializeOwned>(path: &Path) -> Vec<T> {
         .collect()
 }
 
-/// Each scene's layout as the records show it (LLM form, rounded to 0.1), by scene id.
+/// Each scene's layout as the records show it (the first of qa/, refined/, coarse/, in the
+/// LLM form, rounded to 0.1), by scene id.
 fn layouts(dir: &Path) -> BTreeMap<String, LlmLayout> {
     let mut out = BTreeMap::new();
-    for path in common::all_files(dir)
-        .keys()
-        .filter(|p| p.ends_with("coarse/layout.json"))
-    {
-        let scene_id = Path::new(path)
-            .parent()
-            .and_then(Path::parent)
-            .and_then(Path::file_name)
-            .expect("scene folder")
-            .to_string_lossy()
-            .into_owned();
-        let dataset: mesa_schemas::DatasetLayout = read(&dir.join(path));
-        let llm = mesa_schemas::convert::llm_from_dataset(&dataset).layout;
-        out.insert(scene_id, round_layout(&llm, 1));
+    for table in std::fs::read_dir(dir.join("scenes")).expect("scenes") {
+        for scene in std::fs::read_dir(table.expect("entry").path()).expect("table") {
+            let scene = scene.expect("entry").path();
+            let Some(path) = ["qa", "refined", "coarse"]
+                .iter()
+                .map(|d| scene.join(d).join("layout.json"))
+                .find(|p| p.is_file())
+            else {
+                continue;
+            };
+            let dataset: mesa_schemas::DatasetLayout = read(&path);
+            let llm = mesa_schemas::convert::llm_from_dataset(&dataset).layout;
+            let id = scene
+                .file_name()
+                .expect("id")
+                .to_string_lossy()
+                .into_owned();
+            out.insert(id, round_layout(&llm, 1));
+        }
     }
     out
 }
@@ -95,34 +101,28 @@ fn scene_of<'a>(layouts: &'a BTreeMap<String, LlmLayout>, layout: &LlmLayout) ->
         .expect("a scene with that zone")
 }
 
-#[test]
-fn sft_records_give_back_their_layouts_and_the_user_turn_has_the_pinned_bytes() {
-    let dir = built();
-    let records = dir.path().join("records");
-    let sft: Vec<SftRecord> = read(&records.join("sft.json"));
-    let test: Vec<SftRecord> = read(&records.join("test.json"));
-    let split: SplitArtifact = read(&records.join("split.json"));
-    let count = |name: &str| split.scenes.values().filter(|s| *s == name).count();
-    assert_eq!((count("train"), count("dpo"), count("test")), (4, 2, 1));
-    assert_eq!(sft.len(), 4 * 5);
-    assert_eq!(test.len(), 5);
-    let layouts = layouts(dir.path());
+/// Checks SFT records against the dataset: each output parses under the paper's rule and gives
+/// back exactly its scene's layout and scene-graph lines; the instruction is the prompt file;
+/// the input is task info with the layout's zone.
+fn check_sft<'a>(dir: &Path, records: impl IntoIterator<Item = &'a SftRecord>) {
+    let layouts = layouts(dir);
+    let files = common::all_files(dir);
     let instruction = std::fs::read_to_string(
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/prompts/layout_generation.txt"),
     )
     .expect("the prompt file");
     let instruction = instruction.trim_end_matches('\n');
-    for record in sft.iter().chain(&test) {
+    for record in records {
         // The output parses under the paper's rule and gives back the scene's layout exactly.
         let parsed = parse_model_output(&record.output).expect("a success");
         assert!(parsed.dropped_objects.is_empty());
         let scene = scene_of(&layouts, &parsed.layout);
         assert_eq!(parsed.layout, layouts[scene], "{scene}");
         let graph = std::fs::read_to_string(
-            common::all_files(dir.path())
+            files
                 .keys()
                 .find(|k| k.contains(scene) && k.ends_with("graph/graph.txt"))
-                .map(|k| dir.path().join(k))
+                .map(|k| dir.join(k))
                 .expect("graph.txt"),
         )
         .expect("read");
@@ -142,6 +142,25 @@ fn sft_records_give_back_their_layouts_and_the_user_turn_has_the_pinned_bytes() 
             .collect();
         assert!(keys.contains(&"Action Sequence") && keys.contains(&"Objects cluster"));
     }
+}
+
+#[test]
+fn sft_records_give_back_their_layouts_and_the_user_turn_has_the_pinned_bytes() {
+    let dir = built();
+    let records = dir.path().join("records");
+    let sft: Vec<SftRecord> = read(&records.join("sft.json"));
+    let test: Vec<SftRecord> = read(&records.join("test.json"));
+    let split: SplitArtifact = read(&records.join("split.json"));
+    let count = |name: &str| split.scenes.values().filter(|s| *s == name).count();
+    assert_eq!((count("train"), count("dpo"), count("test")), (4, 2, 1));
+    assert_eq!(sft.len(), 4 * 5);
+    assert_eq!(test.len(), 5);
+    let instruction = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/prompts/layout_generation.txt"),
+    )
+    .expect("the prompt file");
+    let instruction = instruction.trim_end_matches('\n');
+    check_sft(dir.path(), sft.iter().chain(&test));
     // The pinned bytes of the user turn LLaMA-Factory builds from an alpaca record:
     // instruction, one line break, the input written as json.dumps(indent=2,
     // ensure_ascii=False) writes it, here rebuilt field by field.
@@ -196,20 +215,17 @@ fn sft_records_give_back_their_layouts_and_the_user_turn_has_the_pinned_bytes() 
     );
 }
 
-#[test]
-fn dpo_pairs_are_chosen_outputs_against_verified_corruptions() {
-    let dir = built();
-    let records = dir.path().join("records");
-    let dpo: Vec<DpoRecord> = read(&records.join("dpo.json"));
-    assert_eq!(
-        dpo.len(),
-        2 * 5 * 2,
-        "two rejected per prompt, 5 prompts, 2 scenes"
-    );
-    let layouts = layouts(dir.path());
-    let mut kinds: BTreeMap<&str, usize> = BTreeMap::new();
-    let mut per_prompt: BTreeMap<(String, String), BTreeSet<&str>> = BTreeMap::new();
-    for record in &dpo {
+/// Prompt (input, scene) → the corruptions of its rejected outputs.
+type PerPrompt = BTreeMap<(String, String), BTreeSet<&'static str>>;
+
+/// Checks DPO records against the dataset: the chosen output is the scene's; each rejected
+/// output is one of the three corruptions and differs the way it says. Returns the count per
+/// corruption and the corruptions of each prompt.
+fn check_dpo(dir: &Path, dpo: &[DpoRecord]) -> (BTreeMap<&'static str, usize>, PerPrompt) {
+    let layouts = layouts(dir);
+    let mut kinds: BTreeMap<&'static str, usize> = BTreeMap::new();
+    let mut per_prompt = PerPrompt::new();
+    for record in dpo {
         let chosen = parse_model_output(&record.chosen).expect("chosen parses");
         let rejected = parse_model_output(&record.rejected).expect("rejected parses");
         let scene = scene_of(&layouts, &chosen.layout);
@@ -281,6 +297,20 @@ fn dpo_pairs_are_chosen_outputs_against_verified_corruptions() {
             .or_default()
             .insert(kind);
     }
+    (kinds, per_prompt)
+}
+
+#[test]
+fn dpo_pairs_are_chosen_outputs_against_verified_corruptions() {
+    let dir = built();
+    let records = dir.path().join("records");
+    let dpo: Vec<DpoRecord> = read(&records.join("dpo.json"));
+    assert_eq!(
+        dpo.len(),
+        2 * 5 * 2,
+        "two rejected per prompt, 5 prompts, 2 scenes"
+    );
+    let (kinds, per_prompt) = check_dpo(dir.path(), &dpo);
     // Each prompt's two rejected outputs come from two different corruptions; all three occur.
     assert!(per_prompt.values().all(|k| k.len() == 2), "{per_prompt:?}");
     assert_eq!(kinds.len(), 3, "{kinds:?}");
@@ -539,4 +569,31 @@ fn llamafactory_and_trl_read_the_files() {
     assert_eq!(trl["trl_sft.jsonl"]["rows"], 20);
     assert_eq!(trl["trl_dpo.jsonl"]["rows"], 20);
     assert_eq!(trl["trl_sft.jsonl"]["first_user_turn"], turn(&sft[0]));
+}
+
+#[test]
+fn on_the_demo_mesa_run_writes_sft_and_dpo_records() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = mesa()
+        .args(["demo", "--scenes", "6", "-q"])
+        .arg(dir.path())
+        .output()
+        .expect("demo");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stderr = ok(&["run", "--progress", "off"], dir.path());
+    assert!(stderr.contains("tasks: 6 scenes: 6 done"), "{stderr}");
+    let records = dir.path().join("records");
+    let sft: Vec<SftRecord> = read(&records.join("sft.json"));
+    let test: Vec<SftRecord> = read(&records.join("test.json"));
+    let dpo: Vec<DpoRecord> = read(&records.join("dpo.json"));
+    // 6 scenes at 0.8 / 0.1 / 0.1: 4 train, 1 dpo, 1 test; 5 template tasks each.
+    assert_eq!((sft.len(), test.len(), dpo.len()), (20, 5, 10));
+    check_sft(dir.path(), sft.iter().chain(&test));
+    let (kinds, per_prompt) = check_dpo(dir.path(), &dpo);
+    assert_eq!(kinds.values().sum::<usize>(), 10);
+    assert!(per_prompt.values().all(|k| k.len() == 2), "{per_prompt:?}");
 }

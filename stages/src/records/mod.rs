@@ -307,3 +307,80 @@ pub fn dpo_pairs(
     }
     (pairs, notes)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mesa_schemas::artifacts::TASKS_SCHEMA;
+    use mesa_schemas::TaskInfo;
+
+    fn task(info: TaskInfo) -> TaskRecord {
+        TaskRecord {
+            schema: TASKS_SCHEMA.to_owned(),
+            scene_id: "bathroom_vanity_0001".to_owned(),
+            task_index: 0,
+            generator: "template".to_owned(),
+            layout: "qa/layout.json".to_owned(),
+            layout_sha256: String::new(),
+            views: Vec::new(),
+            table_description: info.environment.clone(),
+            task_info: info,
+            reasoning: String::new(),
+        }
+    }
+
+    #[test]
+    fn the_input_is_json_dumps_indent_2_without_ascii_escapes_with_the_layouts_zones() {
+        let info = TaskInfo {
+            environment: "Un lavabo: savon, crème \"douce\"".to_owned(),
+            zone_cm: ZoneCm([0.0, 1.0, 0.0, 1.0]),
+            sink_zone_cm: None,
+            task: "Ranger".to_owned(),
+            goal: vec!["Pick la crème".to_owned()],
+            action_sequence: Some(vec!["Pick(Crème)".to_owned()]),
+            objects_cluster: vec!["Crème".to_owned(), "Savon".to_owned()],
+        };
+        let layout = LlmLayout {
+            zone_cm: ZoneCm([0.0, 187.0, 0.0, 52.3]),
+            sink_zone_cm: Some(ZoneCm([68.7, 127.5, 7.4, 46.6])),
+            objects: Vec::new(),
+        };
+        // What Python's json.dumps(info, indent=2, ensure_ascii=False) writes.
+        let expected = "{\n  \"Environment\": \"Un lavabo: savon, crème \\\"douce\\\"\",\n  \
+            \"item_placement_zone\": [\n    0.0,\n    187.0,\n    0.0,\n    52.3\n  ],\n  \
+            \"sink_zone\": [\n    68.7,\n    127.5,\n    7.4,\n    46.6\n  ],\n  \
+            \"Task\": \"Ranger\",\n  \"Goal\": [\n    \"Pick la crème\"\n  ],\n  \
+            \"Action Sequence\": [\n    \"Pick(Crème)\"\n  ],\n  \
+            \"Objects cluster\": [\n    \"Crème\",\n    \"Savon\"\n  ]\n}";
+        let input = sft_input(&task(info), &layout);
+        assert_eq!(input, expected);
+        assert_eq!(
+            user_turn("Lay it out.", &input),
+            format!("Lay it out.\n{expected}")
+        );
+    }
+
+    #[test]
+    fn rounding_keeps_one_decimal_positive_sizes_and_no_negative_zero() {
+        assert_eq!(round_to(116.70000000000002, 1), 116.7);
+        assert_eq!(round_to(-0.04, 1).to_string(), "0");
+        let layout = LlmLayout {
+            zone_cm: ZoneCm([0.0, 100.04, 0.0, 50.0]),
+            sink_zone_cm: None,
+            objects: vec![mesa_schemas::LlmObject {
+                instance: "pen_0".to_owned(),
+                size_cm: SizeCm([0.01, 14.26, 1.0]),
+                position_cm: PositionCm([10.05, 20.0, 0.5]),
+                z_rotation_deg: -0.01,
+                description: String::new(),
+            }],
+        };
+        let rounded = round_layout(&layout, 1);
+        assert_eq!(rounded.zone_cm.0[1], 100.0);
+        assert_eq!(rounded.objects[0].size_cm.0, [0.1, 14.3, 1.0]);
+        assert_eq!(
+            serde_json::to_string(&rounded.objects[0].z_rotation_deg).expect("json"),
+            "0.0"
+        );
+    }
+}
