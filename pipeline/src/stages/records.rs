@@ -13,7 +13,6 @@
 //! changed since the last run (`--force` redoes it).
 
 use std::collections::BTreeMap;
-use std::io::IsTerminal as _;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -38,6 +37,7 @@ use sha2::{Digest as _, Sha256};
 
 use crate::config::{Config, ProgressMode};
 use crate::fsio::{sha256_hex, write_atomic, AtomicFile};
+use crate::progress::Progress;
 use crate::runner::{discover_scenes, Scene, RUN_DIR};
 use crate::stages::scene_docs::{chosen_layout, read_scene_docs, GRAPH_JSON, GRAPH_TXT};
 use crate::stages::tasks::TASKS_FILE;
@@ -401,7 +401,13 @@ pub fn run_records(
         graph: GraphOptions::from(&config.graph),
         seed: config.run.seed,
     };
-    let progress = Progress::new(included.len(), options);
+    let progress = Progress::new(
+        "records",
+        "scenes",
+        included.len(),
+        options.progress,
+        options.progress_interval,
+    );
     let mut assigned: BTreeMap<String, String> = BTreeMap::new();
     let mut counts: BTreeMap<String, BTreeMap<String, u64>> = BTreeMap::new();
     let work: Vec<(Scene, Split)> = included.into_iter().zip(splits).collect();
@@ -589,59 +595,4 @@ pub fn format_records_summary(summary: &RecordsSummary) -> String {
         );
     }
     out
-}
-
-/// Progress of the records: a bar on a terminal, periodic lines otherwise.
-struct Progress {
-    total: usize,
-    done: std::cell::Cell<usize>,
-    bar: Option<indicatif::ProgressBar>,
-    interval: Option<Duration>,
-    last: std::cell::Cell<Instant>,
-    started: Instant,
-}
-
-impl Progress {
-    fn new(total: usize, options: &RecordsOptions) -> Self {
-        let terminal = std::io::stderr().is_terminal();
-        let (bar, lines) = match options.progress {
-            ProgressMode::Off => (false, false),
-            ProgressMode::Bar => (true, false),
-            ProgressMode::Lines => (false, true),
-            ProgressMode::Auto => (terminal, !terminal),
-        };
-        Self {
-            total,
-            done: std::cell::Cell::new(0),
-            bar: bar.then(|| {
-                let bar = indicatif::ProgressBar::new(total as u64);
-                bar.set_prefix("records");
-                bar
-            }),
-            interval: lines.then_some(options.progress_interval),
-            last: std::cell::Cell::new(Instant::now()),
-            started: Instant::now(),
-        }
-    }
-
-    fn advance(&self, n: usize) {
-        let done = self.done.get() + n;
-        self.done.set(done);
-        if let Some(bar) = &self.bar {
-            bar.inc(n as u64);
-        }
-        if let Some(interval) = self.interval {
-            if self.last.get().elapsed() >= interval || done == self.total {
-                self.last.set(Instant::now());
-                let rate = done as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
-                eprintln!("records: {done}/{} scenes, {rate:.0} scenes/s", self.total);
-            }
-        }
-    }
-
-    fn finish(&self) {
-        if let Some(bar) = &self.bar {
-            bar.finish_and_clear();
-        }
-    }
 }

@@ -183,7 +183,7 @@ impl TemplateScene<'_> {
             let kind = KINDS[(start + k) % KINDS.len()];
             let mut picked = types.clone();
             picked.shuffle(&mut rng);
-            if let Some(draft) = self.build(kind, &picked, want) {
+            if let Some(draft) = self.build(kind, &picked, want, &mut rng) {
                 if !drafts.iter().any(|d| d.task == draft.task) {
                     drafts.push(draft);
                 }
@@ -192,7 +192,13 @@ impl TemplateScene<'_> {
         drafts
     }
 
-    fn build(&self, kind: Kind, shuffled: &[&ObjectType], want: usize) -> Option<TaskDraft> {
+    fn build(
+        &self,
+        kind: Kind,
+        shuffled: &[&ObjectType],
+        want: usize,
+        rng: &mut rand_chacha::ChaCha8Rng,
+    ) -> Option<TaskDraft> {
         let the = |t: &ObjectType| format!("the {}", noun(t));
         let away = |ts: &[&ObjectType]| {
             let mean = ts.iter().map(|t| self.side(t)).sum::<f64>() / ts.len() as f64;
@@ -233,7 +239,11 @@ impl TemplateScene<'_> {
             }
             Kind::Line => {
                 picked = shuffled[..want].to_vec();
-                let edge = if rng_bit(&picked) { "back" } else { "front" };
+                let edge = if rng.random_bool(0.5) {
+                    "back"
+                } else {
+                    "front"
+                };
                 task = format!(
                     "Line up {} along the {edge} edge of the table",
                     listing(&picked)
@@ -498,11 +508,6 @@ impl TemplateScene<'_> {
         text.push_str(&sentences.join(" "));
         text
     }
-}
-
-fn rng_bit(picked: &[&ObjectType]) -> bool {
-    // A choice that depends only on the picked types (already drawn from the seeded stream).
-    picked.iter().map(|t| t.key.len()).sum::<usize>() % 2 == 0
 }
 
 fn capitalise(text: &str) -> String {

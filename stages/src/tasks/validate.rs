@@ -2,9 +2,7 @@
 //! checked by [`crate::tasks::reasoning::check_reasoning`]). Every check gives reasons a
 //! person can act on; a reply that fails is kept in the rejects file with them.
 
-use mesa_schemas::llm::PRIMITIVE_ACTIONS;
-use mesa_schemas::units::ZoneCm;
-use mesa_schemas::TaskInfo;
+use mesa_schemas::llm::{check_action, PRIMITIVE_ACTIONS};
 use serde_json::Value;
 
 use crate::tasks::chat::ChatReply;
@@ -245,26 +243,15 @@ pub fn split_action(action: &str) -> Option<(&str, Vec<&str>)> {
 /// types of the scene, and object types, never instance names, everywhere.
 pub fn check_task(draft: &TaskDraft, scene: &SceneTypes, min_task_objects: usize) -> Vec<String> {
     let mut problems = Vec::new();
-    let info = TaskInfo {
-        environment: String::new(),
-        zone_cm: ZoneCm([0.0, 1.0, 0.0, 1.0]),
-        sink_zone_cm: None,
-        task: draft.task.clone(),
-        goal: draft.goal.clone(),
-        action_sequence: Some(draft.action_sequence.clone()),
-        objects_cluster: draft.objects_cluster.clone(),
-    };
-    for problem in info.problems() {
-        problems.push(format!(
-            "{}: {}",
-            problem.path.replacen("$", "", 1),
-            problem.problem
-        ));
+    for (i, action) in draft.action_sequence.iter().enumerate() {
+        if let Err(problem) = check_action(action) {
+            problems.push(format!("\"Action Sequence\"[{i}]: {problem}"));
+        }
     }
     let type_names = || SceneTypes::list(&scene.types);
     for (i, action) in draft.action_sequence.iter().enumerate() {
         let Some((name, args)) = split_action(action) else {
-            continue; // reported by TaskInfo::problems
+            continue; // reported above
         };
         let object_arg = match name {
             "PlaceAt" => None,
