@@ -79,6 +79,8 @@ fn run_direct(dir: &Path, extra: &[&str]) -> (bool, String, String) {
         .args(extra)
         .arg(dir)
         .env(KEY_VAR, KEY)
+        // The most verbose logging there is, HTTP client included.
+        .env("MESA_LOG", "trace")
         .output()
         .expect("runs");
     (
@@ -196,6 +198,18 @@ fn the_direct_path_retries_rejects_caches_and_keeps_the_key_secret() {
             "{path} holds the key"
         );
     }
+
+    // Tasks and rejects are valid artifacts.
+    let out = mesa()
+        .arg("validate")
+        .arg(dir.path().join("scenes"))
+        .output()
+        .expect("validate");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
 
     // The tasks feed the records as the template's do.
     let out = mesa()
