@@ -2,6 +2,7 @@
 # Runs mesa's test suite. First installs, once, what the tests need that cargo does not bring:
 #   - a Python virtualenv with trimesh (PLY files are checked with it) and datasets (the
 #     training records are loaded with it, as LLaMA-Factory and TRL do): .venv-tools/
+#   - Blender 4.3 as a Python module (bpy, numpy<2) in its own virtualenv: .venv-blender/
 #   - the Khronos glTF validator from npm (every GLB we write is validated): scripts/node_modules/
 # Extra arguments go to `cargo test`.
 set -euo pipefail
@@ -19,6 +20,15 @@ if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import trimesh, numpy
   "$venv/bin/pip" install --quiet --disable-pip-version-check -r scripts/requirements-tools.txt
 fi
 export MESA_PYTHON="$venv/bin/python"
+
+# Blender 4.3 as a Python module, in its own virtualenv with numpy<2 (as MesaTask pins it).
+blender_venv="$root/.venv-blender"
+if [ ! -x "$blender_venv/bin/python" ] || ! "$blender_venv/bin/python" -c "import bpy" 2>/dev/null; then
+  echo "test.sh: installing bpy 4.3 into $blender_venv (about 380 MB)" >&2
+  python3 -m venv "$blender_venv"
+  "$blender_venv/bin/pip" install --quiet --disable-pip-version-check "bpy==4.3.0" "numpy<2"
+fi
+export MESA_BLENDER_PYTHON="$blender_venv/bin/python"
 
 if [ -f scripts/package.json ]; then
   if [ ! -d scripts/node_modules ] || [ scripts/package-lock.json -nt scripts/node_modules ]; then

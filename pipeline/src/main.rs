@@ -9,6 +9,7 @@ use mesa_pipeline::cli::Cli;
 fn main() -> ExitCode {
     let cli = Cli::parse();
     init_logging(cli.verbose, cli.quiet);
+    quiet_worker_panics();
     match app::run(cli) {
         Ok(code) => code,
         Err(e) => {
@@ -21,6 +22,27 @@ fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// Panics on mesa's worker threads (named `mesa-...`) are caught where they happen and
+/// reported with the scene or asset they concern (a failed marker, a warning); printing them
+/// again through the default hook, with a backtrace, only buries that report. Other threads
+/// keep the default hook; `MESA_PANIC_TRACE=1` restores it everywhere.
+fn quiet_worker_panics() {
+    if std::env::var_os("MESA_PANIC_TRACE").is_some() {
+        return;
+    }
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let worker = std::thread::current()
+            .name()
+            .is_some_and(|name| name.starts_with("mesa-"));
+        if worker {
+            tracing::debug!("caught panic on a worker: {info}");
+        } else {
+            default(info);
+        }
+    }));
 }
 
 fn init_logging(verbose: u8, quiet: bool) {

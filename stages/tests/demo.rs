@@ -1413,7 +1413,8 @@ fn every_glb_loads_in_trimesh() {
 
 #[test]
 fn every_glb_loads_in_blender() {
-    // A Blender executable (MESA_BLENDER), or a Python with the `bpy` module (MESA_PYTHON).
+    // A Blender executable (MESA_BLENDER), or a Python with the `bpy` module
+    // (MESA_BLENDER_PYTHON, as scripts/test.sh sets it, or MESA_PYTHON).
     let script = repo_root().join("scripts/check_glb_blender.py");
     let ws = noisy();
     let files = library_files(ws);
@@ -1432,14 +1433,18 @@ fn every_glb_loads_in_blender() {
         .arg(&annotations)
         .args(&files);
         c
-    } else if let Some(python) = python_with("bpy") {
+    } else if let Some(python) = std::env::var_os("MESA_BLENDER_PYTHON")
+        .map(PathBuf::from)
+        .or_else(|| python_with("bpy"))
+    {
         let mut c = Command::new(python);
         c.arg(&script).arg(&annotations).args(&files);
         c
     } else {
         skip(
             "Blender import check of the demo GLBs",
-            "set MESA_BLENDER to a Blender executable, or MESA_PYTHON to a Python with the bpy module",
+            "set MESA_BLENDER to a Blender executable, or MESA_BLENDER_PYTHON to a Python with \
+             the bpy module (scripts/test.sh does)",
         );
         return;
     };
