@@ -9,7 +9,7 @@
 //! - [`collide`]: the oriented-box overlap test the collision corruption uses (in place of
 //!   `mesa check`, not built yet);
 //! - [`split`]: train / dpo / test by scene, deterministic, stratified by table type;
-//! - [`write`]: streaming JSON array and JSON Lines writers, `dataset_info.json`.
+//! - [`write`](mod@write): streaming JSON array and JSON Lines writers, `dataset_info.json`.
 //!
 //! Everything here is a pure function of its inputs and the seed; the pipeline's `records`
 //! command reads the scenes, calls these, and writes the files atomically.
