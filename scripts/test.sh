@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Runs mesa's test suite. First installs, once, what the tests need that cargo does not bring:
-#   - a Python virtualenv with trimesh (PLY files are checked with it): .venv-tools/
+#   - a Python virtualenv with trimesh (PLY files are checked with it) and datasets (the
+#     training records are loaded with it, as LLaMA-Factory and TRL do): .venv-tools/
 #   - Blender 4.3 as a Python module (bpy, numpy<2) in its own virtualenv: .venv-blender/
 #   - the Khronos glTF validator from npm (every GLB we write is validated): scripts/node_modules/
 # Extra arguments go to `cargo test`.
@@ -13,8 +14,8 @@ if [ ! -d ../shared/realdata ] && [ -z "${MESA_SHARED:-}" ]; then
 fi
 
 venv="$root/.venv-tools"
-if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import trimesh, numpy" 2>/dev/null; then
-  echo "test.sh: installing trimesh into $venv" >&2
+if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import trimesh, numpy, datasets" 2>/dev/null; then
+  echo "test.sh: installing trimesh and datasets into $venv" >&2
   python3 -m venv "$venv"
   "$venv/bin/pip" install --quiet --disable-pip-version-check -r scripts/requirements-tools.txt
 fi

@@ -12,7 +12,9 @@ use mesa_schemas::json::to_sorted_pretty;
 use mesa_schemas::output::parse_model_output;
 use mesa_schemas::{kinds, validate_text, Kind};
 
-use crate::cli::{AssetsArgs, DemoArgs, GraphArgs, StatusArgs, ValidateArgs};
+use crate::cli::{
+    AssetsArgs, BackendArg, DemoArgs, GraphArgs, RecordsArgs, StatusArgs, TasksArgs, ValidateArgs,
+};
 use crate::cli::{Cli, Command, ConvertArgs, LayoutForm, ParseOutputArgs, RunArgs, StageArgs};
 use crate::config::{annotated_toml, Config};
 use crate::fsio::{write_atomic, DigestCache};
@@ -55,6 +57,8 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             &resolve(&args, cli.quiet)?,
         ),
         Command::Graph(args) => graph(args, cli.quiet),
+        Command::Tasks(args) => tasks(args, cli.quiet),
+        Command::Records(args) => records(args, cli.quiet),
     }
 }
 
@@ -131,6 +135,9 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     if stages.is_empty() {
         bail!("this build of mesa has no per-scene stage to run");
     }
+    // Bad settings of later stages fail now, not after hours of earlier ones.
+    crate::stages::tasks::preflight(&resolved.dataset, &resolved.config).map_err(UsageError)?;
+    records_preflight(&resolved)?;
     // The resolved configuration of the last run, for the record.
     let resolved_toml = annotated_toml(&resolved.config)?;
     write_atomic(
@@ -164,7 +171,208 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
         let code = run_one(stage.as_ref(), &resolved)?;
         failed |= code != ExitCode::SUCCESS;
     }
+    // The dataset-level stages merge every scene: with shards, each shard has only its part.
+    if resolved.options.shard.count > 1 {
+        eprintln!(
+            "records: not run by a shard; run `mesa records {}` once every shard is done",
+            resolved.dataset.display()
+        );
+    } else {
+        failed |= run_records_stage(&resolved)? != ExitCode::SUCCESS;
+    }
     Ok(ExitCode::from(if failed { EXIT_FAILED } else { EXIT_OK }))
+}
+
+fn records_preflight(resolved: &Resolved) -> anyhow::Result<()> {
+    let problems = resolved.config.records.problems();
+    if !problems.is_empty() {
+        return Err(UsageError(problems.join("\n")).into());
+    }
+    crate::stages::records::instruction(&resolved.dataset, &resolved.config.records)
+        .map_err(UsageError)?;
+    Ok(())
+}
+
+fn run_records_stage(resolved: &Resolved) -> anyhow::Result<ExitCode> {
+    let options = crate::stages::records::RecordsOptions {
+        jobs: resolved.options.jobs,
+        force: resolved.options.force,
+        progress: resolved.options.progress,
+        progress_interval: resolved.options.progress_interval,
+    };
+    let summary =
+        crate::stages::records::run_records(&resolved.dataset, &resolved.config, &options)?;
+    eprint!(
+        "{}",
+        crate::stages::records::format_records_summary(&summary)
+    );
+    Ok(ExitCode::from(if summary.excluded.is_empty() {
+        EXIT_OK
+    } else {
+        EXIT_FAILED
+    }))
+}
+
+fn records(args: RecordsArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let stage_args = StageArgs {
+        dataset: args.dataset,
+        scenes: None,
+        jobs: args.jobs,
+        // Records merge every scene: no shard applies (nor the Slurm variables).
+        shard: Some(Shard::default()),
+        force: args.force,
+        config: args.config,
+        progress: args.progress,
+    };
+    let resolved = resolve(&stage_args, quiet)?;
+    records_preflight(&resolved)?;
+    run_records_stage(&resolved)
+}
+
+fn tasks(args: TasksArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    use crate::chat::{ChatClient, Mode};
+    use crate::stages::tasks::{preflight, TasksStage};
+    use mesa_stages::tasks::Backend;
+    use std::sync::Arc;
+
+    let mut resolved = resolve(&args.stage, quiet)?;
+    let batch = args.batch_out.is_some() || !args.batch_in.is_empty();
+    if batch && args.backend == Some(BackendArg::Template) {
+        return Err(UsageError(
+            "--batch-out and --batch-in are for the llm backend (not --backend template)".into(),
+        )
+        .into());
+    }
+    if let Some(backend) = args.backend {
+        resolved.config.tasks.backend = backend.into();
+    }
+    if batch {
+        resolved.config.tasks.backend = Backend::Llm;
+        let problems = resolved.config.tasks.problems();
+        if !problems.is_empty() {
+            return Err(UsageError(problems.join("\n")).into());
+        }
+        crate::stages::tasks::load_prompts(&resolved.dataset, &resolved.config.tasks.prompts_dir)
+            .map_err(UsageError)?;
+        return batch_tasks(&args, resolved);
+    }
+    preflight(&resolved.dataset, &resolved.config).map_err(UsageError)?;
+    if resolved.config.tasks.backend == Backend::Template {
+        return run_one(&TasksStage::new(), &resolved);
+    }
+    let llm = &resolved.config.tasks.llm;
+    let client = Arc::new(ChatClient::new(&resolved.dataset, llm, Mode::Live).map_err(UsageError)?);
+    if args.stage.jobs.is_none() {
+        // Scenes wait on the network, not the CPU: run as many as may be in flight.
+        resolved.options.jobs = llm.max_concurrency;
+    }
+    let code = run_one(&TasksStage::with_chat(client.clone()), &resolved)?;
+    eprintln!("tasks: {}: {}", llm.model, client.stats.summary());
+    for warning in client.warnings() {
+        eprintln!("tasks: warning: {warning}");
+    }
+    Ok(code)
+}
+
+fn batch_tasks(args: &TasksArgs, mut resolved: Resolved) -> anyhow::Result<ExitCode> {
+    use crate::chat::{custom_id, import_batch, request_digest, write_batch, ChatClient, Mode};
+    use crate::stages::tasks::{BatchPlan, TasksStage};
+    use std::sync::Arc;
+
+    let client = Arc::new(
+        ChatClient::new(
+            &resolved.dataset,
+            &resolved.config.tasks.llm,
+            Mode::CacheOnly,
+        )
+        .map_err(UsageError)?,
+    );
+    let stage = TasksStage::with_chat(client.clone());
+    let ctx_plan = |resolved: &Resolved| -> anyhow::Result<BatchPlan> {
+        let ctx = StageContext {
+            dataset: &resolved.dataset,
+            config: &resolved.config,
+        };
+        let scenes = crate::runner::select_scenes(
+            discover_scenes(&resolved.dataset).map_err(|e| UsageError(e.to_string()))?,
+            resolved.options.scenes.as_deref(),
+            resolved.options.shard,
+        )
+        .map_err(|e| UsageError(e.to_string()))?;
+        Ok(stage.plan_batch(&ctx, &scenes, resolved.options.force))
+    };
+    let mut failed_lines = 0usize;
+    if !args.batch_in.is_empty() {
+        let BatchPlan { pending, .. } = ctx_plan(&resolved)?;
+        let by_id: std::collections::BTreeMap<String, String> = pending
+            .iter()
+            .map(|(_, request)| {
+                let digest = request_digest(request);
+                (custom_id(&digest), digest)
+            })
+            .collect();
+        for file in &args.batch_in {
+            let text = std::fs::read_to_string(file).map_err(|e| {
+                UsageError(format!(
+                    "{}: cannot read the batch output: {e}",
+                    file.display()
+                ))
+            })?;
+            let report = import_batch(file, &text, &by_id, client.cache());
+            eprintln!(
+                "tasks: {}: {} replies stored, {} already cached, {} lines failed",
+                file.display(),
+                report.stored,
+                report.already_cached,
+                report.failed.len()
+            );
+            for failure in &report.failed {
+                eprintln!("  failed {failure}");
+            }
+            failed_lines += report.failed.len();
+        }
+    }
+    let BatchPlan { complete, pending } = ctx_plan(&resolved)?;
+    let waiting: std::collections::BTreeSet<&str> =
+        pending.iter().map(|(k, _)| k.as_str()).collect();
+    match &args.batch_out {
+        Some(path) if !pending.is_empty() => {
+            let requests: Vec<_> = pending.iter().map(|(_, r)| r.clone()).collect();
+            let lines = write_batch(path, &requests)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+            eprintln!(
+                "tasks: {lines} requests for {} scenes written to {} (OpenAI Batch JSONL; read \
+                 the provider's output with --batch-in)",
+                waiting.len(),
+                path.display()
+            );
+        }
+        Some(path) => eprintln!(
+            "tasks: no request is pending, so {} was not written",
+            path.display()
+        ),
+        None if !pending.is_empty() => eprintln!(
+            "tasks: {} scenes still wait for replies (write the next batch with --batch-out FILE)",
+            waiting.len()
+        ),
+        None => {}
+    }
+    let code = if complete.is_empty() {
+        if waiting.is_empty() {
+            eprintln!("tasks: every selected scene is done (--force redoes them)");
+        } else {
+            eprintln!("tasks: no scene has all its replies yet");
+        }
+        ExitCode::from(EXIT_OK)
+    } else {
+        resolved.options.only = Some(complete);
+        run_one(&stage, &resolved)?
+    };
+    Ok(if failed_lines > 0 {
+        ExitCode::from(EXIT_FAILED)
+    } else {
+        code
+    })
 }
 
 fn assets_options(options: &RunOptions) -> crate::stages::assets::AssetsOptions {
@@ -339,6 +547,8 @@ fn kind_from_file_name(path: &Path) -> Option<&'static Kind> {
         (Some("input"), "camera.json") => "camera",
         (Some("input" | "truth"), "instances.json") => "instances",
         (_, "sft.json") => "sft",
+        (Some("records"), "test.json") => "sft",
+        (_, "trl_test.jsonl") => "trl-sft",
         (_, "dpo.json") => "dpo",
         (_, "trl_sft.jsonl") => "trl-sft",
         (_, "trl_dpo.jsonl") => "trl-dpo",

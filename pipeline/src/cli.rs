@@ -56,6 +56,13 @@ pub enum Command {
     /// Extract the scene graph of every scene (graph/graph.json and graph/graph.txt), or print
     /// the triplets of one layout file with --layout.
     Graph(GraphArgs),
+    /// Write each scene's table description, tasks and reasoning texts (tasks/tasks.jsonl;
+    /// rejected model replies in tasks/rejects.jsonl), with the built-in template writer or a
+    /// chat model, live or through offline batches.
+    Tasks(TasksArgs),
+    /// Merge every scene's tasks into the training records under records/ (SFT, DPO and TRL
+    /// files, dataset_info.json, split.json). Run it once, after all scenes (and all shards).
+    Records(RecordsArgs),
 }
 
 /// Flags shared by every per-scene stage.
@@ -235,6 +242,66 @@ pub struct GraphArgs {
     /// equally_spaced).
     #[arg(long)]
     pub equally_spaced: bool,
+}
+
+/// `--backend`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    /// The built-in deterministic writer (offline; records say "generator": "template").
+    Template,
+    /// The chat endpoint of [tasks.llm] (its API key from the variable api_key_env names).
+    Llm,
+}
+
+impl From<BackendArg> for mesa_stages::tasks::Backend {
+    fn from(value: BackendArg) -> Self {
+        match value {
+            BackendArg::Template => Self::Template,
+            BackendArg::Llm => Self::Llm,
+        }
+    }
+}
+
+/// `mesa tasks`.
+#[derive(Debug, Args)]
+pub struct TasksArgs {
+    /// The runner flags.
+    #[command(flatten)]
+    pub stage: StageArgs,
+    /// The backend (default: [tasks] backend of mesa.toml). With llm and no --jobs, the
+    /// scenes run [tasks.llm] max_concurrency at a time.
+    #[arg(long, value_enum)]
+    pub backend: Option<BackendArg>,
+    /// Offline batches: write the requests still unanswered to FILE as OpenAI Batch JSONL
+    /// (one call per scene and round: description, then tasks, then reasoning; implies
+    /// --backend llm). Scenes whose replies are all in get their tasks written.
+    #[arg(long, value_name = "FILE")]
+    pub batch_out: Option<PathBuf>,
+    /// Offline batches: read a provider's batch output JSONL (repeatable); replies are joined
+    /// to requests by custom_id and stored in the reply cache, failed lines are reported and
+    /// their requests go into the next --batch-out (implies --backend llm).
+    #[arg(long, value_name = "FILE")]
+    pub batch_in: Vec<PathBuf>,
+}
+
+/// `mesa records`.
+#[derive(Debug, Args)]
+pub struct RecordsArgs {
+    /// The dataset folder.
+    pub dataset: PathBuf,
+    /// Worker threads (default: [run] jobs of mesa.toml; 0 = one per core); the files are the
+    /// same for any number.
+    #[arg(short, long, value_name = "N")]
+    pub jobs: Option<usize>,
+    /// Rebuild the records even when nothing they read has changed.
+    #[arg(long)]
+    pub force: bool,
+    /// The configuration file (default: DATASET/mesa.toml when it exists).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Progress display (default: [run] progress of mesa.toml).
+    #[arg(long, value_enum)]
+    pub progress: Option<ProgressArg>,
 }
 
 /// `mesa parse-output`.

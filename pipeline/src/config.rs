@@ -30,6 +30,11 @@ pub struct Config {
     pub place: mesa_stages::place::PlaceConfig,
     /// `mesa graph`: the rule-based scene graph (SCENE_GRAPH.md).
     pub graph: mesa_stages::graph::GraphConfig,
+    /// `mesa tasks`: task instructions and reasoning texts (the template writer or a chat
+    /// model).
+    pub tasks: mesa_stages::tasks::TasksConfig,
+    /// `mesa records`: SFT and DPO training records and the split.
+    pub records: mesa_stages::records::RecordsConfig,
 }
 
 /// The `[run]` section.
@@ -131,21 +136,38 @@ pub fn annotated_toml(config: &Config) -> Result<String, toml::ser::Error> {
          # Put any of these in DATASET/mesa.toml to change them; flags override the file.\n",
     );
     for (section, value) in &table {
-        let section_schema = property_schema(&schema, &schema, section);
         out.push('\n');
         push_comment(&mut out, description(&schema, &schema, section));
         match value {
             toml::Value::Table(keys) => {
-                out.push_str(&format!("[{section}]\n"));
-                for (key, value) in keys {
-                    push_comment(&mut out, description(&schema, section_schema, key));
-                    out.push_str(&format!("{key} = {value}\n"));
-                }
+                let section_schema = property_schema(&schema, &schema, section);
+                push_table(&mut out, &schema, section_schema, section, keys);
             }
             other => out.push_str(&format!("{section} = {other}\n")),
         }
     }
     Ok(out)
+}
+
+/// Writes `[name]` with its plain keys, each under its doc comment, then its sub-tables as
+/// `[name.sub]` sections the same way.
+fn push_table(out: &mut String, root: &Value, schema: &Value, name: &str, keys: &toml::Table) {
+    out.push_str(&format!("[{name}]\n"));
+    let mut tables = Vec::new();
+    for (key, value) in keys {
+        if let toml::Value::Table(sub) = value {
+            tables.push((key, sub));
+            continue;
+        }
+        push_comment(out, description(root, schema, key));
+        out.push_str(&format!("{key} = {value}\n"));
+    }
+    for (key, sub) in tables {
+        out.push('\n');
+        push_comment(out, description(root, schema, key));
+        let sub_schema = property_schema(root, schema, key);
+        push_table(out, root, sub_schema, &format!("{name}.{key}"), sub);
+    }
 }
 
 fn resolve<'a>(root: &'a Value, schema: &'a Value) -> &'a Value {

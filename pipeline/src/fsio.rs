@@ -47,6 +47,80 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     result
 }
 
+/// A file written through a temporary name beside it and renamed over the target by
+/// [`AtomicFile::commit`], for outputs too large to hold in memory (the record files).
+/// Dropped without a commit, it removes the temporary file and leaves the target as it was.
+#[derive(Debug)]
+pub struct AtomicFile {
+    target: PathBuf,
+    tmp: PathBuf,
+    writer: Option<io::BufWriter<fs::File>>,
+}
+
+impl AtomicFile {
+    /// Starts writing `path` (creating parent folders; leftovers of a killed writer of the same
+    /// file are swept first).
+    pub fn create(path: &Path) -> io::Result<Self> {
+        let dir = path.parent().unwrap_or_else(|| Path::new("."));
+        fs::create_dir_all(dir)?;
+        sweep_tmp_for(path)?;
+        let name = path
+            .file_name()
+            .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"))?;
+        let tmp = dir.join(format!(
+            ".{}{}{}-{}",
+            name.to_string_lossy(),
+            TMP_MARK,
+            std::process::id(),
+            COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        let file = fs::File::create(&tmp)?;
+        Ok(Self {
+            target: path.to_owned(),
+            tmp,
+            writer: Some(io::BufWriter::with_capacity(1 << 20, file)),
+        })
+    }
+
+    /// The file being written.
+    pub fn target(&self) -> &Path {
+        &self.target
+    }
+
+    /// Flushes and renames the temporary file over the target.
+    pub fn commit(mut self) -> io::Result<()> {
+        if let Some(writer) = self.writer.take() {
+            let file = writer.into_inner().map_err(|e| e.into_error())?;
+            drop(file);
+        }
+        fs::rename(&self.tmp, &self.target)
+    }
+}
+
+impl Write for AtomicFile {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        match self.writer.as_mut() {
+            Some(w) => w.write(buf),
+            None => Err(io::Error::other("write after commit")),
+        }
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        match self.writer.as_mut() {
+            Some(w) => w.flush(),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        if self.writer.take().is_some() {
+            let _ = fs::remove_file(&self.tmp);
+        }
+    }
+}
+
 /// Removes temporary files left beside `path` by a killed writer of that same file.
 pub fn sweep_tmp_for(path: &Path) -> io::Result<()> {
     let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
@@ -140,6 +214,29 @@ mod tests {
         sweep_tmp_for(&target).expect("sweep");
         assert!(!stray.exists());
         assert!(other.exists(), "only the named file's leftovers are swept");
+    }
+
+    #[test]
+    fn streamed_files_appear_only_on_commit() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let target = dir.path().join("records/sft.json");
+        let mut file = AtomicFile::create(&target).expect("create");
+        file.write_all(b"[]\n").expect("write");
+        assert!(!target.exists(), "nothing before the commit");
+        file.commit().expect("commit");
+        assert_eq!(fs::read(&target).expect("read"), b"[]\n");
+        let mut abandoned = AtomicFile::create(&target).expect("create");
+        abandoned.write_all(b"half").expect("write");
+        drop(abandoned);
+        assert_eq!(
+            fs::read(&target).expect("read"),
+            b"[]\n",
+            "an abandoned write changes nothing"
+        );
+        let leftovers = fs::read_dir(dir.path().join("records"))
+            .expect("list")
+            .count();
+        assert_eq!(leftovers, 1, "and leaves no temporary file");
     }
 
     #[test]

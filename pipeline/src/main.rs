@@ -52,8 +52,15 @@ fn init_logging(verbose: u8, quiet: bool) {
         (false, 1) => "debug",
         (false, _) => "trace",
     };
-    let filter = tracing_subscriber::EnvFilter::try_from_env("MESA_LOG")
+    let mut filter = tracing_subscriber::EnvFilter::try_from_env("MESA_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    // The HTTP client's trace level writes the wire unredacted, the API key included (its
+    // debug level redacts it): never below debug, whatever MESA_LOG says.
+    for directive in ["ureq=debug", "ureq_proto=debug"] {
+        if let Ok(directive) = directive.parse() {
+            filter = filter.add_directive(directive);
+        }
+    }
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)

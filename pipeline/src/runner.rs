@@ -232,6 +232,10 @@ pub struct RunOptions {
     pub progress: ProgressMode,
     /// Seconds between progress lines.
     pub progress_interval: Duration,
+    /// When set, only these scenes (`<table_type>/<scene_id>`) of the selection run; the
+    /// others are left alone (`mesa tasks` with offline batches runs the scenes whose replies
+    /// are all in).
+    pub only: Option<std::collections::BTreeSet<String>>,
 }
 
 impl RunOptions {
@@ -244,6 +248,7 @@ impl RunOptions {
             force: false,
             progress: config.run.progress,
             progress_interval: Duration::from_secs_f64(config.run.progress_interval_s.max(0.1)),
+            only: None,
         }
     }
 }
@@ -769,11 +774,14 @@ pub fn run_stage(
     options: &RunOptions,
 ) -> Result<StageSummary, RunError> {
     let started = Instant::now();
-    let scenes = select_scenes(
+    let mut scenes = select_scenes(
         discover_scenes(ctx.dataset)?,
         options.scenes.as_deref(),
         options.shard,
     )?;
+    if let Some(only) = &options.only {
+        scenes.retain(|s| only.contains(&s.key()));
+    }
     let config_digest = stage.config_digest(ctx);
     let cache = DigestCache::default();
     let progress = Progress::new(

@@ -25,6 +25,8 @@ pub const CHECK_SCHEMA: &str = "mesa.check/1";
 pub const GRAPH_SCHEMA: &str = "mesa.graph/1";
 /// Schema id of each line of `tasks/tasks.jsonl`.
 pub const TASKS_SCHEMA: &str = "mesa.tasks/1";
+/// Schema id of each line of `tasks/rejects.jsonl`.
+pub const TASK_REJECT_SCHEMA: &str = "mesa.task-reject/1";
 /// Schema id of `records/split.json`.
 pub const SPLIT_SCHEMA: &str = "mesa.split/1";
 /// Schema id of the runner's done / failed markers.
@@ -642,25 +644,62 @@ pub struct TaskRecord {
     pub scene_id: String,
     /// Index of the task within the scene, from 0.
     pub task_index: u32,
-    /// `template` for the built-in offline writer, else `llm:<model>`.
+    /// `template` for the built-in offline writer (deterministic, no model involved), else
+    /// `llm:<model>` for replies of an OpenAI-compatible chat endpoint.
     pub generator: String,
-    /// The table description the tasks were written from.
+    /// The layout the tasks were written for, relative to the scene folder (like
+    /// `qa/layout.json`).
+    pub layout: String,
+    /// SHA-256 of that layout file's bytes, so `mesa records` can tell stale tasks.
+    pub layout_sha256: String,
+    /// The rendered views the table description was written from, relative to the scene
+    /// folder (like `render/front.png`); empty when the scene had no renders, or with the
+    /// template backend, which reads none.
+    pub views: Vec<String>,
+    /// The table description the tasks were written from (the task info's `Environment`).
     pub table_description: String,
     /// The task info (the model's input).
     pub task_info: TaskInfo,
-    /// The reasoning text (the first part of the model output).
+    /// The reasoning text (the first part of the model output): an introduction, the
+    /// `Core Task Objects:` and `Environment Objects:` lists with counts, the placement
+    /// paragraph, and a closing sentence leading to the scene graph.
     pub reasoning: String,
 }
 
-/// An SFT record in LLaMA-Factory's alpaca form (`records/sft.json` is a list of these).
+/// One line of `tasks/rejects.jsonl`: a model reply that failed validation, kept with why.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TaskReject {
+    /// `mesa.task-reject/1`.
+    pub schema: String,
+    /// The scene id.
+    pub scene_id: String,
+    /// Which call the reply answered: `description`, `tasks` or `reasoning`.
+    pub call: String,
+    /// The task the reply was for (reasoning replies, and single tasks rejected from a tasks
+    /// reply); absent for whole-reply rejects of the description and tasks calls.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task_index: Option<u32>,
+    /// The attempt, from 0 (each attempt sends the request with the seed plus the attempt).
+    pub attempt: u32,
+    /// `template` or `llm:<model>`, as in `tasks.jsonl`.
+    pub generator: String,
+    /// Every reason the reply was rejected.
+    pub reasons: Vec<String>,
+    /// The reply text as received (for a single task, that task's JSON).
+    pub reply: String,
+}
+
+/// An SFT record in LLaMA-Factory's alpaca form (`records/sft.json` and `records/test.json`
+/// are lists of these). The user turn a trainer builds is `instruction + "\n" + input`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SftRecord {
-    /// The layout-generation prompt.
+    /// The layout-generation prompt (`data/prompts/layout_generation.txt`).
     pub instruction: String,
-    /// The task info JSON.
+    /// The task info JSON (2-space indent, UTF-8 unescaped, cm).
     pub input: String,
-    /// The model output text.
+    /// The model output text: reasoning, scene-graph lines, the marker, the layout JSON.
     pub output: String,
 }
 
@@ -672,7 +711,7 @@ pub struct DpoRecord {
     pub instruction: String,
     /// The task info JSON.
     pub input: String,
-    /// The preferred output.
+    /// The preferred output (the SFT output of the same task).
     pub chosen: String,
     /// The corrupted output.
     pub rejected: String,
@@ -688,11 +727,12 @@ pub struct ChatMessage {
     pub content: String,
 }
 
-/// A line of `records/trl_sft.jsonl`.
+/// A line of `records/trl_sft.jsonl` (and `trl_test.jsonl`): TRL's conversational language
+/// modelling format.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TrlSftRecord {
-    /// User turn then assistant turn.
+    /// The user turn (`instruction + "\n" + input`) then the assistant turn (`output`).
     pub messages: Vec<ChatMessage>,
 }
 
@@ -708,8 +748,10 @@ pub struct TrlDpoRecord {
     pub rejected: Vec<ChatMessage>,
 }
 
-/// An entry of LLaMA-Factory's `dataset_info.json`.
+/// An entry of LLaMA-Factory's `dataset_info.json` (its `data/README.md` format; keys as its
+/// `DatasetAttr` parser reads them).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
 pub struct DatasetInfoEntry {
     /// The data file, relative to `dataset_info.json`.
     pub file_name: String,
@@ -719,9 +761,14 @@ pub struct DatasetInfoEntry {
     /// True for preference (DPO) data.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ranking: Option<bool>,
-    /// Column mapping.
+    /// Column mapping (LLaMA-Factory name → field of the file). When present, every column
+    /// the format uses must be named: an absent one is read as "no such column".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub columns: Option<BTreeMap<String, String>>,
+    /// Message tags of the `sharegpt` format (`role_tag`, `content_tag`, `user_tag`,
+    /// `assistant_tag`, `system_tag`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tags: Option<BTreeMap<String, String>>,
 }
 
 /// `records/split.json`: which scenes are train, dpo or test.
@@ -730,10 +777,17 @@ pub struct DatasetInfoEntry {
 pub struct SplitArtifact {
     /// `mesa.split/1`.
     pub schema: String,
-    /// Ratios by split name.
+    /// The seed the scene order was drawn with (`[run] seed`).
+    pub seed: u64,
+    /// Ratios by split name (`train`, `dpo`, `test`).
     pub ratios: BTreeMap<String, f64>,
-    /// Split name by scene id.
+    /// Split name by scene, keyed `<table_type>/<scene_id>`.
     pub scenes: BTreeMap<String, String>,
+    /// Scenes per split, by table type then split name.
+    pub counts: BTreeMap<String, BTreeMap<String, u64>>,
+    /// Scenes left out of every split, with why (no tasks, stale tasks, unreadable files).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub excluded: BTreeMap<String, String>,
 }
 
 // ---------------------------------------------------------------------------------------------

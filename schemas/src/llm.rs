@@ -126,7 +126,9 @@ impl TaskInfo {
     }
 }
 
-fn check_action(action: &str) -> Result<(), String> {
+/// Checks one action of an action sequence: a primitive action with its number of arguments
+/// (`Pick(mug)`, `Push(box, left, 10 cm)`); the error says what is wrong.
+pub fn check_action(action: &str) -> Result<(), String> {
     let action = action.trim();
     let (name, rest) = action
         .split_once('(')

@@ -15,6 +15,10 @@
 //! - [`glb_write`]: writing GLB files (embedded PNG textures, materials, node hierarchies).
 //! - [`raster`]: a CPU z-buffer rasterizer (depth in metres, instance ids, shaded colour).
 //! - [`image_io`]: PNG encoding and decoding.
+//! - [`tasks`]: task instructions and reasoning texts, from a chat model or the built-in
+//!   template writer (SPEC 5.8).
+//! - [`records`]: SFT and DPO training records, the corruptions, the split (SPEC 5.9).
+//! - [`seeding`]: seeded random generators per scene and purpose.
 
 pub mod annotations;
 pub mod assets;
@@ -27,5 +31,8 @@ pub mod lift;
 pub mod mesh;
 pub mod place;
 pub mod raster;
+pub mod records;
 pub mod retrieve;
+pub mod seeding;
+pub mod tasks;
 pub mod text;

@@ -6,16 +6,21 @@ pub mod assets;
 pub mod graph;
 pub mod lift;
 pub mod place;
+pub mod records;
 pub mod retrieve;
+pub mod scene_docs;
+pub mod tasks;
 
 use crate::runner::SceneStage;
 
-/// Every per-scene stage, in the order `mesa run` runs them.
+/// Every per-scene stage, in the order `mesa run` runs them. The dataset-level stages
+/// (`records`) run after them, once.
 pub fn pipeline_stages() -> Vec<Box<dyn SceneStage>> {
     vec![
         Box::new(lift::Lift),
         Box::new(retrieve::RetrieveStage::new()),
         Box::new(place::PlaceStage::new()),
         Box::new(graph::GraphStage::new()),
+        Box::new(tasks::TasksStage::new()),
     ]
 }

@@ -1,0 +1,178 @@
+//! What `tasks` and `records` read of a scene: its layout (the first of `qa/`, `refined/`,
+//! `coarse/` `layout.json`, the rule of `mesa graph`) in the LLM form, and its scene graph
+//! (`graph/graph.txt` and `graph/graph.json`), checked to belong together.
+
+use anyhow::{anyhow, bail, Context as _};
+use mesa_schemas::artifacts::GraphArtifact;
+use mesa_schemas::convert::llm_from_dataset;
+use mesa_schemas::LlmLayout;
+
+use crate::fsio::sha256_hex;
+use crate::runner::Scene;
+use crate::stages::graph::LAYOUT_CANDIDATES;
+use mesa_schemas::layout_file::{read_layout_text, AnyLayout};
+
+/// The scene graph files, relative to the scene folder.
+pub const GRAPH_TXT: &str = "graph/graph.txt";
+/// The scene graph with its numbers and node flags.
+pub const GRAPH_JSON: &str = "graph/graph.json";
+
+/// A scene's layout and scene graph.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneDocs {
+    /// The layout file used, relative to the scene folder.
+    pub layout_rel: &'static str,
+    /// SHA-256 of its bytes.
+    pub layout_sha256: String,
+    /// The layout in the LLM form, objects in the file's order (the scene graph's order).
+    pub layout: LlmLayout,
+    /// The triplet lines of `graph/graph.txt`.
+    pub graph_lines: Vec<String>,
+    /// `graph/graph.json`.
+    pub graph: GraphArtifact,
+    /// What the reader noticed (a tilted object, objects not in descending-footprint order).
+    pub warnings: Vec<String>,
+}
+
+/// The layout file a scene's stages read: the first present of [`LAYOUT_CANDIDATES`].
+pub fn chosen_layout(scene: &Scene) -> Option<&'static str> {
+    LAYOUT_CANDIDATES
+        .into_iter()
+        .find(|rel| scene.path(rel).is_file())
+}
+
+/// Every layout file present (a new `qa/layout.json` makes what was built on `refined/` stale).
+pub fn present_layouts(scene: &Scene) -> Vec<&'static str> {
+    LAYOUT_CANDIDATES
+        .into_iter()
+        .filter(|rel| scene.path(rel).is_file())
+        .collect()
+}
+
+/// The triplet lines `graph.json` stands for, in `graph.txt`'s order.
+fn lines_of(graph: &GraphArtifact) -> Vec<String> {
+    let mut lines = Vec::with_capacity(2 * graph.nodes.len() + graph.edges.len());
+    for node in &graph.nodes {
+        lines.push(format!("({}, is at, {})", node.instance, node.is_at));
+        lines.push(format!("({}, face to, {})", node.instance, node.face_to));
+    }
+    for edge in &graph.edges {
+        lines.push(format!(
+            "({}, {}, {})",
+            edge.subject, edge.relation, edge.object
+        ));
+    }
+    for spacing in &graph.equally_spaced {
+        let [a, b, c] = &spacing.instances;
+        lines.push(format!(
+            "({a}, {b}, {c}, are equally spaced along, {})",
+            spacing.axis
+        ));
+    }
+    lines
+}
+
+/// Reads a scene's layout and scene graph; an error says which file is missing or stale and
+/// which stage to rerun.
+pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
+    let layout_rel = chosen_layout(scene).ok_or_else(|| {
+        anyhow!(
+            "{}: no layout (expected {}; run `mesa place` first)",
+            scene.dir.display(),
+            LAYOUT_CANDIDATES.join(", ")
+        )
+    })?;
+    let path = scene.path(layout_rel);
+    let bytes = std::fs::read(&path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let text = String::from_utf8(bytes).map_err(|_| {
+        anyhow!(
+            "{}: not UTF-8 text (expected a layout JSON)",
+            path.display()
+        )
+    })?;
+    let mut warnings = Vec::new();
+    let read = read_layout_text(&text).map_err(|problems| {
+        let lines: Vec<String> = problems
+            .iter()
+            .map(|p| format!("{}: {p}", path.display()))
+            .collect();
+        anyhow!(
+            "{} is not a valid layout:\n{}",
+            path.display(),
+            lines.join("\n")
+        )
+    })?;
+    let layout = match read.layout {
+        AnyLayout::Dataset(dataset) => {
+            let converted = llm_from_dataset(&dataset);
+            warnings.extend(
+                converted
+                    .warnings
+                    .into_iter()
+                    .filter(|w| w.contains("tilted"))
+                    .map(|w| format!("{layout_rel}: {w}")),
+            );
+            converted.layout
+        }
+        AnyLayout::Llm(llm) => llm,
+    };
+    let mut sorted = layout.clone();
+    if sorted.sort_objects() {
+        warnings.push(format!(
+            "{layout_rel}: objects are not in descending-footprint order; the records keep the \
+             file's order, which the scene graph follows"
+        ));
+    }
+
+    let graph_path = scene.path(GRAPH_JSON);
+    let graph_text = std::fs::read_to_string(&graph_path).with_context(|| {
+        format!(
+            "{}: cannot read (run `mesa graph` first)",
+            graph_path.display()
+        )
+    })?;
+    let graph: GraphArtifact = serde_json::from_str(&graph_text)
+        .with_context(|| format!("{}: not a mesa.graph/1 artifact", graph_path.display()))?;
+    if graph.layout != layout_rel {
+        bail!(
+            "{}: extracted from {}, but the scene's layout is now {layout_rel} (rerun `mesa graph`)",
+            graph_path.display(),
+            graph.layout
+        );
+    }
+    let nodes: Vec<&str> = graph.nodes.iter().map(|n| n.instance.as_str()).collect();
+    let objects: Vec<&str> = layout.objects.iter().map(|o| o.instance.as_str()).collect();
+    if nodes != objects {
+        bail!(
+            "{}: its nodes are not the objects of {layout_rel} in order (rerun `mesa graph`)",
+            graph_path.display()
+        );
+    }
+    let txt_path = scene.path(GRAPH_TXT);
+    let graph_lines: Vec<String> = std::fs::read_to_string(&txt_path)
+        .with_context(|| {
+            format!(
+                "{}: cannot read (run `mesa graph` first)",
+                txt_path.display()
+            )
+        })?
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .map(str::to_owned)
+        .collect();
+    if graph_lines != lines_of(&graph) {
+        bail!(
+            "{} and {GRAPH_JSON} disagree (rerun `mesa graph`)",
+            txt_path.display()
+        );
+    }
+    Ok(SceneDocs {
+        layout_rel,
+        layout_sha256: sha256_hex(text.as_bytes()),
+        layout,
+        graph_lines,
+        graph,
+        warnings,
+    })
+}
