@@ -56,6 +56,17 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             &crate::stages::place::PlaceStage::new(),
             &resolve(&args, cli.quiet)?,
         ),
+        Command::Pack(args) => run_one(
+            &crate::stages::pack::PackStage::new(),
+            &resolve(&args, cli.quiet)?,
+        ),
+        Command::Ingest(args) => {
+            let mut resolved = resolve(&args.stage, cli.quiet)?;
+            if args.allow_unknown_nodes {
+                resolved.config.ingest.allow_unknown_nodes = true;
+            }
+            run_one(&crate::stages::ingest::IngestStage::new(), &resolved)
+        }
         Command::Graph(args) => graph(args, cli.quiet),
         Command::Tasks(args) => tasks(args, cli.quiet),
         Command::Records(args) => records(args, cli.quiet),
@@ -131,7 +142,7 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
         print!("{}", annotated_toml(&resolved.config)?);
         return Ok(ExitCode::SUCCESS);
     }
-    let stages = pipeline_stages();
+    let stages = pipeline_stages(&resolved.config);
     if stages.is_empty() {
         bail!("this build of mesa has no per-scene stage to run");
     }
@@ -439,6 +450,15 @@ fn graph(args: GraphArgs, quiet: bool) -> anyhow::Result<ExitCode> {
 
 fn demo(args: DemoArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     use mesa_stages::demo::{write_demo, DemoError, DemoOptions};
+    if let Some(crate::cli::DemoAction::Annotate(stage)) = &args.action {
+        return run_one(
+            &crate::stages::annotate::AnnotateStage,
+            &resolve(stage, quiet)?,
+        );
+    }
+    let Some(dir) = args.dir.clone() else {
+        return Err(UsageError("give the folder to write: `mesa demo DIR`".to_owned()).into());
+    };
     let options = DemoOptions::default()
         .with_scenes(args.scenes)
         .with_seed(args.seed)
@@ -448,16 +468,16 @@ fn demo(args: DemoArgs, quiet: bool) -> anyhow::Result<ExitCode> {
         .build()
         .context("cannot start the worker threads")?;
     let started = std::time::Instant::now();
-    let summary =
-        pool.install(|| write_demo(&args.dir, &options))
-            .map_err(|e| -> anyhow::Error {
-                match e {
-                    DemoError::Options(_)
-                    | DemoError::NotEmpty { .. }
-                    | DemoError::NotADemo { .. } => UsageError(e.to_string()).into(),
-                    other => other.into(),
+    let summary = pool
+        .install(|| write_demo(&dir, &options))
+        .map_err(|e| -> anyhow::Error {
+            match e {
+                DemoError::Options(_) | DemoError::NotEmpty { .. } | DemoError::NotADemo { .. } => {
+                    UsageError(e.to_string()).into()
                 }
-            })?;
+                other => other.into(),
+            }
+        })?;
     if !quiet {
         let objects: usize = summary.scenes.iter().map(|s| s.objects).sum();
         let types: std::collections::BTreeSet<&str> = summary
@@ -491,19 +511,22 @@ fn status(args: StatusArgs) -> anyhow::Result<ExitCode> {
     let cache = DigestCache::default();
     let mut out = String::new();
     out.push_str(&format!(
-        "{}: {} scenes\n{:<10} {:>7} {:>7} {:>7} {:>7}\n",
+        "{}: {} scenes\n{:<10} {:>7} {:>7} {:>7} {:>7} {:>7}\n",
         args.dataset.display(),
         scenes.len(),
         "stage",
         "done",
         "stale",
         "failed",
+        "waiting",
         "pending"
     ));
     let mut notes = Vec::new();
-    for stage in pipeline_stages() {
+    // Scenes awaiting annotation, once each (every stage after ingest waits for them too).
+    let mut awaiting = std::collections::BTreeMap::new();
+    for stage in pipeline_stages(&config) {
         let digest = stage.config_digest(&ctx);
-        let (mut done, mut stale, mut failed, mut pending) = (0, 0, 0, 0);
+        let (mut done, mut stale, mut failed, mut waiting, mut pending) = (0, 0, 0, 0, 0);
         for scene in &scenes {
             match scene_state(stage.as_ref(), &ctx, scene, &digest, &cache) {
                 SceneState::Done => done += 1,
@@ -519,13 +542,23 @@ fn status(args: StatusArgs) -> anyhow::Result<ExitCode> {
                         notes.push(format!("  {} {}: failed: {why}", stage.name(), scene.key()));
                     }
                 }
+                SceneState::Waiting(why) => {
+                    waiting += 1;
+                    awaiting.entry(scene.key()).or_insert(why);
+                }
                 SceneState::Pending => pending += 1,
             }
         }
         out.push_str(&format!(
-            "{:<10} {done:>7} {stale:>7} {failed:>7} {pending:>7}\n",
+            "{:<10} {done:>7} {stale:>7} {failed:>7} {waiting:>7} {pending:>7}\n",
             stage.name()
         ));
+    }
+    if !awaiting.is_empty() {
+        out.push_str(&format!("{} scenes wait:\n", awaiting.len()));
+        for (scene, why) in &awaiting {
+            out.push_str(&format!("  {scene}: {why}\n"));
+        }
     }
     for note in notes {
         out.push_str(&note);

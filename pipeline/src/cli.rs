@@ -53,6 +53,14 @@ pub enum Command {
     /// Scale each retrieved asset isometrically into its lifted box: the coarse layout
     /// (coarse/layout.json).
     Place(StageArgs),
+    /// Write each scene's annotator pack (pack/): the scene as a GLB for Blender (table,
+    /// objects named after their instances, a 1.70 m H1 figure), the photo, a snapshot per
+    /// object, index.json and a README for the annotator.
+    Pack(StageArgs),
+    /// Read each annotator's edited scene (refined/<scene_id>.glb) back into the refined
+    /// layout (refined/layout.json) and what changed (refined/diff.json). Scenes whose edited
+    /// GLB has not arrived are reported as awaiting annotation.
+    Ingest(IngestArgs),
     /// Extract the scene graph of every scene (graph/graph.json and graph/graph.txt), or print
     /// the triplets of one layout file with --layout.
     Graph(GraphArgs),
@@ -149,11 +157,28 @@ pub struct RunArgs {
     pub print_config: bool,
 }
 
+/// `mesa ingest`.
+#[derive(Debug, Args)]
+pub struct IngestArgs {
+    /// The runner flags.
+    #[command(flatten)]
+    pub stage: StageArgs,
+    /// Ignore nodes that are none of the pack's (overrides [ingest] allow_unknown_nodes);
+    /// they are listed in refined/diff.json.
+    #[arg(long)]
+    pub allow_unknown_nodes: bool,
+}
+
 /// `mesa demo`.
 #[derive(Debug, Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct DemoArgs {
+    /// What else to do with a demo dataset.
+    #[command(subcommand)]
+    pub action: Option<DemoAction>,
     /// The folder to write (created if needed; new, empty, or an earlier `mesa demo` output).
-    pub dir: PathBuf,
+    #[arg(required = true)]
+    pub dir: Option<PathBuf>,
     /// Number of scenes; they cycle through the six table types.
     #[arg(long, value_name = "N", default_value_t = 20)]
     pub scenes: usize,
@@ -167,6 +192,15 @@ pub struct DemoArgs {
     /// Worker threads (0 = one per core); the output does not depend on it.
     #[arg(short, long, value_name = "N", default_value_t = 0)]
     pub jobs: usize,
+}
+
+/// `mesa demo` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum DemoAction {
+    /// Play the annotator on every pack/<scene_id>.glb of a demo dataset: write
+    /// refined/<scene_id>.glb as Blender would export it after a person fixed the scene from
+    /// the photo (here: from truth/).
+    Annotate(StageArgs),
 }
 
 /// `mesa status`.

@@ -28,6 +28,12 @@ pub struct Config {
     pub retrieve: mesa_stages::retrieve::RetrieveConfig,
     /// `mesa place`: each asset scaled isometrically into its lifted box.
     pub place: mesa_stages::place::PlaceConfig,
+    /// `mesa pack`: the annotator pack (scene GLB, photo, snapshots, README).
+    pub pack: mesa_stages::pack::PackConfig,
+    /// Who edits the packs between `mesa pack` and `mesa ingest`.
+    pub annotate: mesa_stages::demo::annotator::AnnotateConfig,
+    /// `mesa ingest`: the annotator's edited scene read back into the refined layout.
+    pub ingest: mesa_stages::ingest::IngestConfig,
     /// `mesa graph`: the rule-based scene graph (SCENE_GRAPH.md).
     pub graph: mesa_stages::graph::GraphConfig,
     /// `mesa tasks`: task instructions and reasoning texts (the template writer or a chat
@@ -123,6 +129,15 @@ impl Config {
         let config: Self = toml::from_str(text).map_err(|e| e.to_string())?;
         // Values that parse but cannot work: refused before any work starts.
         config.retrieve.check().map_err(|e| format!("{e} "))?;
+        let problems: Vec<String> = config
+            .pack
+            .problems()
+            .into_iter()
+            .chain(config.ingest.problems())
+            .collect();
+        if !problems.is_empty() {
+            return Err(format!("{} ", problems.join("; ")));
+        }
         Ok(config)
     }
 }

@@ -6,6 +6,7 @@ use schemars::JsonSchema;
 use serde::de::DeserializeOwned;
 use serde_json::Value;
 
+use crate::annotation::*;
 use crate::artifacts::*;
 use crate::layout::{DatasetLayout, LAYOUT_SCHEMA};
 use crate::llm::{GalleryRecord, LlmLayout, TaskInfo};
@@ -157,6 +158,22 @@ pub fn kinds() -> &'static [Kind] {
                 form: FileForm::Json,
                 summary: "assets/index/shapes/<uid>.json (convex hull and decomposition)",
                 generate: schema_of::<ShapesArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "pack-index",
+                schema_id: Some(PACK_INDEX_SCHEMA),
+                form: FileForm::Json,
+                summary: "pack/index.json (the annotator pack: objects, assets, snapshots)",
+                generate: schema_of::<PackIndexArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "ingest-diff",
+                schema_id: Some(INGEST_DIFF_SCHEMA),
+                form: FileForm::Json,
+                summary: "refined/diff.json (what the annotator changed)",
+                generate: schema_of::<IngestDiffArtifact>,
                 semantic: no_semantics,
             },
             Kind {

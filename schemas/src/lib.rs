@@ -4,6 +4,7 @@
 //! - [`llm`]: the LLM layout, task info and the published MesaTask records.
 //! - [`convert`]: dataset layout ↔ LLM layout.
 //! - [`output`]: the model output text and its parser (the paper's success rule).
+//! - [`annotation`]: the annotator round trip (the pack index, the ingest diff).
 //! - [`artifacts`]: inputs and per-stage artifacts (lift, retrieval, check, graph, tasks,
 //!   records, run markers).
 //! - [`kinds`] and [`validate`]: the kind registry and a validator that reports every problem
@@ -13,6 +14,7 @@
 //! Units live in names: `_cm`, `_deg`, `_m`, `_mm`, `_px`. Layout files are in centimetres in
 //! the table frame (SPEC section 2).
 
+pub mod annotation;
 pub mod artifacts;
 pub mod convert;
 pub mod json;

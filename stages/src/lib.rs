@@ -9,6 +9,10 @@
 //! - [`text`]: the built-in lexical text encoder of retrieval.
 //! - [`retrieve`]: an asset per instance by text and size, MesaTask's recipe (SPEC 5.2).
 //! - [`place`]: isometric placement into the lifted boxes, the coarse layout (SPEC 5.3).
+//! - [`pack`]: the annotator pack, a scene GLB for Blender with the photo and snapshots
+//!   (SPEC 5.4).
+//! - [`ingest`]: the edited scene read back into the refined layout (SPEC 5.5).
+//! - [`gltf_frames`]: table frame ↔ glTF node transforms.
 //! - [`graph`]: the rule-based scene graph (SPEC 5.7, `SCENE_GRAPH.md`).
 //! - [`demo`]: `mesa demo`, a synthetic dataset workspace with ground truth.
 //! - [`mesh`]: triangle meshes, transforms, bounds and frame conversions.
@@ -25,10 +29,13 @@ pub mod assets;
 pub mod demo;
 pub mod glb_read;
 pub mod glb_write;
+pub mod gltf_frames;
 pub mod graph;
 pub mod image_io;
+pub mod ingest;
 pub mod lift;
 pub mod mesh;
+pub mod pack;
 pub mod place;
 pub mod raster;
 pub mod records;

@@ -2,25 +2,40 @@
 //! functions of `mesa-stages`, and the dataset-level `mesa assets` ([`assets`]), which `mesa
 //! run` runs before them.
 
+pub mod annotate;
 pub mod assets;
 pub mod graph;
+pub mod ingest;
 pub mod lift;
+pub mod pack;
 pub mod place;
 pub mod records;
 pub mod retrieve;
 pub mod scene_docs;
 pub mod tasks;
 
+use crate::config::Config;
 use crate::runner::SceneStage;
+use mesa_stages::demo::annotator::Annotator;
 
-/// Every per-scene stage, in the order `mesa run` runs them. The dataset-level stages
-/// (`records`) run after them, once.
-pub fn pipeline_stages() -> Vec<Box<dyn SceneStage>> {
-    vec![
+/// Every per-scene stage, in the order `mesa run` runs them: the simulated annotator between
+/// `pack` and `ingest` only when the configuration names it (`[annotate] annotator =
+/// "simulated"`, as `mesa demo` writes). The dataset-level stages (`records`) run after them,
+/// once.
+pub fn pipeline_stages(config: &Config) -> Vec<Box<dyn SceneStage>> {
+    let mut stages: Vec<Box<dyn SceneStage>> = vec![
         Box::new(lift::Lift),
         Box::new(retrieve::RetrieveStage::new()),
         Box::new(place::PlaceStage::new()),
+        Box::new(pack::PackStage::new()),
+    ];
+    if config.annotate.annotator == Annotator::Simulated {
+        stages.push(Box::new(annotate::AnnotateStage));
+    }
+    stages.extend([
+        Box::new(ingest::IngestStage::new()) as Box<dyn SceneStage>,
         Box::new(graph::GraphStage::new()),
         Box::new(tasks::TasksStage::new()),
-    ]
+    ]);
+    stages
 }

@@ -24,6 +24,10 @@ pub(crate) struct DracoPrimitive {
     pub positions: Vec<[f64; 3]>,
     /// Triangles as indices into `positions`.
     pub triangles: Vec<[u32; 3]>,
+    /// NORMAL per point, when asked for and mapped by the extension.
+    pub normals: Option<Vec<[f64; 3]>>,
+    /// TEXCOORD_0 per point, when asked for and mapped by the extension.
+    pub uvs: Option<Vec<[f64; 2]>>,
 }
 
 fn draco_error(path: &str, problem: impl Into<String>) -> GlbError {
@@ -34,12 +38,13 @@ fn draco_error(path: &str, problem: impl Into<String>) -> GlbError {
 }
 
 /// Decodes the Draco stream of a primitive whose `extensions.KHR_draco_mesh_compression` is
-/// `extension`.
+/// `extension`; with `attributes`, also its NORMAL and TEXCOORD_0 when the extension maps them.
 pub(crate) fn decode_primitive(
     root: &gltf_json::Root,
     buffers: &Buffers<'_>,
     extension: &Value,
     path: &str,
+    attributes: bool,
 ) -> Result<DracoPrimitive, GlbError> {
     let view_index = extension
         .get("bufferView")
@@ -131,9 +136,79 @@ pub(crate) fn decode_primitive(
         }
         triangles.push(tri);
     }
+    let mapped = |name: &str| {
+        extension
+            .get("attributes")
+            .and_then(|a| a.get(name))
+            .and_then(Value::as_u64)
+            .map(|id| id as usize)
+    };
+    let float_attribute = |id: usize, width: usize, name: &str| -> Result<Vec<f64>, GlbError> {
+        let attribute = decoded
+            .get_attributes()
+            .iter()
+            .find(|a| a.get_id().as_usize() == id)
+            .ok_or_else(|| {
+                draco_error(
+                    path,
+                    format!("the stream has no attribute with the {name} id {id}"),
+                )
+            })?;
+        if attribute.get_num_components() != width
+            || attribute.get_component_type() != ComponentDataType::F32
+            || attribute.len() != points
+        {
+            return Err(draco_error(
+                path,
+                format!(
+                    "{name} decodes to {} values of {} components of {:?} (expected {points} \
+                     of {width} floats)",
+                    attribute.len(),
+                    attribute.get_num_components(),
+                    attribute.get_component_type()
+                ),
+            ));
+        }
+        let mut out = Vec::with_capacity(points * width);
+        for i in 0..points {
+            if width == 3 {
+                let v: NdVector<3, f32> = attribute.get(PointIdx::from(i));
+                out.extend((0..3).map(|c| f64::from(*v.get(c))));
+            } else {
+                let v: NdVector<2, f32> = attribute.get(PointIdx::from(i));
+                out.extend((0..2).map(|c| f64::from(*v.get(c))));
+            }
+        }
+        Ok(out)
+    };
+    let (normals, uvs) = if attributes {
+        let normals = match mapped("NORMAL") {
+            Some(id) => Some(
+                float_attribute(id, 3, "NORMAL")?
+                    .chunks_exact(3)
+                    .map(|c| [c[0], c[1], c[2]])
+                    .collect(),
+            ),
+            None => None,
+        };
+        let uvs = match mapped("TEXCOORD_0") {
+            Some(id) => Some(
+                float_attribute(id, 2, "TEXCOORD_0")?
+                    .chunks_exact(2)
+                    .map(|c| [c[0], c[1]])
+                    .collect(),
+            ),
+            None => None,
+        };
+        (normals, uvs)
+    } else {
+        (None, None)
+    };
     Ok(DracoPrimitive {
         positions,
         triangles,
+        normals,
+        uvs,
     })
 }
 
@@ -173,7 +248,9 @@ mod tests {
                     .and_then(|e| e.others.get("KHR_draco_mesh_compression"))
                     .expect("a Draco primitive");
                 let path = format!("meshes[{m}].primitives[{p}]");
-                out.push(decode_primitive(&root, &buffers, extension, &path).expect("decodes"));
+                out.push(
+                    decode_primitive(&root, &buffers, extension, &path, false).expect("decodes"),
+                );
             }
         }
         out

@@ -255,20 +255,29 @@ fn required_extension_fix(extension: &str) -> Option<&'static str> {
     }
 }
 
-/// Reads a GLB file's triangles.
-pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
+/// A GLB file opened and checked: its container split, its glTF JSON parsed and validated,
+/// its required extensions judged, its buffers resolved. The parts are read on demand.
+pub struct GlbDocument<'a> {
+    root: Root,
+    buffers: Buffers<'a>,
+    warnings: Vec<String>,
+}
+
+impl std::fmt::Debug for GlbDocument<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GlbDocument")
+            .field("nodes", &self.root.nodes.len())
+            .field("meshes", &self.root.meshes.len())
+            .finish()
+    }
+}
+
+/// Opens a GLB file: everything [`read_glb`] checks before it reads geometry.
+pub fn open_glb(bytes: &[u8]) -> Result<GlbDocument<'_>, GlbError> {
     let mut warnings = Vec::new();
     let chunks = container::split(bytes, &mut warnings)?;
     let root = parse_root(chunks.json, &mut warnings)?;
     validate(&root, &mut warnings)?;
-    let mut info = GlbInfo {
-        generator: root.asset.generator.clone(),
-        nodes: root.nodes.len(),
-        textures: root.textures.len(),
-        extensions_used: root.extensions_used.clone(),
-        extensions_required: root.extensions_required.clone(),
-        ..GlbInfo::default()
-    };
     for extension in &root.extensions_required {
         if let Some(fix) = required_extension_fix(extension) {
             return Err(GlbError::UnsupportedExtension {
@@ -289,65 +298,290 @@ pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
         );
     }
     let buffers = resolve_buffers(&root, chunks.bin)?;
-    info.image_mime_types = images(&root)?;
-    info.materials = root
-        .materials
-        .iter()
-        .enumerate()
-        .map(|(i, m)| MaterialInfo {
-            name: m.name.clone().unwrap_or_else(|| format!("material_{i}")),
-            textured: m.pbr_metallic_roughness.base_color_texture.is_some(),
-        })
-        .collect();
+    Ok(GlbDocument {
+        root,
+        buffers,
+        warnings,
+    })
+}
 
-    let scene = scene_instances(&root, &mut warnings)?;
-    let instances = &scene.instances;
-    let mut mesh = GlbMesh::default();
-    let mut unused_meshes: BTreeSet<usize> = (0..root.meshes.len()).collect();
-    let mut cache = HashMap::new();
-    for instance in instances {
-        unused_meshes.remove(&instance.mesh);
-        info.mesh_instances += 1;
+/// One triangle primitive placed by a node of the scene, in the glTF scene frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlacedPrimitive {
+    /// The node placing it.
+    pub node: usize,
+    /// The mesh and the primitive within it.
+    pub mesh: usize,
+    /// Index of the primitive in the mesh.
+    pub primitive: usize,
+    /// Vertex positions in the scene frame, metres (morphed and skinned as a viewer shows
+    /// them).
+    pub positions_m: Vec<[f64; 3]>,
+    /// Triangles as indices into `positions_m`.
+    pub triangles: Vec<[u32; 3]>,
+    /// Unit normals in the scene frame, one per vertex, when attributes were asked for and
+    /// the primitive has them (never for skinned or morphed primitives, whose normals a
+    /// reader recomputes).
+    pub normals: Option<Vec<[f64; 3]>>,
+    /// `TEXCOORD_0`, one per vertex, when attributes were asked for and the primitive has it.
+    pub uvs: Option<Vec<[f64; 2]>>,
+    /// The primitive's material.
+    pub material: Option<usize>,
+    /// Whether the node's world transform mirrors (negative determinant): its triangles'
+    /// front faces are then the other side (glTF 2.0 §3.7.4), as `positions_m` are placed.
+    pub mirrored: bool,
+}
+
+/// One triangle primitive of a mesh, in the mesh's own frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocalPrimitive {
+    /// Vertex positions, metres.
+    pub positions: Vec<[f64; 3]>,
+    /// Triangles as indices into `positions`.
+    pub triangles: Vec<[u32; 3]>,
+    /// NORMAL, when attributes were asked for and present.
+    pub normals: Option<Vec<[f64; 3]>>,
+    /// TEXCOORD_0, when attributes were asked for and present.
+    pub uvs: Option<Vec<[f64; 2]>>,
+    /// The primitive's material.
+    pub material: Option<usize>,
+}
+
+/// Every triangle primitive of a GLB's scene, with what else the file holds.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PlacedScene {
+    /// The primitives, in node order (depth first from the scene's roots).
+    pub primitives: Vec<PlacedPrimitive>,
+    /// What else the file holds.
+    pub info: GlbInfo,
+    /// What does not stop the file from being used.
+    pub warnings: Vec<String>,
+}
+
+impl<'a> GlbDocument<'a> {
+    /// The glTF document.
+    pub fn root(&self) -> &Root {
+        &self.root
+    }
+
+    /// What opening the file noticed (validator warnings and infos).
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// Every node's world matrix (column vectors, glTF scene frame), `None` for nodes outside
+    /// the default scene. A node reached twice (a cycle, two parents) is an error.
+    pub fn world_matrices(&self) -> Result<Vec<Option<Matrix4<f64>>>, GlbError> {
+        let mut warnings = Vec::new();
+        Ok(scene_instances(&self.root, &mut warnings)?.world)
+    }
+
+    /// The triangle primitives of a mesh in its own frame (before any node transform, morph
+    /// or skin), Draco decoded; with `attributes`, also normals and texture coordinates.
+    pub fn mesh_primitives(
+        &self,
+        mesh: usize,
+        attributes: bool,
+    ) -> Result<Vec<LocalPrimitive>, GlbError> {
+        let primitives = &self
+            .root
+            .meshes
+            .get(mesh)
+            .ok_or_else(|| data_error(format!("meshes[{mesh}]"), "does not exist"))?
+            .primitives;
         let reader = Reader {
-            root: &root,
-            buffers: &buffers,
+            root: &self.root,
+            buffers: &self.buffers,
+            world: &[],
+            attributes,
+        };
+        let mut info = GlbInfo::default();
+        let mut warnings = Vec::new();
+        let mut out = Vec::new();
+        for (p, primitive) in primitives.iter().enumerate() {
+            let mode = match primitive.mode {
+                Checked::Valid(mode) => mode,
+                Checked::Invalid => {
+                    return Err(data_error(
+                        format!("meshes[{mesh}].primitives[{p}]"),
+                        "invalid mode",
+                    ))
+                }
+            };
+            if !matches!(
+                mode,
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) {
+                continue;
+            }
+            let geometry = reader.primitive(mesh, p, mode, &mut info, &mut warnings)?;
+            out.push(LocalPrimitive {
+                positions: geometry.positions,
+                triangles: geometry.triangles,
+                normals: geometry.normals,
+                uvs: geometry.uvs,
+                material: primitive.material.map(|m| m.value()),
+            });
+        }
+        Ok(out)
+    }
+
+    /// The local vertex positions of every triangle primitive of a mesh (its own frame, before
+    /// any node transform, morph or skin), Draco decoded, concatenated.
+    pub fn mesh_positions(&self, mesh: usize) -> Result<Vec<[f64; 3]>, GlbError> {
+        Ok(self
+            .mesh_primitives(mesh, false)?
+            .into_iter()
+            .flat_map(|p| p.positions)
+            .collect())
+    }
+
+    /// The bytes and MIME type of image `index` (from its buffer view or data URI).
+    pub fn image(&self, index: usize) -> Result<(Cow<'_, [u8]>, Option<String>), GlbError> {
+        let path = format!("images[{index}]");
+        let image = self
+            .root
+            .images
+            .get(index)
+            .ok_or_else(|| data_error(&path, "does not exist"))?;
+        let mime = image.mime_type.as_ref().map(|m| m.0.clone());
+        if let Some(view) = image.buffer_view {
+            let (bytes, _) = accessor::view_bytes(&self.root, &self.buffers, view.value(), &path)?;
+            return Ok((Cow::Borrowed(bytes), mime));
+        }
+        match &image.uri {
+            Some(uri) if uri.starts_with("data:") => {
+                let bytes = data_uri(uri).ok_or_else(|| {
+                    data_error(&path, "INVALID_URI: the data URI cannot be decoded")
+                })?;
+                let mime = mime.or_else(|| {
+                    uri.strip_prefix("data:")
+                        .and_then(|r| r.split([';', ',']).next())
+                        .map(str::to_owned)
+                });
+                Ok((Cow::Owned(bytes), mime))
+            }
+            Some(uri) => Err(GlbError::ExternalUri {
+                what: path,
+                uri: uri.clone(),
+            }),
+            None => Err(data_error(&path, "has neither a bufferView nor a uri")),
+        }
+    }
+
+    /// Every triangle primitive the default scene places, transformed to the scene frame;
+    /// with `attributes`, also normals and texture coordinates. An error when the file has
+    /// no triangle.
+    pub fn placed_primitives(&self, attributes: bool) -> Result<PlacedScene, GlbError> {
+        let root = &self.root;
+        let mut warnings = self.warnings.clone();
+        let mut info = GlbInfo {
+            generator: root.asset.generator.clone(),
+            nodes: root.nodes.len(),
+            textures: root.textures.len(),
+            extensions_used: root.extensions_used.clone(),
+            extensions_required: root.extensions_required.clone(),
+            ..GlbInfo::default()
+        };
+        info.image_mime_types = images(root)?;
+        info.materials = root
+            .materials
+            .iter()
+            .enumerate()
+            .map(|(i, m)| MaterialInfo {
+                name: m.name.clone().unwrap_or_else(|| format!("material_{i}")),
+                textured: m.pbr_metallic_roughness.base_color_texture.is_some(),
+            })
+            .collect();
+        let scene = scene_instances(root, &mut warnings)?;
+        let instances = &scene.instances;
+        let mut unused_meshes: BTreeSet<usize> = (0..root.meshes.len()).collect();
+        let mut cache = HashMap::new();
+        let reader = Reader {
+            root,
+            buffers: &self.buffers,
             world: &scene.world,
+            attributes,
         };
-        reader.add_instance(instance, &mut cache, &mut mesh, &mut info, &mut warnings)?;
-    }
-    if mesh.triangles.is_empty() {
-        let detail = if root.meshes.is_empty() {
-            "the file has no mesh".to_owned()
-        } else if instances.is_empty() {
-            format!(
-                "no node of the scene places any of its {} meshes",
+        let mut primitives = Vec::new();
+        for instance in instances {
+            unused_meshes.remove(&instance.mesh);
+            info.mesh_instances += 1;
+            reader.add_instance(
+                instance,
+                &mut cache,
+                &mut primitives,
+                &mut info,
+                &mut warnings,
+            )?;
+        }
+        if primitives.iter().all(|p| p.triangles.is_empty()) {
+            let detail = if root.meshes.is_empty() {
+                "the file has no mesh".to_owned()
+            } else if instances.is_empty() {
+                format!(
+                    "no node of the scene places any of its {} meshes",
+                    root.meshes.len()
+                )
+            } else if info.skipped_primitives > 0 {
+                format!(
+                    "its {} primitives are points or lines, not triangles",
+                    info.skipped_primitives
+                )
+            } else {
+                "its primitives have no triangles".to_owned()
+            };
+            return Err(GlbError::NoMesh { detail });
+        }
+        if !unused_meshes.is_empty() {
+            warnings.push(format!(
+                "{} of {} meshes are not placed by any node of the scene and are ignored",
+                unused_meshes.len(),
                 root.meshes.len()
-            )
-        } else if info.skipped_primitives > 0 {
-            format!(
-                "its {} primitives are points or lines, not triangles",
+            ));
+        }
+        if info.skipped_primitives > 0 {
+            warnings.push(format!(
+                "{} point or line primitives are ignored",
                 info.skipped_primitives
-            )
-        } else {
-            "its primitives have no triangles".to_owned()
-        };
-        return Err(GlbError::NoMesh { detail });
+            ));
+        }
+        Ok(PlacedScene {
+            primitives,
+            info,
+            warnings,
+        })
     }
-    if !unused_meshes.is_empty() {
-        warnings.push(format!(
-            "{} of {} meshes are not placed by any node of the scene and are ignored",
-            unused_meshes.len(),
-            root.meshes.len()
-        ));
+}
+
+/// Reads a GLB file's triangles.
+pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
+    let document = open_glb(bytes)?;
+    let placed = document.placed_primitives(false)?;
+    let mut mesh = GlbMesh::default();
+    for primitive in placed.primitives {
+        let base = u32::try_from(mesh.positions_m.len())
+            .ok()
+            .filter(|b| b.checked_add(primitive.positions_m.len() as u32).is_some())
+            .ok_or_else(|| {
+                data_error(
+                    format!(
+                        "meshes[{}].primitives[{}]",
+                        primitive.mesh, primitive.primitive
+                    ),
+                    "the asset has more than 2^32 vertices",
+                )
+            })?;
+        mesh.positions_m.extend(primitive.positions_m);
+        mesh.triangles.extend(
+            primitive
+                .triangles
+                .iter()
+                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+        );
     }
-    if info.skipped_primitives > 0 {
-        warnings.push(format!(
-            "{} point or line primitives are ignored",
-            info.skipped_primitives
-        ));
-    }
-    mesh.info = info;
-    mesh.warnings = warnings;
+    mesh.info = placed.info;
+    mesh.warnings = placed.warnings;
     Ok(mesh)
 }
 
@@ -632,12 +866,18 @@ fn scene_instances(root: &Root, warnings: &mut Vec<String>) -> Result<SceneNodes
 struct Primitive {
     positions: Vec<[f64; 3]>,
     triangles: Vec<[u32; 3]>,
+    /// NORMAL, when attributes are read and present.
+    normals: Option<Vec<[f64; 3]>>,
+    /// TEXCOORD_0, when attributes are read and present.
+    uvs: Option<Vec<[f64; 2]>>,
 }
 
 struct Reader<'a, 'b> {
     root: &'a Root,
     buffers: &'a Buffers<'b>,
     world: &'a [Option<Matrix4<f64>>],
+    /// Whether normals and texture coordinates are read too.
+    attributes: bool,
 }
 
 fn data_error(path: impl Into<String>, problem: impl Into<String>) -> GlbError {
@@ -723,12 +963,23 @@ impl Reader<'_, '_> {
             .accessors
             .get(position)
             .is_some_and(|a| a.buffer_view.is_some());
-        let (positions, triangles) = match draco {
+        let (positions, triangles, normals, uvs) = match draco {
             // Uncompressed fallback data wins when a file carries both.
             Some(extension) if !has_fallback => {
                 info.draco = true;
-                let decoded = draco::decode_primitive(self.root, self.buffers, extension, &path)?;
-                (decoded.positions, decoded.triangles)
+                let decoded = draco::decode_primitive(
+                    self.root,
+                    self.buffers,
+                    extension,
+                    &path,
+                    self.attributes,
+                )?;
+                (
+                    decoded.positions,
+                    decoded.triangles,
+                    decoded.normals,
+                    decoded.uvs,
+                )
             }
             _ => {
                 let (values, width) = read_accessor(
@@ -761,7 +1012,12 @@ impl Reader<'_, '_> {
                     ));
                 }
                 let triangles = triangles_of(&indices, mode, &path, warnings);
-                (positions, triangles)
+                let (normals, uvs) = if self.attributes {
+                    self.plain_attributes(primitive, &path, positions.len())?
+                } else {
+                    (None, None)
+                };
+                (positions, triangles, normals, uvs)
             }
         };
         if positions.iter().flatten().any(|v| !v.is_finite()) {
@@ -773,7 +1029,54 @@ impl Reader<'_, '_> {
         Ok(Primitive {
             positions,
             triangles,
+            normals,
+            uvs,
         })
+    }
+
+    /// NORMAL and TEXCOORD_0 of an uncompressed primitive, each when present and well formed
+    /// (one element per vertex); a malformed one is an error.
+    #[allow(clippy::type_complexity)]
+    fn plain_attributes(
+        &self,
+        primitive: &gltf_json::mesh::Primitive,
+        path: &str,
+        vertices: usize,
+    ) -> Result<(Option<Vec<[f64; 3]>>, Option<Vec<[f64; 2]>>), GlbError> {
+        let normals = match self.attribute(primitive, Semantic::Normals) {
+            Some(accessor) => {
+                let here = format!("{path}.attributes.NORMAL");
+                let (values, width) = read_accessor(self.root, self.buffers, accessor, &here)?;
+                let normals = vec3s(values, width, &here)?;
+                if normals.len() != vertices {
+                    return Err(data_error(
+                        here,
+                        format!("has {} elements for {vertices} vertices", normals.len()),
+                    ));
+                }
+                Some(normals)
+            }
+            None => None,
+        };
+        let uvs = match self.attribute(primitive, Semantic::TexCoords(0)) {
+            Some(accessor) => {
+                let here = format!("{path}.attributes.TEXCOORD_0");
+                let (values, width) = read_accessor(self.root, self.buffers, accessor, &here)?;
+                if width != 2 || values.len() != 2 * vertices {
+                    return Err(data_error(
+                        here,
+                        format!(
+                            "has {} values of width {width} for {vertices} vertices (expected \
+                             VEC2, one per vertex)",
+                            values.len()
+                        ),
+                    ));
+                }
+                Some(values.chunks_exact(2).map(|c| [c[0], c[1]]).collect())
+            }
+            None => None,
+        };
+        Ok((normals, uvs))
     }
 
     /// Adds the morph target displacements at `weights` to `positions`.
@@ -921,7 +1224,7 @@ impl Reader<'_, '_> {
         &self,
         instance: &Instance,
         cache: &mut HashMap<(usize, usize), Rc<Primitive>>,
-        out: &mut GlbMesh,
+        out: &mut Vec<PlacedPrimitive>,
         info: &mut GlbInfo,
         warnings: &mut Vec<String>,
     ) -> Result<(), GlbError> {
@@ -940,6 +1243,9 @@ impl Reader<'_, '_> {
             }
             None => None,
         };
+        // Normals turn with the inverse transpose of the world matrix's linear part.
+        let linear = instance.world.fixed_view::<3, 3>(0, 0).into_owned();
+        let normal_matrix = linear.try_inverse().map(|m| m.transpose());
         for (p, primitive) in mesh.primitives.iter().enumerate() {
             let path = format!("meshes[{}].primitives[{p}]", instance.mesh);
             let mode = match primitive.mode {
@@ -962,7 +1268,8 @@ impl Reader<'_, '_> {
                 }
             };
             let mut positions = geometry.positions.clone();
-            if primitive.targets.as_ref().is_some_and(|t| !t.is_empty()) {
+            let morphed = primitive.targets.as_ref().is_some_and(|t| !t.is_empty());
+            if morphed {
                 info.morph_targets = true;
                 self.morph(primitive, &path, &weights, &mut positions)?;
             }
@@ -970,6 +1277,7 @@ impl Reader<'_, '_> {
                 Some(joints) => self.skin(primitive, &path, joints, &positions)?,
                 None => None,
             };
+            let deformed = morphed || skinned.is_some();
             let placed: Vec<[f64; 3]> = match skinned {
                 Some(skinned) => skinned,
                 None => positions
@@ -977,17 +1285,34 @@ impl Reader<'_, '_> {
                     .map(|v| transform(&instance.world, v))
                     .collect(),
             };
-            let base = u32::try_from(out.positions_m.len())
-                .ok()
-                .filter(|b| b.checked_add(placed.len() as u32).is_some())
-                .ok_or_else(|| data_error(&path, "the asset has more than 2^32 vertices"))?;
-            out.positions_m.extend(placed);
-            out.triangles.extend(
-                geometry
-                    .triangles
-                    .iter()
-                    .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
-            );
+            let normals = match (&geometry.normals, &normal_matrix) {
+                (Some(normals), Some(m)) if !deformed => Some(
+                    normals
+                        .iter()
+                        .map(|n| {
+                            let v = m * Vector3::new(n[0], n[1], n[2]);
+                            let len = v.norm();
+                            if len > 0.0 && len.is_finite() {
+                                [v[0] / len, v[1] / len, v[2] / len]
+                            } else {
+                                [0.0, 1.0, 0.0]
+                            }
+                        })
+                        .collect(),
+                ),
+                _ => None,
+            };
+            out.push(PlacedPrimitive {
+                node: instance.node,
+                mesh: instance.mesh,
+                primitive: p,
+                positions_m: placed,
+                triangles: geometry.triangles.clone(),
+                normals,
+                uvs: geometry.uvs.clone(),
+                material: primitive.material.map(|m| m.value()),
+                mirrored: !deformed && linear.determinant() < 0.0,
+            });
             info.primitives += 1;
         }
         Ok(())
