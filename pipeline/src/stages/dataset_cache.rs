@@ -69,13 +69,32 @@ mod tests {
             loads.set(loads.get() + 1);
             Ok(value)
         };
-        assert_eq!(*cache.get_or_load(Path::new("a"), || load(1)).unwrap(), 1);
-        assert_eq!(*cache.get_or_load(Path::new("a"), || load(2)).unwrap(), 1);
-        assert_eq!(*cache.get_or_load(Path::new("b"), || load(3)).unwrap(), 3);
+        assert_eq!(
+            *cache
+                .get_or_load(Path::new("a"), || load(1))
+                .expect("loads"),
+            1
+        );
+        assert_eq!(
+            *cache
+                .get_or_load(Path::new("a"), || load(2))
+                .expect("loads"),
+            1
+        );
+        assert_eq!(
+            *cache
+                .get_or_load(Path::new("b"), || load(3))
+                .expect("loads"),
+            3
+        );
         assert_eq!(loads.get(), 2);
         let failing = || -> anyhow::Result<u32> { bail!("index.json: missing") };
-        let first = cache.get_or_load(Path::new("c"), failing).unwrap_err();
-        let again = cache.get_or_load(Path::new("c"), || load(4)).unwrap_err();
+        let first = cache
+            .get_or_load(Path::new("c"), failing)
+            .expect_err("fails");
+        let again = cache
+            .get_or_load(Path::new("c"), || load(4))
+            .expect_err("fails");
         assert_eq!(first.to_string(), "index.json: missing");
         assert_eq!(again.to_string(), first.to_string());
         assert_eq!(loads.get(), 2);
