@@ -4,6 +4,7 @@
 
 pub mod annotate;
 pub mod assets;
+pub mod dataset_cache;
 pub mod graph;
 pub mod ingest;
 pub mod lift;
