@@ -3,8 +3,7 @@
 //! `index.json`, `README.txt`, optionally a zip).
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use anyhow::{anyhow, bail, Context as _};
 use mesa_schemas::annotation::PackIndexArtifact;
@@ -15,6 +14,7 @@ use mesa_stages::pack::snapshot::Photo;
 use mesa_stages::pack::{pack_scene, AssetSource, PackRequest};
 
 use super::assets::INDEX;
+use super::dataset_cache::DatasetCache;
 use super::retrieve::read_json;
 use crate::fsio::sha256_hex;
 use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
@@ -37,7 +37,7 @@ pub fn refined_glb(scene: &Scene) -> String {
 /// The `pack` stage.
 #[derive(Default)]
 pub struct PackStage {
-    indexes: Mutex<BTreeMap<PathBuf, Result<Arc<AssetIndexArtifact>, String>>>,
+    indexes: DatasetCache<AssetIndexArtifact>,
 }
 
 impl PackStage {
@@ -47,19 +47,9 @@ impl PackStage {
     }
 
     fn index(&self, ctx: &StageContext<'_>) -> anyhow::Result<Arc<AssetIndexArtifact>> {
-        let mut cache = self
-            .indexes
-            .lock()
-            .map_err(|_| anyhow!("internal error: the index cache is poisoned"))?;
-        let entry = cache.entry(ctx.dataset.to_owned()).or_insert_with(|| {
+        self.indexes.get_or_load(ctx.dataset, || {
             read_json(&ctx.dataset.join(INDEX), "run `mesa assets` to write it")
-                .map(Arc::new)
-                .map_err(|e: anyhow::Error| format!("{e:#}"))
-        });
-        match entry {
-            Ok(index) => Ok(Arc::clone(index)),
-            Err(message) => bail!("{message}"),
-        }
+        })
     }
 }
 
