@@ -29,7 +29,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::glb_read::{open_glb, GlbDocument, GlbError};
 use crate::glb_write::{GlbBuilder, GlbWriteError, MaterialSpec, NodeSpec};
-use crate::gltf_frames::{gltf_from_object_axes, gltf_from_table_point, gltf_from_table_quat};
+use crate::gltf_frames::{
+    gltf_from_object_axes, gltf_from_table_point, gltf_from_table_quat, object_from_gltf_axes,
+    table_from_gltf_point, table_from_gltf_quat,
+};
 use crate::mesh::{normalize3, quat_normalize, TriMesh};
 use crate::pack::bake::MaterialReader;
 use crate::pack::{
@@ -93,6 +96,9 @@ pub struct Annotation {
     pub missing: Vec<String>,
     /// Whether it added the restricted zone.
     pub restricted_zone_added: bool,
+    /// The same session as Blender operations, in order (`scripts/blender_pack.py edit`
+    /// applies them to the pack: the check that this writes what Blender writes).
+    pub blender_ops: Vec<serde_json::Value>,
 }
 
 /// Why a scene cannot be annotated.
@@ -333,8 +339,46 @@ pub fn annotate_scene(request: &AnnotateRequest<'_>) -> Result<Annotation, Annot
         }
     }
     annotation.deleted.sort();
+    annotation.blender_ops = blender_ops(&annotation.deleted, &nodes, added_zone);
     annotation.glb = export_like_blender(&pack, &nodes, added_zone)?;
     Ok(annotation)
+}
+
+/// The session as Blender operations (Blender's world is the table frame): deletions, then
+/// each object set to its place (a copy duplicated from its source first), then the added box.
+fn blender_ops(
+    deleted: &[String],
+    nodes: &[EditedNode],
+    added_zone: Option<([f64; 3], [f64; 3])>,
+) -> Vec<serde_json::Value> {
+    let mut ops: Vec<serde_json::Value> = deleted
+        .iter()
+        .map(|name| serde_json::json!({"op": "delete", "name": name}))
+        .collect();
+    for node in nodes {
+        if node.own_mesh {
+            ops.push(
+                serde_json::json!({"op": "duplicate", "name": node.pack_node, "as": node.name}),
+            );
+        }
+        let q = table_from_gltf_quat(node.rotation);
+        ops.push(serde_json::json!({
+            "op": "set",
+            "name": node.name,
+            "location": table_from_gltf_point(node.translation),
+            "rotation_wxyz": [q[3], q[0], q[1], q[2]],
+            "scale": object_from_gltf_axes(node.scale),
+        }));
+    }
+    if let Some((centre, size)) = added_zone {
+        ops.push(serde_json::json!({
+            "op": "add_box",
+            "name": RESTRICTED_ZONE_NODE,
+            "location": table_from_gltf_point(centre),
+            "size": object_from_gltf_axes(size),
+        }));
+    }
+    ops
 }
 
 /// The name Blender gives a copy of `source`: `<source>.001`, or the next free number.

@@ -308,7 +308,8 @@ fn angle_between_deg(a: [f64; 4], b: [f64; 4]) -> f64 {
 }
 
 fn round6(v: f64) -> f64 {
-    (v * 1e6).round() / 1e6
+    // `+ 0.0` turns -0.0 into 0.0.
+    (v * 1e6).round() / 1e6 + 0.0
 }
 
 fn node_geometry(

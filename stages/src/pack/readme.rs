@@ -113,14 +113,17 @@ Compare with reference.png and the snapshots, then, object by object (Object Mod
   mug_0.001; keep that name, the program gives it a proper one.
 - If the table top is too small or too large for the objects, you may move or scale the
   \"table\" object; positions are read relative to the table.
+- If the photo shows a sink (or another area where nothing may stand) and the scene has no
+  \"restricted_zone\" object, add one: Add > Mesh > Cube, scale it flat over that area, and
+  name it restricted_zone. If it has one, move and scale it to fit.
 
 What not to do
 --------------
 - Do not rename objects, and do not join or separate them.
 - Do not apply transforms (Ctrl+A) and do not edit meshes (Tab / Edit Mode): the program reads
   each object's location, rotation and scale, and its mesh must stay as it is.
-- Do not parent objects to one another, and do not add new objects (no new meshes, no
-  imported models, no empties, cameras or lights).
+- Do not parent objects to one another, and do not add other objects (no new meshes but the
+  restricted_zone box, no imported models, no empties, cameras or lights).
 - Leave H1_reference exactly as it is (do not move, scale or delete it). If you scale the
   whole scene, scale the figure with it: the program measures the figure to undo that.
 - Do not delete the \"table\".
