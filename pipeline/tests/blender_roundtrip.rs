@@ -263,6 +263,7 @@ fn round_trip(python: &Path, ops: &Value, extras: bool) -> (DatasetLayout, Inges
     };
     let h1 = object(&objects, "H1_reference");
     let f = index.h1.height_cm / 100.0 / vec3(&h1["dimensions"])[2];
+    let (mut worst_position, mut worst_size, mut worst_yaw) = (0.0f64, 0.0f64, 0.0f64);
     for b in &objects {
         let name = b["name"].as_str().expect("name");
         if ["table", "H1_reference", "restricted_zone"].contains(&name) {
@@ -283,6 +284,8 @@ fn round_trip(python: &Path, ops: &Value, extras: bool) -> (DatasetLayout, Inges
         ];
         let dimensions = vec3(&b["dimensions"]);
         for i in 0..3 {
+            worst_position = worst_position.max((o.position_cm.0[i] - expected[i] * 100.0).abs());
+            worst_size = worst_size.max((o.size_cm.0[i] - dimensions[i] * f * 100.0).abs());
             assert!(
                 (o.position_cm.0[i] - expected[i] * 100.0).abs() < 0.01,
                 "{instance}: position {:?} cm, Blender shows {expected:?} m",
@@ -302,11 +305,17 @@ fn round_trip(python: &Path, ops: &Value, extras: bool) -> (DatasetLayout, Inges
             q[0].as_f64().expect("w"),
         ]);
         let yaw = o.z_rotation_deg.expect("not tilted: a z_rotation");
+        worst_yaw = worst_yaw.max(normalize_deg(yaw - blender_yaw).abs());
         assert!(
             normalize_deg(yaw - blender_yaw).abs() < 0.01,
             "{instance}: yaw {yaw}, Blender shows {blender_yaw}"
         );
     }
+    eprintln!(
+        "Blender vs ingest: worst position {:.6} mm, size {:.6} mm, yaw {worst_yaw:.6}°",
+        worst_position * 10.0,
+        worst_size * 10.0
+    );
     (layout, diff)
 }
 

@@ -641,6 +641,7 @@ pub fn ingest_scene(
         .filter_map(|n| Some((n.name.as_deref()?, n.mesh?.value())))
         .collect();
     let mut pack_positions: HashMap<usize, Vec<[f64; 3]>> = HashMap::new();
+    let mut refined_positions: HashMap<usize, Vec<[f64; 3]>> = HashMap::new();
 
     // Objects: originals first (in baseline order), then duplicates.
     let mut taken: BTreeSet<String> = baseline
@@ -684,6 +685,7 @@ pub fn ingest_scene(
             &pack,
             pack_mesh_of.get(object.instance.as_str()).copied(),
             &mut pack_positions,
+            &mut refined_positions,
         )?;
         let (entry, change) = compare_with_baseline(object, &read, config, &mut lists);
         let mut change = change;
@@ -729,6 +731,7 @@ pub fn ingest_scene(
             &pack,
             pack_mesh_of.get(source).copied(),
             &mut pack_positions,
+            &mut refined_positions,
         )?;
         let node_name = root.nodes[node].name.clone().unwrap_or_default();
         let mut entry = new_object(object, &instance, &read, config);
@@ -906,6 +909,7 @@ fn mesh_status(
     pack: &GlbDocument<'_>,
     pack_mesh: Option<usize>,
     cache: &mut HashMap<usize, Vec<[f64; 3]>>,
+    refined_cache: &mut HashMap<usize, Vec<[f64; 3]>>,
 ) -> Result<MeshComparison, IngestError> {
     let Some(pack_mesh) = pack_mesh else {
         return Ok(MeshComparison::Unchanged);
@@ -920,8 +924,11 @@ fn mesh_status(
                 .map_err(IngestError::PackGlb)?,
         ),
     };
-    let positions = document.mesh_positions(mesh)?;
-    Ok(compare_meshes(pack_positions, &positions))
+    let positions = match refined_cache.entry(mesh) {
+        std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+        std::collections::hash_map::Entry::Vacant(e) => e.insert(document.mesh_positions(mesh)?),
+    };
+    Ok(compare_meshes(pack_positions, positions))
 }
 
 fn yaw_or_none(rotation: [f64; 4], config: &IngestConfig) -> Option<f64> {
