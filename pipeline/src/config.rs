@@ -35,6 +35,8 @@ pub struct Config {
     pub tasks: mesa_stages::tasks::TasksConfig,
     /// `mesa records`: SFT and DPO training records and the split.
     pub records: mesa_stages::records::RecordsConfig,
+    /// `mesa render`: pictures of each scene's layout (and of single assets with --assets).
+    pub render: mesa_stages::render::RenderConfig,
 }
 
 /// The `[run]` section.
@@ -123,6 +125,10 @@ impl Config {
         let config: Self = toml::from_str(text).map_err(|e| e.to_string())?;
         // Values that parse but cannot work: refused before any work starts.
         config.retrieve.check().map_err(|e| format!("{e} "))?;
+        let problems = config.render.problems();
+        if !problems.is_empty() {
+            return Err(format!("{} ", problems.join("; ")));
+        }
         Ok(config)
     }
 }

@@ -7,6 +7,9 @@ pub mod graph;
 pub mod lift;
 pub mod place;
 pub mod records;
+pub mod release;
+pub mod render;
+pub mod report;
 pub mod retrieve;
 pub mod scene_docs;
 pub mod tasks;
@@ -14,13 +17,14 @@ pub mod tasks;
 use crate::runner::SceneStage;
 
 /// Every per-scene stage, in the order `mesa run` runs them. The dataset-level stages
-/// (`records`) run after them, once.
+/// (`records`, then `report`) run after them, once.
 pub fn pipeline_stages() -> Vec<Box<dyn SceneStage>> {
     vec![
         Box::new(lift::Lift),
         Box::new(retrieve::RetrieveStage::new()),
         Box::new(place::PlaceStage::new()),
         Box::new(graph::GraphStage::new()),
+        Box::new(render::RenderStage::new()),
         Box::new(tasks::TasksStage::new()),
     ]
 }

@@ -422,6 +422,7 @@ fn draw_items<'a>(
                 material: &a.surface_materials[*material],
                 instance: i as u32 + 1,
                 casts_shadow: true,
+                vertex_colors: None,
             });
         }
     }
@@ -432,6 +433,7 @@ fn draw_items<'a>(
             material: &part.material,
             instance: if part.is_table { TABLE_ITEM } else { 0 },
             casts_shadow: part.is_table,
+            vertex_colors: None,
         });
     }
     items

@@ -22,6 +22,9 @@
 mod accessor;
 mod container;
 mod draco;
+mod surface;
+
+pub use surface::{AlphaMode, GlbSurface, SurfaceImage, SurfaceMaterial, SurfacePrimitive};
 
 use std::borrow::Cow;
 use std::collections::{BTreeSet, HashMap};
@@ -257,6 +260,21 @@ fn required_extension_fix(extension: &str) -> Option<&'static str> {
 
 /// Reads a GLB file's triangles.
 pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
+    read_glb_impl(bytes, false).map(|(mesh, _)| mesh)
+}
+
+/// Reads a GLB file's triangles and what a renderer needs to draw them: per-vertex normals,
+/// texture coordinates and colours, the material of each primitive, and the embedded images
+/// (see [`GlbSurface`]). The triangles are exactly those of [`read_glb`].
+pub fn read_glb_surface(bytes: &[u8]) -> Result<(GlbMesh, GlbSurface), GlbError> {
+    let (mesh, surface) = read_glb_impl(bytes, true)?;
+    Ok((mesh, surface.unwrap_or_default()))
+}
+
+fn read_glb_impl(
+    bytes: &[u8],
+    want_surface: bool,
+) -> Result<(GlbMesh, Option<GlbSurface>), GlbError> {
     let mut warnings = Vec::new();
     let chunks = container::split(bytes, &mut warnings)?;
     let root = parse_root(chunks.json, &mut warnings)?;
@@ -303,6 +321,11 @@ pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
     let scene = scene_instances(&root, &mut warnings)?;
     let instances = &scene.instances;
     let mut mesh = GlbMesh::default();
+    let mut surface = if want_surface {
+        Some(surface::surface_materials(&root, &buffers, &mut warnings))
+    } else {
+        None
+    };
     let mut unused_meshes: BTreeSet<usize> = (0..root.meshes.len()).collect();
     let mut cache = HashMap::new();
     for instance in instances {
@@ -312,8 +335,16 @@ pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
             root: &root,
             buffers: &buffers,
             world: &scene.world,
+            surface: want_surface,
         };
-        reader.add_instance(instance, &mut cache, &mut mesh, &mut info, &mut warnings)?;
+        reader.add_instance(
+            instance,
+            &mut cache,
+            &mut mesh,
+            surface.as_mut(),
+            &mut info,
+            &mut warnings,
+        )?;
     }
     if mesh.triangles.is_empty() {
         let detail = if root.meshes.is_empty() {
@@ -348,7 +379,7 @@ pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
     }
     mesh.info = info;
     mesh.warnings = warnings;
-    Ok(mesh)
+    Ok((mesh, surface))
 }
 
 fn parse_root(json: &[u8], warnings: &mut Vec<String>) -> Result<Root, GlbError> {
@@ -632,12 +663,16 @@ fn scene_instances(root: &Root, warnings: &mut Vec<String>) -> Result<SceneNodes
 struct Primitive {
     positions: Vec<[f64; 3]>,
     triangles: Vec<[u32; 3]>,
+    /// Surface attributes, read only for [`read_glb_surface`].
+    attributes: surface::Attributes,
 }
 
 struct Reader<'a, 'b> {
     root: &'a Root,
     buffers: &'a Buffers<'b>,
     world: &'a [Option<Matrix4<f64>>],
+    /// Whether to read the surface attributes too.
+    surface: bool,
 }
 
 fn data_error(path: impl Into<String>, problem: impl Into<String>) -> GlbError {
@@ -723,11 +758,30 @@ impl Reader<'_, '_> {
             .accessors
             .get(position)
             .is_some_and(|a| a.buffer_view.is_some());
+        let wanted = if self.surface {
+            surface::wanted_attributes(self.root, primitive)
+        } else {
+            Vec::new()
+        };
+        let mut attributes = surface::Attributes::default();
         let (positions, triangles) = match draco {
             // Uncompressed fallback data wins when a file carries both.
             Some(extension) if !has_fallback => {
                 info.draco = true;
-                let decoded = draco::decode_primitive(self.root, self.buffers, extension, &path)?;
+                let names: Vec<&str> = wanted.iter().map(String::as_str).collect();
+                let decoded = draco::decode_primitive_with(
+                    self.root,
+                    self.buffers,
+                    extension,
+                    &path,
+                    &names,
+                )?;
+                attributes = surface::Attributes::from_named(
+                    decoded.extra,
+                    decoded.positions.len(),
+                    &path,
+                    warnings,
+                );
                 (decoded.positions, decoded.triangles)
             }
             _ => {
@@ -761,6 +815,15 @@ impl Reader<'_, '_> {
                     ));
                 }
                 let triangles = triangles_of(&indices, mode, &path, warnings);
+                if !wanted.is_empty() {
+                    attributes = self.surface_attributes(
+                        primitive,
+                        &wanted,
+                        positions.len(),
+                        &path,
+                        warnings,
+                    );
+                }
                 (positions, triangles)
             }
         };
@@ -773,6 +836,7 @@ impl Reader<'_, '_> {
         Ok(Primitive {
             positions,
             triangles,
+            attributes,
         })
     }
 
@@ -922,6 +986,7 @@ impl Reader<'_, '_> {
         instance: &Instance,
         cache: &mut HashMap<(usize, usize), Rc<Primitive>>,
         out: &mut GlbMesh,
+        mut surface: Option<&mut GlbSurface>,
         info: &mut GlbInfo,
         warnings: &mut Vec<String>,
     ) -> Result<(), GlbError> {
@@ -970,6 +1035,21 @@ impl Reader<'_, '_> {
                 Some(joints) => self.skin(primitive, &path, joints, &positions)?,
                 None => None,
             };
+            if let Some(surface) = surface.as_deref_mut() {
+                // Normals follow the node's transform; a morphed or skinned primitive's
+                // normals would need the same deformation, so they are recomputed instead.
+                let deformed =
+                    skinned.is_some() || primitive.targets.as_ref().is_some_and(|t| !t.is_empty());
+                surface.push_primitive(
+                    &geometry.attributes,
+                    (!deformed).then_some(&instance.world),
+                    primitive.material.map(|m| m.value()),
+                    u32::try_from(out.positions_m.len()).unwrap_or(u32::MAX),
+                    positions.len(),
+                    u32::try_from(out.triangles.len()).unwrap_or(u32::MAX),
+                    geometry.triangles.len(),
+                );
+            }
             let placed: Vec<[f64; 3]> = match skinned {
                 Some(skinned) => skinned,
                 None => positions
