@@ -109,8 +109,8 @@ pub struct ReportStats {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Distribution {
-    /// How many items had each value.
-    pub histogram: BTreeMap<u64, u64>,
+    /// How many items had each value, by increasing value (values no item had are left out).
+    pub histogram: Vec<Bin>,
     /// Smallest value (0 when there is none).
     pub min: u64,
     /// Largest value.
@@ -119,6 +119,16 @@ pub struct Distribution {
     pub mean: f64,
     /// Median value.
     pub median: f64,
+}
+
+/// One bar of a histogram.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Bin {
+    /// The value.
+    pub value: u64,
+    /// How many items had it.
+    pub count: u64,
 }
 
 /// A name and its count.

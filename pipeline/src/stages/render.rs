@@ -298,7 +298,13 @@ impl SceneStage for RenderStage {
             .map(|o| o.retrieved_uid.as_str())
             .filter(|u| !u.is_empty())
             .collect();
-        inputs.extend(uids.iter().map(|uid| format!("{LIBRARY}/{uid}.glb")));
+        // A missing GLB is left to `run`, which names the object and the uid (a failed scene
+        // runs again next time, so the file is picked up once it is there).
+        inputs.extend(
+            uids.iter()
+                .map(|uid| format!("{LIBRARY}/{uid}.glb"))
+                .filter(|rel| ctx.dataset.join(rel).is_file()),
+        );
         Ok(inputs)
     }
 

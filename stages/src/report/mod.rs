@@ -10,7 +10,7 @@ mod plots;
 use std::collections::BTreeMap;
 
 use mesa_schemas::render::{
-    CollisionStats, Distribution, NameCount, RateStats, ReportStats, REPORT_STATS_SCHEMA,
+    Bin, CollisionStats, Distribution, NameCount, RateStats, ReportStats, REPORT_STATS_SCHEMA,
 };
 
 pub use page::html;
@@ -106,7 +106,10 @@ fn distribution(values: &[u64]) -> Distribution {
         n => (sorted[n / 2 - 1] + sorted[n / 2]) as f64 / 2.0,
     };
     Distribution {
-        histogram,
+        histogram: histogram
+            .into_iter()
+            .map(|(value, count)| Bin { value, count })
+            .collect(),
         min: sorted.first().copied().unwrap_or(0),
         max: sorted.last().copied().unwrap_or(0),
         mean: if sorted.is_empty() {

@@ -207,7 +207,11 @@ pub fn plots(stats: &ReportStats) -> Result<Vec<(String, String)>, String> {
                     BAR,
                     counts
                         .iter()
-                        .map(|c| hist.get(c).copied().unwrap_or(0) as f64)
+                        .map(|c| {
+                            hist.iter()
+                                .find(|b| b.value == *c)
+                                .map_or(0.0, |b| b.count as f64)
+                        })
                         .collect(),
                 )],
                 (760, 360),
