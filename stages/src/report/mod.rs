@@ -339,7 +339,7 @@ mod tests {
         assert_eq!(stats.objects, 4);
         assert_eq!(
             stats.objects_per_scene.histogram,
-            BTreeMap::from([(1, 1), (3, 1)])
+            vec![Bin { value: 1, count: 1 }, Bin { value: 3, count: 1 }]
         );
         assert_eq!(stats.objects_per_scene.median, 2.0);
         assert_eq!(
