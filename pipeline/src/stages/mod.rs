@@ -3,6 +3,7 @@
 //! run` runs before them.
 
 pub mod assets;
+pub mod dataset_cache;
 pub mod graph;
 pub mod lift;
 pub mod place;
