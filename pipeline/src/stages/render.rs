@@ -10,7 +10,7 @@
 //! GLB, front alignment and the `[render]` settings are unchanged (`views.json` records them).
 
 use std::collections::{BTreeMap, HashMap};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -27,6 +27,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::assets::{INDEX, LIBRARY};
+use super::dataset_cache::DatasetCache;
 use super::retrieve::read_json;
 use crate::config::{Config, ProgressMode};
 use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic};
@@ -172,7 +173,7 @@ struct Library {
 /// The `render` stage.
 #[derive(Default)]
 pub struct RenderStage {
-    libraries: Mutex<BTreeMap<PathBuf, Result<Arc<Library>, String>>>,
+    libraries: DatasetCache<Library>,
     cache: AssetCache,
 }
 
@@ -190,19 +191,10 @@ impl RenderStage {
     }
 
     fn library(&self, dataset: &Path) -> anyhow::Result<Arc<Library>> {
-        let mut cache = self
-            .libraries
-            .lock()
-            .map_err(|_| anyhow!("internal error: the library cache is poisoned"))?;
-        let entry = cache.entry(dataset.to_owned()).or_insert_with(|| {
-            read_json(&dataset.join(INDEX), "run `mesa assets` to write it")
-                .map(|index| Arc::new(Library { index }))
-                .map_err(|e| format!("{e:#}"))
-        });
-        match entry {
-            Ok(library) => Ok(Arc::clone(library)),
-            Err(message) => bail!("{message}"),
-        }
+        self.libraries.get_or_load(dataset, || {
+            let index = read_json(&dataset.join(INDEX), "run `mesa assets` to write it")?;
+            Ok(Library { index })
+        })
     }
 
     /// The asset `uid`, read from the library with the index's front alignment.
