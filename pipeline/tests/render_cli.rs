@@ -527,3 +527,46 @@ fn release_writes_the_mesatask_tree_which_reads_back_into_the_refined_layouts() 
         ));
     assert_eq!(std::fs::read_dir(&other).expect("dir").count(), 1);
 }
+
+#[test]
+fn mesa_run_renders_refined_scenes_lets_the_others_wait_and_reports_at_the_end() {
+    let (_dir, ws) = workspace();
+    // Two scenes are back from the annotator, two are not.
+    for scene in &SCENES[2..] {
+        std::fs::remove_file(ws.join("scenes").join(scene).join("refined/layout.json"))
+            .expect("remove");
+    }
+    mesa()
+        .args(["run", "--progress", "off"])
+        .arg(&ws)
+        .assert()
+        .success()
+        .stderr(predicate::str::contains(
+            "render: 4 scenes: 4 done, 0 skipped, 0 failed, 2 warnings",
+        ))
+        .stderr(predicate::str::contains("waiting for the annotator"))
+        .stderr(predicate::str::contains(
+            "report: 4 scenes (2 without a render",
+        ));
+    for (k, scene) in SCENES.iter().enumerate() {
+        let front = ws.join("scenes").join(scene).join("render/front.png");
+        assert_eq!(front.is_file(), k < 2, "{scene}");
+    }
+    assert!(ws.join("report/index.html").is_file());
+    // A refined layout that comes back is rendered by the next run; the others stay done.
+    let scene = ws.join("scenes").join(SCENES[2]);
+    std::fs::copy(
+        scene.join("truth/layout.json"),
+        scene.join("refined/layout.json"),
+    )
+    .expect("copy");
+    mesa()
+        .args(["run", "--progress", "off"])
+        .arg(&ws)
+        .assert()
+        .success()
+        .stderr(predicate::str::contains(
+            "render: 4 scenes: 1 done, 3 skipped",
+        ));
+    assert!(scene.join("render/front.png").is_file());
+}

@@ -25,7 +25,7 @@ pub fn pipeline_stages() -> Vec<Box<dyn SceneStage>> {
         Box::new(retrieve::RetrieveStage::new()),
         Box::new(place::PlaceStage::new()),
         Box::new(graph::GraphStage::new()),
-        Box::new(render::RenderStage::new()),
+        Box::new(render::RenderStage::for_pipeline()),
         Box::new(tasks::TasksStage::new()),
     ]
 }

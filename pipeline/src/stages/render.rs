@@ -175,7 +175,15 @@ struct Library {
 pub struct RenderStage {
     libraries: DatasetCache<Library>,
     cache: AssetCache,
+    /// In `mesa run`: a scene whose refined layout has not come back from the annotator yet
+    /// is waiting, not failed (see [`RenderStage::for_pipeline`]).
+    waits_for_annotator: bool,
 }
+
+/// The warning of a scene still waiting for its refined layout.
+pub const WAITING: &str = "waiting for the annotator: no qa/layout.json or refined/layout.json \
+     yet, so nothing was rendered (run `mesa ingest` once the annotator's GLB is back; `mesa \
+     render --layout coarse` draws the coarse layout)";
 
 /// The `[render]` values that change pictures (the cache size does not).
 fn fingerprint(config: &RenderConfig) -> String {
@@ -185,9 +193,28 @@ fn fingerprint(config: &RenderConfig) -> String {
 }
 
 impl RenderStage {
-    /// A stage with nothing loaded yet.
+    /// The stage of `mesa render`: a scene without the layout asked for fails.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// The stage of `mesa run`: with `[render] layout = "refined"`, a scene that has neither
+    /// `qa/layout.json` nor `refined/layout.json` is still with the annotator. It is done with
+    /// a warning and no picture (never a picture of the coarse layout), and rendered by the
+    /// first run after its refined layout appears (its inputs change then). Explicit choices
+    /// (`coarse`, `truth`) still fail when their layout is missing.
+    pub fn for_pipeline() -> Self {
+        Self {
+            waits_for_annotator: true,
+            ..Self::default()
+        }
+    }
+
+    /// Whether a scene is waiting for its refined layout (and this stage lets it wait).
+    fn waiting(&self, choice: LayoutChoice, scene: &Scene) -> bool {
+        self.waits_for_annotator
+            && choice == LayoutChoice::Refined
+            && present_layouts(scene, choice).is_empty()
     }
 
     fn library(&self, dataset: &Path) -> anyhow::Result<Arc<Library>> {
@@ -277,6 +304,9 @@ impl SceneStage for RenderStage {
 
     fn inputs(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
         let choice = ctx.config.render.layout;
+        if self.waiting(choice, scene) {
+            return Ok(Vec::new());
+        }
         let layouts = present_layouts(scene, choice);
         let Some(first) = layouts.first() else {
             return Err(no_layout(scene, choice));
@@ -306,6 +336,11 @@ impl SceneStage for RenderStage {
 
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
         let config = &ctx.config.render;
+        if self.waiting(config.layout, scene) {
+            let mut out = SceneOutput::new();
+            out.warn(WAITING);
+            return Ok(out);
+        }
         let rel = *present_layouts(scene, config.layout)
             .first()
             .ok_or_else(|| no_layout(scene, config.layout))?;
@@ -394,6 +429,8 @@ pub struct AssetViewsSummary {
     pub skipped: usize,
     /// Assets that could not be rendered, with why.
     pub failed: Vec<(String, String)>,
+    /// Selected assets left out because the index marks them invalid.
+    pub invalid: usize,
     /// Wall time.
     pub elapsed_s: f64,
 }
@@ -420,12 +457,16 @@ pub fn render_asset_views(
         ),
         None => None,
     };
-    let uids: Vec<&String> = library
+    let selected: Vec<&String> = library
         .index
         .assets
         .keys()
         .filter(|uid| matcher.as_ref().is_none_or(|m| m.is_match(uid.as_str())))
         .collect();
+    // Invalid assets cannot be drawn; the index says why.
+    let (uids, invalid): (Vec<&String>, Vec<&String>) = selected
+        .into_iter()
+        .partition(|uid| library.index.assets[*uid].valid);
     let render = &config.render;
     let digest = fingerprint(render);
     let progress = crate::progress::Progress::new(
@@ -459,6 +500,7 @@ pub fn render_asset_views(
     progress.finish();
     let mut summary = AssetViewsSummary {
         assets: uids.len(),
+        invalid: invalid.len(),
         ..AssetViewsSummary::default()
     };
     for (uid, outcome) in uids.iter().zip(outcomes) {
@@ -542,6 +584,13 @@ pub fn format_asset_views_summary(summary: &AssetViewsSummary) -> String {
         summary.failed.len(),
         summary.elapsed_s
     );
+    if summary.invalid > 0 {
+        let _ = writeln!(
+            out,
+            "  {} invalid assets left out (their reasons are in {INDEX})",
+            summary.invalid
+        );
+    }
     for (uid, error) in &summary.failed {
         let _ = writeln!(out, "  failed {uid}: {error}");
     }

@@ -744,3 +744,104 @@ pub fn render_asset_view(
         picture,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Placed as MesaTask's reader places it: the asset's box centre lands on `position`
+        /// and its box, turned back by the rotation, has exactly the layout's `size`.
+        #[test]
+        fn an_asset_box_becomes_the_layout_box(
+            lo in prop::array::uniform3(-0.5f64..0.5),
+            extent in prop::array::uniform3(0.01f64..0.8),
+            size_cm in prop::array::uniform3(1.0f64..120.0),
+            position_cm in prop::array::uniform3(-50.0f64..150.0),
+            yaw_deg in -180.0f64..180.0,
+        ) {
+            let bounds = Aabb { min: lo, max: [lo[0] + extent[0], lo[1] + extent[1], lo[2] + extent[2]] };
+            let q = mesa_schemas::rotation::quat_xyzw_from_yaw_deg(yaw_deg);
+            let (map, _) = table_from_asset(position_cm, q, size_cm, [1.0; 3], &bounds);
+            let centre = map.apply_point(bounds.center());
+            for k in 0..3 {
+                prop_assert!((centre[k] - position_cm[k] / 100.0).abs() < 1e-9);
+            }
+            let unturn = Affine3::from_quat_xyzw(q).inverse().expect("rotation");
+            let back = bounds.transformed(&unturn.mul(&map));
+            for k in 0..3 {
+                prop_assert!((back.size()[k] - size_cm[k] / 100.0).abs() < 1e-9);
+            }
+        }
+
+        /// Every scene view shows the whole scene box, whatever the table's shape.
+        #[test]
+        fn every_view_frames_the_scene(
+            width_cm in 30.0f64..300.0,
+            depth_cm in 20.0f64..120.0,
+            top_cm in 0.0f64..80.0,
+        ) {
+            let scene = camera::scene_box([0.0, width_cm / 100.0, 0.0, depth_cm / 100.0], top_cm / 100.0);
+            for view in SceneView::ALL {
+                let cam = camera::scene_camera(view, &scene, 512, 512, 39.6, 1.5);
+                let camera_from_table = cam.table_from_camera.inverse().expect("rigid");
+                for corner in scene.corners() {
+                    let uv = cam.intrinsics.project(camera_from_table.apply_point(corner));
+                    prop_assert!(uv.is_some_and(|[u, v]| (0.0..=511.0).contains(&u) && (0.0..=511.0).contains(&v)),
+                        "{:?}: {:?} at {:?}", view, corner, uv);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_scale_factor_that_disagrees_with_size_is_noted() {
+        let bounds = Aabb {
+            min: [0.0; 3],
+            max: [0.1, 0.1, 0.2],
+        };
+        let q = [0.0, 0.0, 0.0, 1.0];
+        let (_, note) = table_from_asset([0.0; 3], q, [10.0, 10.0, 20.0], [1.0; 3], &bounds);
+        assert!(note.is_none());
+        let (map, note) = table_from_asset([0.0; 3], q, [10.0, 10.0, 20.0], [2.0; 3], &bounds);
+        assert!(note.expect("a note").contains("drawn at size"));
+        // The picture follows size.
+        assert_abs_diff_eq!(map.linear[0][0], 1.0, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn transparent_and_black_backgrounds() {
+        let picture = Picture {
+            width: 2,
+            height: 1,
+            rgba: vec![255, 255, 255, 255, 255, 0, 0, 0],
+            instances: vec![1, 0],
+        };
+        let png = picture.png(Background::Black).expect("png");
+        let decoded = crate::image_io::decode_png(&png).expect("decodes");
+        assert_eq!(decoded.layout, crate::image_io::PixelLayout::Rgb8);
+        assert_eq!(decoded.samples, vec![255, 255, 255, 0, 0, 0]);
+        let png = picture.png(Background::Transparent).expect("png");
+        let decoded = crate::image_io::decode_png(&png).expect("decodes");
+        assert_eq!(decoded.layout, crate::image_io::PixelLayout::Rgba8);
+        assert_eq!(picture.instance_pixels(), BTreeMap::from([(1, 1)]));
+    }
+
+    #[test]
+    fn configuration_problems_name_the_key() {
+        let config = RenderConfig {
+            supersampling: 0,
+            asset_fill: 1.5,
+            ..RenderConfig::default()
+        };
+        let problems = config.problems().join("\n");
+        assert!(
+            problems.contains("[render] supersampling = 0"),
+            "{problems}"
+        );
+        assert!(problems.contains("[render] asset_fill = 1.5"), "{problems}");
+        assert!(RenderConfig::default().problems().is_empty());
+    }
+}
