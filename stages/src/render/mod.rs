@@ -766,13 +766,13 @@ mod tests {
             let q = mesa_schemas::rotation::quat_xyzw_from_yaw_deg(yaw_deg);
             let (map, _) = table_from_asset(position_cm, q, size_cm, [1.0; 3], &bounds);
             let centre = map.apply_point(bounds.center());
-            for k in 0..3 {
-                prop_assert!((centre[k] - position_cm[k] / 100.0).abs() < 1e-9);
+            for (c, p) in centre.iter().zip(position_cm) {
+                prop_assert!((c - p / 100.0).abs() < 1e-9);
             }
             let unturn = Affine3::from_quat_xyzw(q).inverse().expect("rotation");
             let back = bounds.transformed(&unturn.mul(&map));
-            for k in 0..3 {
-                prop_assert!((back.size()[k] - size_cm[k] / 100.0).abs() < 1e-9);
+            for (b, s) in back.size().iter().zip(size_cm) {
+                prop_assert!((b - s / 100.0).abs() < 1e-9);
             }
         }
 
