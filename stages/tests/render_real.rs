@@ -162,3 +162,30 @@ fn a_textured_asset_shows_its_texture_in_every_view() {
         }
     }
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+    /// Damaged textured files (bytes changed, the end cut off) are loaded or rejected, never a
+    /// panic; what loads has one normal, texture coordinate and colour per vertex.
+    #[test]
+    fn damaged_textured_files_load_or_are_rejected(
+        flips in proptest::collection::vec((proptest::prelude::any::<proptest::sample::Index>(), proptest::prelude::any::<u8>()), 0..6),
+        keep in 0.0f64..=1.0,
+        file in proptest::sample::select(vec!["BoxTextured.glb", "BoxVertexColors.glb", "Box_Draco.glb"]),
+    ) {
+        let mut bytes = glb(file);
+        for (at, value) in flips {
+            let i = at.index(bytes.len());
+            bytes[i] = value;
+        }
+        let len = ((bytes.len() as f64) * keep).round() as usize;
+        bytes.truncate(len.max(1));
+        if let Ok((mesh, surface)) = read_glb_surface(&bytes) {
+            proptest::prop_assert_eq!(surface.normals.len(), mesh.positions_m.len());
+            proptest::prop_assert_eq!(surface.uvs.len(), mesh.positions_m.len());
+            proptest::prop_assert_eq!(surface.colors.len(), mesh.positions_m.len());
+            let asset = load_render_asset(&bytes, 0.0, 64);
+            proptest::prop_assert!(asset.is_ok());
+        }
+    }
+}
