@@ -4,7 +4,8 @@
 # default, or ENGINE=EEVEE / CYCLES), both on the CPU, and prints the time of each and the
 # ratio. mesa is timed by its criterion bench (the view alone, assets loaded), run here on one
 # thread; Blender by bench/render_blender.py (the render call alone, after a first render that
-# compiles its shaders). Blender's picture is written beside mesa's for comparison.
+# compiles its shaders), with one OpenMP and one llvmpipe thread. Blender's picture is written
+# beside mesa's for comparison.
 #
 #   bench/compare_blender.sh [OUT_DIR]
 #
@@ -31,7 +32,7 @@ echo "mesa (criterion, one thread):"
   'render/front_512_15_objects$' 2>/dev/null | grep -E "time:" | head -1)
 
 echo "Blender ($engine):"
-OMP_NUM_THREADS=1 "$python" "$root/bench/render_blender.py" "$ws/$scene_rel" \
+OMP_NUM_THREADS=1 LP_NUM_THREADS=1 "$python" "$root/bench/render_blender.py" "$ws/$scene_rel" \
   "$ws/assets/library" truth/layout.json "$out/blender_front.png" --engine "$engine" \
   --repeat 5 2>/dev/null | grep '^{' | tee "$out/blender.json"
 echo "pictures: $out/mesa_front.png $out/blender_front.png"

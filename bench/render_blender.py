@@ -12,8 +12,8 @@ by `rotation` (x, y, z, w), moved to `position`; in metres, as mesa renders. The
 slab over the placement zone; the camera is `render/front_camera.json` (OpenCV, table frame)
 turned into Blender's (looking along -z, y up); one sun light where mesa's main light is, a
 grey world for ambient light. Timing: the first render (shaders compiled) and the median of
-`--repeat` more, each `bpy.ops.render.render` alone (import and scene set-up not counted).
-Prints one JSON line.
+`--repeat` more, each `bpy.ops.render.render` alone (import and scene set-up not counted), wall
+and CPU time (all threads of the process). Prints one JSON line.
 """
 import argparse
 import json
@@ -145,10 +145,12 @@ def main():
     scene.render.filepath = str(args.out)
     setup = time.perf_counter() - setup
     times = []
+    cpu = []
     for _ in range(1 + args.repeat):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         bpy.ops.render.render(write_still=True)
         times.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
     triangles = sum(len(p.vertices) - 2 for o in scene.objects if o.type == "MESH" for p in o.data.polygons)
     print(json.dumps({
         "engine": scene.render.engine,
@@ -160,6 +162,7 @@ def main():
         "first_render_s": round(times[0], 4),
         "median_render_s": round(statistics.median(times[1:]), 4) if args.repeat else None,
         "renders_s": [round(t, 4) for t in times],
+        "median_render_cpu_s": round(statistics.median(cpu[1:]), 4) if args.repeat else None,
     }))
 
 

@@ -108,7 +108,7 @@ pub struct RenderConfig {
     /// 36 mm sensor).
     pub fov_x_deg: f64,
     /// Scene views: camera distance as a multiple of the scene box's largest side (MesaTask:
-    /// 1.5).
+    /// 1.5); farther when the box would be cut at the picture's edges.
     pub distance_factor: f64,
     /// Cast shadows from the main light (a shadow map).
     pub shadows: bool,
