@@ -348,7 +348,7 @@ pub fn lift_scene(
         let mut max = [0.0; 3];
         let mut edges = [Vector3::zeros(); 3];
         for axis in 0..3 {
-            table_points.sort_by(|a, b| a.0[axis].total_cmp(&b.0[axis]));
+            table_points.sort_unstable_by(|a, b| a.0[axis].total_cmp(&b.0[axis]));
             let top = if axis == 2 { top_trim } else { 0 };
             let (lo, hi) = (
                 &table_points[0],
@@ -946,7 +946,7 @@ fn sharp_extent(samples: &mut [(f64, f64)], q: f64) -> (f64, f64) {
     if samples.is_empty() {
         return (0.0, 0.0);
     }
-    samples.sort_by(|a, b| a.0.total_cmp(&b.0));
+    samples.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let total: f64 = samples.iter().map(|s| s.1).sum();
     let quantile = |target: f64| {
         let mut acc = 0.0;
