@@ -177,8 +177,11 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     // The dataset-level stages merge every scene: with shards, each shard has only its part.
     if resolved.options.shard.count > 1 {
         eprintln!(
-            "records, report: not run by a shard; run `mesa records {0}` and `mesa report {0}` \
-             once every shard is done",
+            "records: not run by a shard; run `mesa records {}` once every shard is done",
+            resolved.dataset.display()
+        );
+        eprintln!(
+            "report: not run by a shard; run `mesa report {}` once every shard is done",
             resolved.dataset.display()
         );
     } else {
