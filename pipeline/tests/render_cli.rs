@@ -363,6 +363,29 @@ fn the_report_counts_the_dataset_and_its_page_opens_in_chromium_without_errors()
     // One scene left unrendered: the page says so, without an image.
     let unrendered = ws.join("scenes").join(SCENES[3]).join("render");
     std::fs::remove_dir_all(&unrendered).expect("remove");
+    // Two scenes checked (qa/check.json as `mesa check` writes it): one with a collision that
+    // settling removed, one clean and not settled; the other two not checked.
+    let findings = |colliding: usize| {
+        serde_json::json!({
+            "collisions": (0..colliding).map(|_| serde_json::json!({"a": "x_0", "b": "y_0", "depth_mm": 4.0})).collect::<Vec<_>>(),
+            "floating": [], "zone_violations": [], "pairs_total": 10,
+            "collision_rate": colliding as f64 / 10.0, "mesatask_rule_pairs": 0,
+            "clean": colliding == 0
+        })
+    };
+    for (scene, colliding, settled) in [(SCENES[0], 1, true), (SCENES[1], 0, false)] {
+        let mut check = findings(colliding);
+        check["schema"] = "mesa.check/1".into();
+        check["layout"] = "refined/layout.json".into();
+        if settled {
+            check["settle"] = serde_json::json!({
+                "status": "settled", "layout": "qa/layout.json", "after": findings(0)
+            });
+        }
+        let path = ws.join("scenes").join(scene).join("qa/check.json");
+        std::fs::create_dir_all(path.parent().expect("parent")).expect("mkdir");
+        std::fs::write(&path, serde_json::to_vec_pretty(&check).expect("json")).expect("write");
+    }
     mesa()
         .arg("report")
         .arg(&ws)
@@ -387,8 +410,12 @@ fn the_report_counts_the_dataset_and_its_page_opens_in_chromium_without_errors()
         BTreeMap::from([("refined/layout.json".into(), 4)])
     );
     assert_eq!(stats.scenes_rendered, 3);
-    assert_eq!(stats.collisions.checked, 0);
-    assert_eq!(stats.collisions.not_checked, 4);
+    assert_eq!(stats.collisions.checked, 2);
+    assert_eq!(stats.collisions.not_checked, 2);
+    assert_eq!(stats.collisions.before.colliding_pairs, 1);
+    assert_eq!(stats.collisions.before.pairs, 20);
+    let after = stats.collisions.after.as_ref().expect("settling was tried");
+    assert_eq!((after.scenes, after.colliding_pairs), (2, 0));
     let categories: BTreeSet<String> = layouts
         .iter()
         .flat_map(|l| l.objects.iter().filter_map(|o| o.category.clone()))
@@ -414,6 +441,8 @@ fn the_report_counts_the_dataset_and_its_page_opens_in_chromium_without_errors()
     }
     let page = std::fs::read_to_string(report.join("index.html")).expect("page");
     assert!(page.contains("not checked"));
+    assert!(page.contains("1 colliding pairs before settling (rate 0.100)"));
+    assert!(page.contains("settled"));
     assert!(page.contains("not rendered"));
     mesa().arg("validate").arg(&report).assert().success();
 

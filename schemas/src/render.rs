@@ -142,8 +142,8 @@ pub struct NameCount {
 }
 
 /// Collision statistics: the paper's collision rate (colliding pairs / all pairs) before
-/// settling (the checked layout) and after (the settled `qa/layout.json`, when `mesa check
-/// --settle` wrote one).
+/// settling (the layouts as checked) and after (the layouts later stages read: the settled
+/// `qa/layout.json` where `mesa check --settle` wrote one, the checked layout elsewhere).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CollisionStats {
@@ -153,7 +153,7 @@ pub struct CollisionStats {
     pub not_checked: u64,
     /// Before settling: the checked layout.
     pub before: RateStats,
-    /// After settling; `None` when no scene was settled.
+    /// After settling; `None` when settling was not tried on any scene.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub after: Option<RateStats>,
 }

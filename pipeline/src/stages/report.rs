@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{anyhow, Context as _};
-use mesa_schemas::artifacts::{CheckArtifact, GraphArtifact, MarkerStatus};
+use mesa_schemas::artifacts::{GraphArtifact, MarkerStatus, CHECK_SCHEMA};
 use mesa_schemas::convert::category_of_instance;
 use mesa_schemas::json::to_sorted_pretty;
 use mesa_schemas::layout_file::{read_layout_text, AnyLayout};
@@ -23,6 +23,7 @@ use mesa_schemas::render::RenderCameraArtifact;
 use mesa_stages::render::SceneView;
 use mesa_stages::report::{compute_stats, html, plots, CheckFacts, SceneFacts, SceneLink};
 use rayon::prelude::*;
+use serde_json::Value;
 
 use super::render::RENDER_DIR;
 use super::scene_docs::chosen_layout;
@@ -178,20 +179,16 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
         }
     }
     if let Ok(text) = std::fs::read_to_string(scene.path("qa/check.json")) {
-        if let Ok(check) = serde_json::from_str::<CheckArtifact>(&text) {
-            let c = CheckFacts {
-                layout: check.layout.clone(),
-                pairs: check.pairs_total,
-                colliding: check.collisions.len() as u64,
-                collision_rate: check.collision_rate,
-                floating: check.floating.len() as u64,
-                zone_violations: check.zone_violations.len() as u64,
-            };
-            if check.layout == "qa/layout.json" {
-                facts.check_after = Some(c);
-            } else {
-                facts.check_before = Some(c);
+        match check_facts(&text) {
+            Some((before, after, tried)) => {
+                facts.check_before = Some(before);
+                facts.check_after = after;
+                facts.settle_tried = tried;
             }
+            None => facts.failed.push((
+                "check".into(),
+                "qa/check.json is not a mesa.check/1 artifact".into(),
+            )),
         }
     }
     let mut thumb = None;
@@ -282,6 +279,46 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
         });
     }
     (facts, thumb)
+}
+
+/// Counts of a check's findings (`qa/check.json`'s top level, or its `settle.after`).
+fn findings(value: &Value, layout: &str) -> Option<CheckFacts> {
+    let count = |key: &str| {
+        value
+            .get(key)
+            .and_then(Value::as_array)
+            .map(|a| a.len() as u64)
+    };
+    Some(CheckFacts {
+        layout: layout.to_owned(),
+        pairs: value.get("pairs_total")?.as_u64()?,
+        colliding: count("collisions")?,
+        collision_rate: value.get("collision_rate")?.as_f64()?,
+        floating: count("floating")?,
+        zone_violations: count("zone_violations")?,
+    })
+}
+
+/// What `qa/check.json` says: the checked layout's findings, the settled layout's (when
+/// `--settle` wrote one), and whether settling was tried.
+fn check_facts(text: &str) -> Option<(CheckFacts, Option<CheckFacts>, bool)> {
+    let value: Value = serde_json::from_str(text).ok()?;
+    if value.get("schema").and_then(Value::as_str) != Some(CHECK_SCHEMA) {
+        return None;
+    }
+    let layout = value.get("layout")?.as_str()?;
+    let before = findings(&value, layout)?;
+    let settle = value.get("settle").filter(|s| !s.is_null());
+    let after = settle
+        .filter(|s| s.get("status").and_then(Value::as_str) == Some("settled"))
+        .and_then(|s| {
+            let layout = s
+                .get("layout")
+                .and_then(Value::as_str)
+                .unwrap_or("qa/layout.json");
+            findings(s.get("after")?, layout)
+        });
+    Some((before, after, settle.is_some()))
 }
 
 fn write(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {

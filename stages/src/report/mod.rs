@@ -60,11 +60,14 @@ pub struct SceneFacts {
     pub relations: BTreeMap<String, u64>,
     /// Whether the scene has a scene graph.
     pub has_graph: bool,
-    /// The check of the layout before settling (`qa/check.json` of a refined or coarse
-    /// layout).
+    /// The check of the layout checked (`qa/check.json`'s top level: the refined layout,
+    /// before settling); `None`: not checked.
     pub check_before: Option<CheckFacts>,
-    /// The check of the settled layout (`qa/check.json` naming `qa/layout.json`).
+    /// The check of the settled layout (`qa/check.json`'s `settle.after` when `mesa check
+    /// --settle` wrote `qa/layout.json`).
     pub check_after: Option<CheckFacts>,
+    /// Whether `mesa check --settle` ran on the scene (settled or not).
+    pub settle_tried: bool,
     /// Views rendered (`front`, ...).
     pub rendered: Vec<String>,
     /// Objects not visible in the front view.
@@ -186,13 +189,14 @@ pub fn compute_stats(scenes: &[SceneFacts]) -> ReportStats {
     top.sort_by(|a, b| b.count.cmp(&a.count).then_with(|| a.name.cmp(&b.name)));
     let distinct = top.len() as u64;
     top.truncate(TOP_CATEGORIES);
-    let checked = scenes
+    let checked = scenes.iter().filter(|s| s.check_before.is_some()).count() as u64;
+    // After settling: the layouts later stages read, the settled one where there is one and
+    // the checked one elsewhere (as `mesa check`'s qa/summary.json counts them); only when
+    // settling was tried somewhere.
+    let tried = scenes.iter().any(|s| s.settle_tried);
+    let after: Vec<&CheckFacts> = scenes
         .iter()
-        .filter(|s| s.check_before.is_some() || s.check_after.is_some())
-        .count() as u64;
-    let settled: Vec<&CheckFacts> = scenes
-        .iter()
-        .filter_map(|s| s.check_after.as_ref())
+        .filter_map(|s| s.check_after.as_ref().or(s.check_before.as_ref()))
         .collect();
     ReportStats {
         schema: REPORT_STATS_SCHEMA.to_owned(),
@@ -209,7 +213,7 @@ pub fn compute_stats(scenes: &[SceneFacts]) -> ReportStats {
             checked,
             not_checked: scenes.len() as u64 - checked,
             before: rates(scenes.iter().filter_map(|s| s.check_before.as_ref())),
-            after: (!settled.is_empty()).then(|| rates(settled.into_iter())),
+            after: tried.then(|| rates(after.into_iter())),
         },
         scenes_rendered: scenes.iter().filter(|s| s.rendered.len() == VIEWS).count() as u64,
         tasks: scenes.iter().map(|s| s.tasks).sum(),
@@ -229,7 +233,7 @@ pub fn flags(scene: &SceneFacts) -> Vec<(&'static str, String)> {
         out.push(("warn", "coarse layout (not refined)".to_owned()));
     }
     match (&scene.check_before, &scene.check_after) {
-        (None, None) => out.push(("info", "not checked".to_owned())),
+        (None, _) => out.push(("info", "not checked".to_owned())),
         (before, after) => {
             for (when, check) in [("before settling", before), ("settled", after)] {
                 let Some(c) = check else { continue };
@@ -254,6 +258,11 @@ pub fn flags(scene: &SceneFacts) -> Vec<(&'static str, String)> {
             }
             if scene.check_after.is_some() {
                 out.push(("info", "settled".to_owned()));
+            } else if scene.settle_tried {
+                out.push((
+                    "warn",
+                    "settling failed (the checked layout stays)".to_owned(),
+                ));
             }
         }
     }
@@ -354,6 +363,35 @@ mod tests {
         assert_eq!(stats.collisions.before.colliding_pairs, 1);
         assert!((stats.collisions.before.collision_rate - 1.0 / 3.0).abs() < 1e-12);
         assert!(stats.collisions.after.is_none());
+    }
+
+    #[test]
+    fn after_settling_counts_the_layouts_later_stages_read() {
+        let check = |colliding: u64| CheckFacts {
+            layout: "refined/layout.json".into(),
+            pairs: 10,
+            colliding,
+            collision_rate: colliding as f64 / 10.0,
+            floating: 0,
+            zone_violations: 0,
+        };
+        let mut settled = scene("a", &["mug_0"]);
+        settled.check_before = Some(check(2));
+        settled.check_after = Some(check(0));
+        settled.settle_tried = true;
+        let mut unsettled = scene("b", &["mug_0"]);
+        unsettled.check_before = Some(check(1));
+        unsettled.settle_tried = true;
+        let stats = compute_stats(&[settled, unsettled.clone()]);
+        assert_eq!(stats.collisions.before.colliding_pairs, 3);
+        let after = stats.collisions.after.expect("settling was tried");
+        assert_eq!(
+            (after.scenes, after.colliding_pairs, after.pairs),
+            (2, 1, 20)
+        );
+        assert!(flags(&unsettled)
+            .iter()
+            .any(|(_, f)| f.starts_with("settling failed")));
     }
 
     #[test]
