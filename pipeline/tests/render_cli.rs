@@ -445,6 +445,14 @@ fn the_report_counts_the_dataset_and_its_page_opens_in_chromium_without_errors()
     assert!(page.contains("settled"));
     assert!(page.contains("not rendered"));
     mesa().arg("validate").arg(&report).assert().success();
+    // Every link of the page leads to a file.
+    let mut links = 0;
+    for piece in page.split("href=\"").skip(1) {
+        let target = &piece[..piece.find('"').expect("closing quote")];
+        assert!(report.join(target).is_file(), "{target}: no such file");
+        links += 1;
+    }
+    assert!(links > 4 * 5, "{links} links");
 
     let Some(checked) = check_html(&report.join("index.html"), "[data-scene]") else {
         return;
