@@ -70,6 +70,9 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Graph(args) => graph(args, cli.quiet),
         Command::Tasks(args) => tasks(args, cli.quiet),
         Command::Records(args) => records(args, cli.quiet),
+        Command::Render(args) => render(args, cli.quiet),
+        Command::Report(args) => report(args, cli.quiet),
+        Command::Release(args) => release(args, cli.quiet),
     }
 }
 
@@ -188,8 +191,13 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
             "records: not run by a shard; run `mesa records {}` once every shard is done",
             resolved.dataset.display()
         );
+        eprintln!(
+            "report: not run by a shard; run `mesa report {}` once every shard is done",
+            resolved.dataset.display()
+        );
     } else {
         failed |= run_records_stage(&resolved)? != ExitCode::SUCCESS;
+        failed |= run_report_stage(&resolved)? != ExitCode::SUCCESS;
     }
     Ok(ExitCode::from(if failed { EXIT_FAILED } else { EXIT_OK }))
 }
@@ -448,6 +456,94 @@ fn graph(args: GraphArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     run_one(&crate::stages::graph::GraphStage::new(), &resolved)
 }
 
+fn render(args: crate::cli::RenderArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let mut resolved = resolve(&args.stage, quiet)?;
+    if let Some(layout) = args.layout {
+        resolved.config.render.layout = layout.into();
+    }
+    if args.assets {
+        let options = crate::stages::render::AssetViewsOptions {
+            uids: args.uids.clone(),
+            jobs: resolved.options.jobs,
+            force: resolved.options.force,
+            progress: resolved.options.progress,
+            progress_interval: resolved.options.progress_interval,
+        };
+        let summary = crate::stages::render::render_asset_views(
+            &resolved.dataset,
+            &resolved.config,
+            &options,
+        )?;
+        eprint!(
+            "{}",
+            crate::stages::render::format_asset_views_summary(&summary)
+        );
+        return Ok(ExitCode::from(if summary.failed.is_empty() {
+            EXIT_OK
+        } else {
+            EXIT_FAILED
+        }));
+    }
+    run_one(&crate::stages::render::RenderStage::new(), &resolved)
+}
+
+fn report(args: crate::cli::ReportArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let stage_args = StageArgs {
+        dataset: args.dataset,
+        scenes: None,
+        jobs: args.jobs,
+        // The report covers every scene: no shard applies (nor the Slurm variables).
+        shard: Some(Shard::default()),
+        force: false,
+        config: args.config,
+        progress: None,
+    };
+    let resolved = resolve(&stage_args, quiet)?;
+    run_report_stage(&resolved)
+}
+
+fn run_report_stage(resolved: &Resolved) -> anyhow::Result<ExitCode> {
+    let summary = crate::stages::report::write_report(
+        &resolved.dataset,
+        &resolved.config,
+        resolved.options.jobs,
+    )?;
+    eprint!("{}", crate::stages::report::format_report_summary(&summary));
+    Ok(ExitCode::SUCCESS)
+}
+
+fn release(args: crate::cli::ReleaseArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let stage_args = StageArgs {
+        dataset: args.dataset.clone(),
+        scenes: args.scenes.clone(),
+        jobs: args.jobs,
+        shard: Some(Shard::default()),
+        force: false,
+        config: args.config.clone(),
+        progress: None,
+    };
+    let mut resolved = resolve(&stage_args, quiet)?;
+    if let Some(layout) = args.layout {
+        resolved.config.render.layout = layout.into();
+    }
+    let summary = crate::stages::release::write_release(
+        &resolved.dataset,
+        &args.out,
+        &resolved.config,
+        resolved.options.scenes.as_deref(),
+        resolved.options.jobs,
+    )?;
+    eprint!(
+        "{}",
+        crate::stages::release::format_release_summary(&summary)
+    );
+    Ok(ExitCode::from(if summary.failed.is_empty() {
+        EXIT_OK
+    } else {
+        EXIT_FAILED
+    }))
+}
+
 fn demo(args: DemoArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     use mesa_stages::demo::{write_demo, DemoError, DemoOptions};
     if let Some(crate::cli::DemoAction::Annotate(stage)) = &args.action {
@@ -586,6 +682,7 @@ fn kind_from_file_name(path: &Path) -> Option<&'static Kind> {
         (_, "trl_sft.jsonl") => "trl-sft",
         (_, "trl_dpo.jsonl") => "trl-dpo",
         (_, "dataset_info.json") => "dataset-info",
+        (_, "Asset_annotation.json") | (Some("assets"), "annotations.json") => "asset-annotations",
         _ => return None,
     };
     Kind::by_name(kind)

@@ -41,6 +41,8 @@ pub struct Config {
     pub tasks: mesa_stages::tasks::TasksConfig,
     /// `mesa records`: SFT and DPO training records and the split.
     pub records: mesa_stages::records::RecordsConfig,
+    /// `mesa render`: pictures of each scene's layout (and of single assets with --assets).
+    pub render: mesa_stages::render::RenderConfig,
 }
 
 /// The `[run]` section.
@@ -134,6 +136,7 @@ impl Config {
             .problems()
             .into_iter()
             .chain(config.ingest.problems())
+            .chain(config.render.problems())
             .collect();
         if !problems.is_empty() {
             return Err(format!("{} ", problems.join("; ")));

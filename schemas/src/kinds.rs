@@ -10,6 +10,10 @@ use crate::annotation::*;
 use crate::artifacts::*;
 use crate::layout::{DatasetLayout, LAYOUT_SCHEMA};
 use crate::llm::{GalleryRecord, LlmLayout, TaskInfo};
+use crate::render::{
+    annotation_problems, AssetAnnotationsFile, RenderCameraArtifact, ReportStats,
+    RENDER_CAMERA_SCHEMA, REPORT_STATS_SCHEMA,
+};
 use crate::validate::{nonfinite_problems, validate_against, Problem};
 
 /// How a kind's file is laid out.
@@ -275,6 +279,30 @@ pub fn kinds() -> &'static [Kind] {
                 summary: "truth/scene.json of a demo scene (exact camera, pose, depth noise)",
                 generate: schema_of::<TruthScene>,
                 semantic: no_semantics,
+            },
+            Kind {
+                name: "render-camera",
+                schema_id: Some(RENDER_CAMERA_SCHEMA),
+                form: FileForm::Json,
+                summary: "render/<view>_camera.json (intrinsics and pose of a rendered view)",
+                generate: schema_of::<RenderCameraArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "report-stats",
+                schema_id: Some(REPORT_STATS_SCHEMA),
+                form: FileForm::Json,
+                summary: "report/stats.json (dataset statistics)",
+                generate: schema_of::<ReportStats>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "asset-annotations",
+                schema_id: None,
+                form: FileForm::Json,
+                summary: "assets/annotations.json, a release's Asset_annotation.json (per uid)",
+                generate: schema_of::<AssetAnnotationsFile>,
+                semantic: |v| typed(v, annotation_problems),
             },
             Kind {
                 name: "truth-instances",

@@ -7,6 +7,7 @@
 //! - [`annotation`]: the annotator round trip (the pack index, the ingest diff).
 //! - [`artifacts`]: inputs and per-stage artifacts (lift, retrieval, check, graph, tasks,
 //!   records, run markers).
+//! - [`render`]: rendered views' cameras, the report's statistics, the release's annotations.
 //! - [`kinds`] and [`validate`]: the kind registry and a validator that reports every problem
 //!   as `<json path>: <problem> (expected ...)`.
 //! - [`json`]: lenient reading (`NaN` reported, not a syntax error) and sorted-key writing.
@@ -23,6 +24,7 @@ pub mod layout;
 pub mod layout_file;
 pub mod llm;
 pub mod output;
+pub mod render;
 pub mod rotation;
 pub mod units;
 pub mod validate;

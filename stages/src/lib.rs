@@ -22,6 +22,9 @@
 //! - [`tasks`]: task instructions and reasoning texts, from a chat model or the built-in
 //!   template writer (SPEC 5.8).
 //! - [`records`]: SFT and DPO training records, the corruptions, the split (SPEC 5.9).
+//! - [`render`]: pictures of layouts and assets on the CPU, with camera files (SPEC 5.10).
+//! - [`report`]: dataset statistics, SVG plots and the HTML page of a dataset (SPEC 5.10).
+//! - [`release`]: the MesaTask-10K tree's files (SPEC 5.10).
 //! - [`seeding`]: seeded random generators per scene and purpose.
 
 pub mod annotations;
@@ -39,6 +42,9 @@ pub mod pack;
 pub mod place;
 pub mod raster;
 pub mod records;
+pub mod release;
+pub mod render;
+pub mod report;
 pub mod retrieve;
 pub mod seeding;
 pub mod tasks;

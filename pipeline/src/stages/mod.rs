@@ -11,6 +11,9 @@ pub mod lift;
 pub mod pack;
 pub mod place;
 pub mod records;
+pub mod release;
+pub mod render;
+pub mod report;
 pub mod retrieve;
 pub mod scene_docs;
 pub mod tasks;
@@ -21,8 +24,8 @@ use mesa_stages::demo::annotator::Annotator;
 
 /// Every per-scene stage, in the order `mesa run` runs them: the simulated annotator between
 /// `pack` and `ingest` only when the configuration names it (`[annotate] annotator =
-/// "simulated"`, as `mesa demo` writes). The dataset-level stages (`records`) run after them,
-/// once.
+/// "simulated"`, as `mesa demo` writes). The dataset-level stages (`records`, then `report`)
+/// run after them, once.
 pub fn pipeline_stages(config: &Config) -> Vec<Box<dyn SceneStage>> {
     let mut stages: Vec<Box<dyn SceneStage>> = vec![
         Box::new(lift::Lift),
@@ -36,6 +39,7 @@ pub fn pipeline_stages(config: &Config) -> Vec<Box<dyn SceneStage>> {
     stages.extend([
         Box::new(ingest::IngestStage::new()) as Box<dyn SceneStage>,
         Box::new(graph::GraphStage::new()),
+        Box::new(render::RenderStage::for_pipeline()),
         Box::new(tasks::TasksStage::new()),
     ]);
     stages

@@ -428,6 +428,7 @@ fn draw_items<'a>(
                 material: &a.surface_materials[*material],
                 instance: i as u32 + 1,
                 casts_shadow: true,
+                vertex_colors: None,
             });
         }
     }
@@ -438,6 +439,7 @@ fn draw_items<'a>(
             material: &part.material,
             instance: if part.is_table { TABLE_ITEM } else { 0 },
             casts_shadow: part.is_table,
+            vertex_colors: None,
         });
     }
     items

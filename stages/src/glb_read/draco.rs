@@ -24,10 +24,9 @@ pub(crate) struct DracoPrimitive {
     pub positions: Vec<[f64; 3]>,
     /// Triangles as indices into `positions`.
     pub triangles: Vec<[u32; 3]>,
-    /// NORMAL per point, when asked for and mapped by the extension.
-    pub normals: Option<Vec<[f64; 3]>>,
-    /// TEXCOORD_0 per point, when asked for and mapped by the extension.
-    pub uvs: Option<Vec<[f64; 2]>>,
+    /// The other attributes asked for that the stream holds as floats, by glTF name
+    /// (`NORMAL`, `TEXCOORD_0`, ...): one element of `width` values per point, flattened.
+    pub extra: Vec<(String, Vec<f64>, usize)>,
 }
 
 fn draco_error(path: &str, problem: impl Into<String>) -> GlbError {
@@ -38,13 +37,25 @@ fn draco_error(path: &str, problem: impl Into<String>) -> GlbError {
 }
 
 /// Decodes the Draco stream of a primitive whose `extensions.KHR_draco_mesh_compression` is
-/// `extension`; with `attributes`, also its NORMAL and TEXCOORD_0 when the extension maps them.
+/// `extension`.
+#[cfg(test)]
 pub(crate) fn decode_primitive(
     root: &gltf_json::Root,
     buffers: &Buffers<'_>,
     extension: &Value,
     path: &str,
-    attributes: bool,
+) -> Result<DracoPrimitive, GlbError> {
+    decode_primitive_with(root, buffers, extension, path, &[])
+}
+
+/// [`decode_primitive`], also returning the attributes named in `wanted` (glTF attribute
+/// names) that the stream holds as 32-bit floats; others are left out.
+pub(crate) fn decode_primitive_with(
+    root: &gltf_json::Root,
+    buffers: &Buffers<'_>,
+    extension: &Value,
+    path: &str,
+    wanted: &[&str],
 ) -> Result<DracoPrimitive, GlbError> {
     let view_index = extension
         .get("bufferView")
@@ -136,79 +147,52 @@ pub(crate) fn decode_primitive(
         }
         triangles.push(tri);
     }
-    let mapped = |name: &str| {
-        extension
+    let mut extra = Vec::new();
+    for name in wanted {
+        let Some(id) = extension
             .get("attributes")
-            .and_then(|a| a.get(name))
+            .and_then(|a| a.get(*name))
             .and_then(Value::as_u64)
-            .map(|id| id as usize)
-    };
-    let float_attribute = |id: usize, width: usize, name: &str| -> Result<Vec<f64>, GlbError> {
-        let attribute = decoded
+        else {
+            continue;
+        };
+        let Some(attribute) = decoded
             .get_attributes()
             .iter()
-            .find(|a| a.get_id().as_usize() == id)
-            .ok_or_else(|| {
-                draco_error(
-                    path,
-                    format!("the stream has no attribute with the {name} id {id}"),
-                )
-            })?;
-        if attribute.get_num_components() != width
-            || attribute.get_component_type() != ComponentDataType::F32
-            || attribute.len() != points
-        {
-            return Err(draco_error(
-                path,
-                format!(
-                    "{name} decodes to {} values of {} components of {:?} (expected {points} \
-                     of {width} floats)",
-                    attribute.len(),
-                    attribute.get_num_components(),
-                    attribute.get_component_type()
-                ),
-            ));
+            .find(|a| a.get_id().as_usize() as u64 == id)
+        else {
+            continue;
+        };
+        if attribute.get_component_type() != ComponentDataType::F32 || attribute.len() != points {
+            continue;
         }
-        let mut out = Vec::with_capacity(points * width);
+        let width = attribute.get_num_components();
+        let mut values = Vec::with_capacity(points * width);
         for i in 0..points {
-            if width == 3 {
-                let v: NdVector<3, f32> = attribute.get(PointIdx::from(i));
-                out.extend((0..3).map(|c| f64::from(*v.get(c))));
-            } else {
-                let v: NdVector<2, f32> = attribute.get(PointIdx::from(i));
-                out.extend((0..2).map(|c| f64::from(*v.get(c))));
+            match width {
+                2 => {
+                    let v: NdVector<2, f32> = attribute.get(PointIdx::from(i));
+                    values.extend([f64::from(*v.get(0)), f64::from(*v.get(1))]);
+                }
+                3 => {
+                    let v: NdVector<3, f32> = attribute.get(PointIdx::from(i));
+                    values.extend((0..3).map(|k| f64::from(*v.get(k))));
+                }
+                4 => {
+                    let v: NdVector<4, f32> = attribute.get(PointIdx::from(i));
+                    values.extend((0..4).map(|k| f64::from(*v.get(k))));
+                }
+                _ => break,
             }
         }
-        Ok(out)
-    };
-    let (normals, uvs) = if attributes {
-        let normals = match mapped("NORMAL") {
-            Some(id) => Some(
-                float_attribute(id, 3, "NORMAL")?
-                    .chunks_exact(3)
-                    .map(|c| [c[0], c[1], c[2]])
-                    .collect(),
-            ),
-            None => None,
-        };
-        let uvs = match mapped("TEXCOORD_0") {
-            Some(id) => Some(
-                float_attribute(id, 2, "TEXCOORD_0")?
-                    .chunks_exact(2)
-                    .map(|c| [c[0], c[1]])
-                    .collect(),
-            ),
-            None => None,
-        };
-        (normals, uvs)
-    } else {
-        (None, None)
-    };
+        if values.len() == points * width {
+            extra.push(((*name).to_owned(), values, width));
+        }
+    }
     Ok(DracoPrimitive {
         positions,
         triangles,
-        normals,
-        uvs,
+        extra,
     })
 }
 
@@ -248,9 +232,7 @@ mod tests {
                     .and_then(|e| e.others.get("KHR_draco_mesh_compression"))
                     .expect("a Draco primitive");
                 let path = format!("meshes[{m}].primitives[{p}]");
-                out.push(
-                    decode_primitive(&root, &buffers, extension, &path, false).expect("decodes"),
-                );
+                out.push(decode_primitive(&root, &buffers, extension, &path).expect("decodes"));
             }
         }
         out

@@ -22,6 +22,9 @@
 mod accessor;
 mod container;
 mod draco;
+mod surface;
+
+pub use surface::{AlphaMode, GlbSurface, SurfaceImage, SurfaceMaterial, SurfacePrimitive};
 
 use std::borrow::Cow;
 use std::collections::{BTreeSet, HashMap};
@@ -393,6 +396,7 @@ impl<'a> GlbDocument<'a> {
             root: &self.root,
             buffers: &self.buffers,
             world: &[],
+            surface: false,
             attributes,
         };
         let mut info = GlbInfo::default();
@@ -501,13 +505,14 @@ impl<'a> GlbDocument<'a> {
             root,
             buffers: &self.buffers,
             world: &scene.world,
+            surface: false,
             attributes,
         };
         let mut primitives = Vec::new();
         for instance in instances {
             unused_meshes.remove(&instance.mesh);
             info.mesh_instances += 1;
-            reader.add_instance(
+            reader.add_instance_placed(
                 instance,
                 &mut cache,
                 &mut primitives,
@@ -556,33 +561,127 @@ impl<'a> GlbDocument<'a> {
 
 /// Reads a GLB file's triangles.
 pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
-    let document = open_glb(bytes)?;
-    let placed = document.placed_primitives(false)?;
-    let mut mesh = GlbMesh::default();
-    for primitive in placed.primitives {
-        let base = u32::try_from(mesh.positions_m.len())
-            .ok()
-            .filter(|b| b.checked_add(primitive.positions_m.len() as u32).is_some())
-            .ok_or_else(|| {
-                data_error(
-                    format!(
-                        "meshes[{}].primitives[{}]",
-                        primitive.mesh, primitive.primitive
-                    ),
-                    "the asset has more than 2^32 vertices",
-                )
-            })?;
-        mesh.positions_m.extend(primitive.positions_m);
-        mesh.triangles.extend(
-            primitive
-                .triangles
-                .iter()
-                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+    read_glb_impl(bytes, false).map(|(mesh, _)| mesh)
+}
+
+/// Reads a GLB file's triangles and what a renderer needs to draw them: per-vertex normals,
+/// texture coordinates and colours, the material of each primitive, and the embedded images
+/// (see [`GlbSurface`]). The triangles are exactly those of [`read_glb`].
+pub fn read_glb_surface(bytes: &[u8]) -> Result<(GlbMesh, GlbSurface), GlbError> {
+    let (mesh, surface) = read_glb_impl(bytes, true)?;
+    Ok((mesh, surface.unwrap_or_default()))
+}
+
+fn read_glb_impl(
+    bytes: &[u8],
+    want_surface: bool,
+) -> Result<(GlbMesh, Option<GlbSurface>), GlbError> {
+    let mut warnings = Vec::new();
+    let chunks = container::split(bytes, &mut warnings)?;
+    let root = parse_root(chunks.json, &mut warnings)?;
+    validate(&root, &mut warnings)?;
+    let mut info = GlbInfo {
+        generator: root.asset.generator.clone(),
+        nodes: root.nodes.len(),
+        textures: root.textures.len(),
+        extensions_used: root.extensions_used.clone(),
+        extensions_required: root.extensions_required.clone(),
+        ..GlbInfo::default()
+    };
+    for extension in &root.extensions_required {
+        if let Some(fix) = required_extension_fix(extension) {
+            return Err(GlbError::UnsupportedExtension {
+                extension: extension.clone(),
+                fix,
+            });
+        }
+    }
+    if root
+        .extensions_used
+        .iter()
+        .any(|e| e == "EXT_mesh_gpu_instancing")
+    {
+        warnings.push(
+            "EXT_mesh_gpu_instancing is used but not required: the instances it adds are \
+             ignored, the base meshes are read"
+                .to_owned(),
         );
     }
-    mesh.info = placed.info;
-    mesh.warnings = placed.warnings;
-    Ok(mesh)
+    let buffers = resolve_buffers(&root, chunks.bin)?;
+    info.image_mime_types = images(&root)?;
+    info.materials = root
+        .materials
+        .iter()
+        .enumerate()
+        .map(|(i, m)| MaterialInfo {
+            name: m.name.clone().unwrap_or_else(|| format!("material_{i}")),
+            textured: m.pbr_metallic_roughness.base_color_texture.is_some(),
+        })
+        .collect();
+
+    let scene = scene_instances(&root, &mut warnings)?;
+    let instances = &scene.instances;
+    let mut mesh = GlbMesh::default();
+    let mut surface = if want_surface {
+        Some(surface::surface_materials(&root, &buffers, &mut warnings))
+    } else {
+        None
+    };
+    let mut unused_meshes: BTreeSet<usize> = (0..root.meshes.len()).collect();
+    let mut cache = HashMap::new();
+    for instance in instances {
+        unused_meshes.remove(&instance.mesh);
+        info.mesh_instances += 1;
+        let reader = Reader {
+            root: &root,
+            buffers: &buffers,
+            world: &scene.world,
+            surface: want_surface,
+            attributes: false,
+        };
+        reader.add_instance(
+            instance,
+            &mut cache,
+            &mut mesh,
+            surface.as_mut(),
+            &mut info,
+            &mut warnings,
+        )?;
+    }
+    if mesh.triangles.is_empty() {
+        let detail = if root.meshes.is_empty() {
+            "the file has no mesh".to_owned()
+        } else if instances.is_empty() {
+            format!(
+                "no node of the scene places any of its {} meshes",
+                root.meshes.len()
+            )
+        } else if info.skipped_primitives > 0 {
+            format!(
+                "its {} primitives are points or lines, not triangles",
+                info.skipped_primitives
+            )
+        } else {
+            "its primitives have no triangles".to_owned()
+        };
+        return Err(GlbError::NoMesh { detail });
+    }
+    if !unused_meshes.is_empty() {
+        warnings.push(format!(
+            "{} of {} meshes are not placed by any node of the scene and are ignored",
+            unused_meshes.len(),
+            root.meshes.len()
+        ));
+    }
+    if info.skipped_primitives > 0 {
+        warnings.push(format!(
+            "{} point or line primitives are ignored",
+            info.skipped_primitives
+        ));
+    }
+    mesh.info = info;
+    mesh.warnings = warnings;
+    Ok((mesh, surface))
 }
 
 fn parse_root(json: &[u8], warnings: &mut Vec<String>) -> Result<Root, GlbError> {
@@ -866,9 +965,11 @@ fn scene_instances(root: &Root, warnings: &mut Vec<String>) -> Result<SceneNodes
 struct Primitive {
     positions: Vec<[f64; 3]>,
     triangles: Vec<[u32; 3]>,
-    /// NORMAL, when attributes are read and present.
+    /// Surface attributes, read only for [`read_glb_surface`].
+    attributes: surface::Attributes,
+    /// NORMAL, when the document API asks for attributes and the primitive has them.
     normals: Option<Vec<[f64; 3]>>,
-    /// TEXCOORD_0, when attributes are read and present.
+    /// TEXCOORD_0, likewise.
     uvs: Option<Vec<[f64; 2]>>,
 }
 
@@ -876,7 +977,9 @@ struct Reader<'a, 'b> {
     root: &'a Root,
     buffers: &'a Buffers<'b>,
     world: &'a [Option<Matrix4<f64>>],
-    /// Whether normals and texture coordinates are read too.
+    /// Whether to read the surface attributes too.
+    surface: bool,
+    /// Whether to read NORMAL and TEXCOORD_0 for the document API ([`GlbDocument`]).
     attributes: bool,
 }
 
@@ -963,23 +1066,53 @@ impl Reader<'_, '_> {
             .accessors
             .get(position)
             .is_some_and(|a| a.buffer_view.is_some());
+        let wanted = if self.surface {
+            surface::wanted_attributes(self.root, primitive)
+        } else {
+            Vec::new()
+        };
+        let mut attributes = surface::Attributes::default();
         let (positions, triangles, normals, uvs) = match draco {
             // Uncompressed fallback data wins when a file carries both.
             Some(extension) if !has_fallback => {
                 info.draco = true;
-                let decoded = draco::decode_primitive(
+                let mut names: Vec<&str> = wanted.iter().map(String::as_str).collect();
+                if self.attributes {
+                    for name in ["NORMAL", "TEXCOORD_0"] {
+                        if !names.contains(&name) {
+                            names.push(name);
+                        }
+                    }
+                }
+                let decoded = draco::decode_primitive_with(
                     self.root,
                     self.buffers,
                     extension,
                     &path,
-                    self.attributes,
+                    &names,
                 )?;
-                (
-                    decoded.positions,
-                    decoded.triangles,
-                    decoded.normals,
-                    decoded.uvs,
-                )
+                let points = decoded.positions.len();
+                let (mut normals, mut uvs) = (None, None);
+                if self.attributes {
+                    for (name, values, width) in &decoded.extra {
+                        match (name.as_str(), width) {
+                            ("NORMAL", 3) => {
+                                normals = Some(
+                                    values.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+                                )
+                            }
+                            ("TEXCOORD_0", 2) => {
+                                uvs = Some(values.chunks_exact(2).map(|c| [c[0], c[1]]).collect())
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+                if self.surface {
+                    attributes =
+                        surface::Attributes::from_named(decoded.extra, points, &path, warnings);
+                }
+                (decoded.positions, decoded.triangles, normals, uvs)
             }
             _ => {
                 let (values, width) = read_accessor(
@@ -1012,6 +1145,15 @@ impl Reader<'_, '_> {
                     ));
                 }
                 let triangles = triangles_of(&indices, mode, &path, warnings);
+                if !wanted.is_empty() {
+                    attributes = self.surface_attributes(
+                        primitive,
+                        &wanted,
+                        positions.len(),
+                        &path,
+                        warnings,
+                    );
+                }
                 let (normals, uvs) = if self.attributes {
                     self.plain_attributes(primitive, &path, positions.len())?
                 } else {
@@ -1029,6 +1171,7 @@ impl Reader<'_, '_> {
         Ok(Primitive {
             positions,
             triangles,
+            attributes,
             normals,
             uvs,
         })
@@ -1221,6 +1364,100 @@ impl Reader<'_, '_> {
     }
 
     fn add_instance(
+        &self,
+        instance: &Instance,
+        cache: &mut HashMap<(usize, usize), Rc<Primitive>>,
+        out: &mut GlbMesh,
+        mut surface: Option<&mut GlbSurface>,
+        info: &mut GlbInfo,
+        warnings: &mut Vec<String>,
+    ) -> Result<(), GlbError> {
+        let mesh = &self.root.meshes[instance.mesh];
+        let node = &self.root.nodes[instance.node];
+        let weights: Vec<f64> = node
+            .weights
+            .as_ref()
+            .or(mesh.weights.as_ref())
+            .map(|w| w.iter().map(|v| f64::from(*v)).collect())
+            .unwrap_or_default();
+        let joints = match node.skin {
+            Some(skin) => {
+                info.skinned = true;
+                Some(self.joint_matrices(skin.value())?)
+            }
+            None => None,
+        };
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            let path = format!("meshes[{}].primitives[{p}]", instance.mesh);
+            let mode = match primitive.mode {
+                Checked::Valid(mode) => mode,
+                Checked::Invalid => return Err(data_error(path, "invalid mode")),
+            };
+            if !matches!(
+                mode,
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) {
+                info.skipped_primitives += 1;
+                continue;
+            }
+            let geometry = match cache.get(&(instance.mesh, p)) {
+                Some(g) => Rc::clone(g),
+                None => {
+                    let g = Rc::new(self.primitive(instance.mesh, p, mode, info, warnings)?);
+                    cache.insert((instance.mesh, p), Rc::clone(&g));
+                    g
+                }
+            };
+            let mut positions = geometry.positions.clone();
+            if primitive.targets.as_ref().is_some_and(|t| !t.is_empty()) {
+                info.morph_targets = true;
+                self.morph(primitive, &path, &weights, &mut positions)?;
+            }
+            let skinned = match &joints {
+                Some(joints) => self.skin(primitive, &path, joints, &positions)?,
+                None => None,
+            };
+            if let Some(surface) = surface.as_deref_mut() {
+                // Normals follow the node's transform; a morphed or skinned primitive's
+                // normals would need the same deformation, so they are recomputed instead.
+                let deformed =
+                    skinned.is_some() || primitive.targets.as_ref().is_some_and(|t| !t.is_empty());
+                surface.push_primitive(
+                    &geometry.attributes,
+                    (!deformed).then_some(&instance.world),
+                    primitive.material.map(|m| m.value()),
+                    u32::try_from(out.positions_m.len()).unwrap_or(u32::MAX),
+                    positions.len(),
+                    u32::try_from(out.triangles.len()).unwrap_or(u32::MAX),
+                    geometry.triangles.len(),
+                );
+            }
+            let placed: Vec<[f64; 3]> = match skinned {
+                Some(skinned) => skinned,
+                None => positions
+                    .iter()
+                    .map(|v| transform(&instance.world, v))
+                    .collect(),
+            };
+            let base = u32::try_from(out.positions_m.len())
+                .ok()
+                .filter(|b| b.checked_add(placed.len() as u32).is_some())
+                .ok_or_else(|| data_error(&path, "the asset has more than 2^32 vertices"))?;
+            out.positions_m.extend(placed);
+            out.triangles.extend(
+                geometry
+                    .triangles
+                    .iter()
+                    .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+            );
+            info.primitives += 1;
+        }
+        Ok(())
+    }
+
+    /// Like `add_instance`, for the document API: each primitive placed on its own, with its
+    /// material and, when asked, its normals and texture coordinates.
+    fn add_instance_placed(
         &self,
         instance: &Instance,
         cache: &mut HashMap<(usize, usize), Rc<Primitive>>,
