@@ -729,7 +729,37 @@ fn parse_root(json: &[u8], warnings: &mut Vec<String>) -> Result<Root, GlbError>
     })
 }
 
+/// POSITION attributes that name no accessor: gltf-json's own validation indexes the accessor
+/// list with them without a check (and panics), so they are caught first.
+fn position_indices_out_of_range(root: &Root) -> Vec<String> {
+    let mut problems = Vec::new();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            if let Some(index) = primitive
+                .attributes
+                .get(&Checked::Valid(Semantic::Positions))
+            {
+                if index.value() >= root.accessors.len() {
+                    problems.push(format!(
+                        "meshes[{m}].primitives[{p}].attributes[\"POSITION\"]: Index out of \
+                         range (accessor {} of {})",
+                        index.value(),
+                        root.accessors.len()
+                    ));
+                }
+            }
+        }
+    }
+    problems
+}
+
 fn validate(root: &Root, warnings: &mut Vec<String>) -> Result<(), GlbError> {
+    let out_of_range = position_indices_out_of_range(root);
+    if !out_of_range.is_empty() {
+        return Err(GlbError::Invalid {
+            problems: out_of_range,
+        });
+    }
     let mut problems = Vec::new();
     let mut without_bounds = 0;
     root.validate(root, gltf_json::Path::new, &mut |path, error| {

@@ -80,7 +80,13 @@ impl Grid {
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    let Some(points) = self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) else {
+                    // Saturating: a far-away vertex (a hostile file) must not overflow.
+                    let cell = [
+                        k[0].saturating_add(dx),
+                        k[1].saturating_add(dy),
+                        k[2].saturating_add(dz),
+                    ];
+                    let Some(points) = self.cells.get(&cell) else {
                         continue;
                     };
                     if points
@@ -134,6 +140,14 @@ mod tests {
 
     fn cube() -> Vec<[f64; 3]> {
         corners([-0.1, -0.2, -0.05], [0.1, 0.2, 0.05]).to_vec()
+    }
+
+    #[test]
+    fn far_away_vertices_do_not_overflow_the_grid() {
+        let far = vec![[1e300, -1e300, 1e300], [f64::MAX, 0.0, f64::MIN]];
+        assert_eq!(compare_meshes(&cube(), &far), MeshComparison::Edited);
+        // (A pack mesh is ours, so never this far; it must not panic either.)
+        let _ = compare_meshes(&far, &cube());
     }
 
     #[test]
