@@ -37,5 +37,5 @@ for target in "${targets[@]}"; do
   extra=()
   [ "$target" = glb_reader ] && [ -d "$shared" ] && extra=("$shared")
   (cd fuzz && cargo +nightly fuzz run --target-dir "$fuzz_target_dir" "$target" "corpus/$target" "${extra[@]}" -- \
-     -max_total_time="$seconds" -rss_limit_mb=4096 -max_len=4194304 -print_final_stats=1)
+     -max_total_time="$seconds" -rss_limit_mb=4096 -max_len=262144 -print_final_stats=1)
 done
