@@ -7,20 +7,8 @@
 use libfuzzer_sys::fuzz_target;
 use mesa_stages::glb_read::{open_glb, read_glb};
 
-/// Panics inside the Draco decoder (an alpha, third-party) are caught by mesa, which turns them
-/// into a `draco` error (`stages/src/glb_read/draco.rs`); libFuzzer's hook would abort on them
-/// before they unwind. Every other panic still aborts: it is a bug.
-fn let_draco_panics_unwind() {
-    let abort = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        let in_draco = info
-            .location()
-            .is_some_and(|l| l.file().contains("/draco-oxide-"));
-        if !in_draco {
-            abort(info);
-        }
-    }));
-}
+mod common;
+use common::let_draco_panics_unwind;
 
 fuzz_target!(init: let_draco_panics_unwind(), |data: &[u8]| {
     let _ = read_glb(data);

@@ -8,6 +8,9 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use libfuzzer_sys::fuzz_target;
+
+mod common;
+use common::let_draco_panics_unwind;
 use mesa_schemas::annotation::PackIndexArtifact;
 use mesa_schemas::layout::DatasetLayout;
 use mesa_stages::ingest::{ingest_scene, IngestConfig, IngestRequest};
@@ -30,31 +33,15 @@ fn pack() -> &'static Pack {
         )
         .expect("index");
         let glb = std::fs::read(scene.join("pack").join(&index.glb)).expect("the pack GLB");
-        let baseline = serde_json::from_slice(
-            &std::fs::read(scene.join(&index.layout)).expect("the layout"),
-        )
-        .expect("layout");
+        let baseline =
+            serde_json::from_slice(&std::fs::read(scene.join(&index.layout)).expect("the layout"))
+                .expect("layout");
         Pack {
             glb,
             index,
             baseline,
         }
     })
-}
-
-/// Panics inside the Draco decoder (an alpha, third-party) are caught by mesa, which turns them
-/// into a `draco` error (`stages/src/glb_read/draco.rs`); libFuzzer's hook would abort on them
-/// before they unwind. Every other panic still aborts: it is a bug.
-fn let_draco_panics_unwind() {
-    let abort = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        let in_draco = info
-            .location()
-            .is_some_and(|l| l.file().contains("/draco-oxide-"));
-        if !in_draco {
-            abort(info);
-        }
-    }));
 }
 
 fuzz_target!(init: let_draco_panics_unwind(), |data: &[u8]| {
