@@ -36,6 +36,11 @@ for target in "${targets[@]}"; do
   echo "fuzzing $target for $seconds s"
   extra=()
   [ "$target" = glb_reader ] && [ -d "$shared" ] && extra=("$shared")
+  # glb_reader explores a GLB's structure: inputs up to 256 KiB keep it fast. ingest needs a
+  # whole edited scene (about 430 KiB for the demo's): a shorter limit would cut every seed and
+  # leave only the header checks to explore.
+  max_len=262144
+  [ "$target" = ingest ] && max_len=1048576
   (cd fuzz && cargo +nightly fuzz run --target-dir "$fuzz_target_dir" "$target" "corpus/$target" "${extra[@]}" -- \
-     -max_total_time="$seconds" -rss_limit_mb=4096 -max_len=262144 -print_final_stats=1)
+     -max_total_time="$seconds" -rss_limit_mb=4096 -max_len="$max_len" -print_final_stats=1)
 done
