@@ -378,20 +378,35 @@ pub struct ConvexPart {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Decomposition {
-    /// `vhacd` (parry3d's V-HACD); `convex` when the asset is a closed mesh filling its
-    /// hull (the hull is its one part); `hull` when the decomposition failed and the parts are
-    /// the single hull (the asset's warnings say why).
+    /// `adaptive` (parts within `tolerance_m` of the mesh); `vhacd` (parry3d's V-HACD);
+    /// `convex` when V-HACD was asked and the asset is a closed mesh filling its hull (the hull
+    /// is its one part); `hull` when the decomposition failed and the parts are the single hull
+    /// (the asset's warnings say why).
     pub method: String,
-    /// Voxels along the longest axis (the configured resolution, or the one a retry used
-    /// when V-HACD failed on the configured one).
-    pub resolution: u32,
-    /// Whether V-HACD approximated the parts' hulls while cutting (its default; a retry turns
-    /// it off).
-    pub convex_hull_approximation: bool,
-    /// Maximum concavity of a part.
-    pub concavity: f64,
     /// Most parts allowed.
     pub max_parts: u32,
+    /// Adaptive: the most a part may reach outside the object, metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance_m: Option<f64>,
+    /// Adaptive: how far the parts reach outside the object at most (sampled on their faces),
+    /// metres; above `tolerance_m` only when `max_parts` ran out (the asset then has a warning).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_deviation_m: Option<f64>,
+    /// Adaptive: whether the mesh was read as a solid (closed and consistently oriented), so
+    /// that its inside counts as the object; otherwise only its surface does.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub solid: Option<bool>,
+    /// V-HACD: voxels along the longest axis (the configured resolution, or the one a retry
+    /// used when V-HACD failed on the configured one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resolution: Option<u32>,
+    /// V-HACD: whether the parts' hulls were approximated while cutting (its default; a retry
+    /// turns it off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub convex_hull_approximation: Option<bool>,
+    /// V-HACD: maximum concavity of a part.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub concavity: Option<f64>,
 }
 
 /// `assets/index/text.json`: the asset texts and their features for the built-in lexical

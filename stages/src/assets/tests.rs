@@ -47,7 +47,8 @@ fn a_box_is_measured_in_the_table_frame() {
     let shapes = indexed.shapes.expect("shapes");
     assert_abs_diff_eq!(shapes.hull.volume_m3, 0.1 * 0.2 * 0.3, epsilon = 1e-5);
     // A closed convex mesh is its own hull: one part.
-    assert_eq!(shapes.decomposition.method, "convex");
+    assert_eq!(shapes.decomposition.method, "adaptive");
+    assert_eq!(shapes.decomposition.solid, Some(true));
     assert_eq!(shapes.parts.len(), 1);
 }
 
@@ -187,7 +188,7 @@ fn the_decomposition_of_a_vessel_keeps_its_cavity() {
         let vessel = Mesh::vessel(radius, height, 0.006, 0.008);
         let indexed = index(&vessel, None, &AssetsConfig::default());
         let shapes = indexed.shapes.expect("shapes");
-        assert_eq!(shapes.decomposition.method, "vhacd", "{name}");
+        assert_eq!(shapes.decomposition.method, "adaptive", "{name}");
         assert!(
             shapes.parts.len() > 1,
             "{name}: {} parts",
