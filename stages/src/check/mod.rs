@@ -21,6 +21,7 @@
 //! keeping the scene graph's `in` and `above` relations.
 
 pub mod geometry;
+pub mod scene;
 pub mod settle;
 pub mod shapes;
 
@@ -32,6 +33,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use self::geometry::{fall_distance, proximity, Bounds, Hull};
+pub use self::scene::{check_layout, LayoutSource as CheckedLayout, SceneCheck, SETTLED_LAYOUT};
 pub use self::shapes::{AssetShape, Body, Pose};
 
 /// Which layout of a scene `mesa check` reads.
@@ -283,6 +285,18 @@ impl Findings {
         } else {
             self.collisions.len() as f64 / self.pairs_total as f64
         }
+    }
+
+    /// At rest: every object checked, no collision, nothing floating or sunk into the table
+    /// (what settling must reach; zone violations may remain when an object cannot fit).
+    pub fn physical(&self) -> bool {
+        self.collisions.is_empty()
+            && self.floating.is_empty()
+            && self.unchecked == 0
+            && !self
+                .violations
+                .iter()
+                .any(|(_, kind, _)| *kind == ViolationKind::BelowTable)
     }
 
     /// No collision, no floating, no violation, every object checked.
