@@ -28,6 +28,8 @@ pub struct Config {
     pub retrieve: mesa_stages::retrieve::RetrieveConfig,
     /// `mesa place`: each asset scaled isometrically into its lifted box.
     pub place: mesa_stages::place::PlaceConfig,
+    /// `mesa check`: mesh-level physics QA (collisions, floating, zones) and settling.
+    pub check: mesa_stages::check::CheckConfig,
     /// `mesa graph`: the rule-based scene graph (SCENE_GRAPH.md).
     pub graph: mesa_stages::graph::GraphConfig,
     /// `mesa tasks`: task instructions and reasoning texts (the template writer or a chat
@@ -123,6 +125,10 @@ impl Config {
         let config: Self = toml::from_str(text).map_err(|e| e.to_string())?;
         // Values that parse but cannot work: refused before any work starts.
         config.retrieve.check().map_err(|e| format!("{e} "))?;
+        let problems = config.check.problems();
+        if !problems.is_empty() {
+            return Err(format!("{} ", problems.join("; ")));
+        }
         Ok(config)
     }
 }
@@ -221,6 +227,16 @@ mod tests {
                 assert!(lines[i - 1].starts_with("# "), "undocumented: {line}");
             }
         }
+    }
+
+    #[test]
+    fn check_values_that_cannot_work_are_refused_naming_the_key() {
+        let err = Config::from_toml("[check]\npenetration_tolerance_mm = -1\n").expect_err("bad");
+        assert!(err.contains("[check] penetration_tolerance_mm is -1"), "{err}");
+        let err = Config::from_toml("[check.settling]\nmax_rounds = 0\n").expect_err("bad");
+        assert!(err.contains("[check.settling] max_rounds is 0"), "{err}");
+        let err = Config::from_toml("[check]\nlayout = \"truth\"\n").expect_err("bad");
+        assert!(err.contains("layout"), "{err}");
     }
 
     #[test]

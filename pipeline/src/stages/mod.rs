@@ -3,6 +3,7 @@
 //! run` runs before them.
 
 pub mod assets;
+pub mod check;
 pub mod graph;
 pub mod lift;
 pub mod place;
@@ -20,6 +21,8 @@ pub fn pipeline_stages() -> Vec<Box<dyn SceneStage>> {
         Box::new(lift::Lift),
         Box::new(retrieve::RetrieveStage::new()),
         Box::new(place::PlaceStage::new()),
+        // pack, the annotator and ingest come here once they exist.
+        Box::new(check::CheckStage::new()),
         Box::new(graph::GraphStage::new()),
         Box::new(tasks::TasksStage::new()),
     ]
