@@ -441,7 +441,9 @@ fn check(args: CheckArgs, quiet: bool) -> anyhow::Result<ExitCode> {
 fn print_check_summary(resolved: &Resolved, quiet: bool) -> anyhow::Result<()> {
     let lines = crate::stages::check::write_summary(&resolved.dataset)?;
     if !quiet {
-        eprint!("{lines}");
+        if let Some(lines) = lines {
+            eprint!("{lines}");
+        }
     }
     Ok(())
 }

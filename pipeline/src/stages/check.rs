@@ -32,15 +32,16 @@ pub const CHECK_FILE: &str = "qa/check.json";
 pub const SUMMARY_FILE: &str = "qa/summary.json";
 
 /// What the check reads once per dataset and run: the asset index, the annotations, and the
-/// shapes of the assets used so far.
-struct Library {
+/// shapes of the assets used so far (also what `mesa records` verifies collisions with).
+pub struct ShapeLibrary {
     index: AssetIndexArtifact,
     annotations: Option<Annotations>,
     shapes: Mutex<BTreeMap<String, Result<Arc<AssetShape>, String>>>,
 }
 
-impl Library {
-    fn load(dataset: &Path) -> anyhow::Result<Self> {
+impl ShapeLibrary {
+    /// Reads the asset index and the annotations of a dataset.
+    pub fn load(dataset: &Path) -> anyhow::Result<Self> {
         let index = read_json(&dataset.join(INDEX), "run `mesa assets` to write it")?;
         let path = dataset.join(ANNOTATIONS);
         let annotations = if path.exists() {
@@ -56,7 +57,7 @@ impl Library {
     }
 
     /// The collision shape of an object's asset, or why there is none.
-    fn shape_of(&self, dataset: &Path, object: &LayoutObject) -> Result<Arc<AssetShape>, String> {
+    pub fn shape_of(&self, dataset: &Path, object: &LayoutObject) -> Result<Arc<AssetShape>, String> {
         let uid = object.retrieved_uid.as_str();
         if uid.is_empty() {
             return Err("no retrieved_uid (run `mesa retrieve` and `mesa place`)".to_owned());
@@ -103,7 +104,7 @@ impl Library {
 
 /// The `check` stage.
 pub struct CheckStage {
-    libraries: Mutex<BTreeMap<PathBuf, Result<Arc<Library>, String>>>,
+    libraries: Mutex<BTreeMap<PathBuf, Result<Arc<ShapeLibrary>, String>>>,
 }
 
 impl Default for CheckStage {
@@ -120,13 +121,13 @@ impl CheckStage {
         }
     }
 
-    fn library(&self, dataset: &Path) -> anyhow::Result<Arc<Library>> {
+    fn library(&self, dataset: &Path) -> anyhow::Result<Arc<ShapeLibrary>> {
         let mut cache = self
             .libraries
             .lock()
             .map_err(|_| anyhow!("internal error: the library cache is poisoned"))?;
         let entry = cache.entry(dataset.to_owned()).or_insert_with(|| {
-            Library::load(dataset)
+            ShapeLibrary::load(dataset)
                 .map(Arc::new)
                 .map_err(|e| format!("{e:#}"))
         });
@@ -145,7 +146,9 @@ struct Fingerprint<'a> {
     version: &'a str,
 }
 
-fn read_dataset_layout(path: &Path) -> anyhow::Result<(DatasetLayout, String)> {
+/// Reads a dataset layout file (an LLM layout is an error: it names no assets), with the
+/// SHA-256 of its bytes.
+pub fn read_dataset_layout(path: &Path) -> anyhow::Result<(DatasetLayout, String)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
     let text = String::from_utf8(bytes)
         .map_err(|_| anyhow!("{}: not UTF-8 text (expected a layout JSON)", path.display()))?;
@@ -368,15 +371,16 @@ pub fn summarize(dataset: &Path) -> anyhow::Result<CheckSummaryArtifact> {
     })
 }
 
-/// Writes `qa/summary.json` and returns its lines for the terminal.
-pub fn write_summary(dataset: &Path) -> anyhow::Result<String> {
+/// Writes `qa/summary.json` and returns its lines for the terminal (none when no scene has
+/// been checked).
+pub fn write_summary(dataset: &Path) -> anyhow::Result<Option<String>> {
     let summary = summarize(dataset)?;
     let path = dataset.join(SUMMARY_FILE);
     let bytes = mesa_schemas::json::to_sorted_pretty(&summary)
         .with_context(|| format!("serialising {SUMMARY_FILE}"))?;
     sweep_tmp_for(&path).with_context(|| format!("{}: sweeping", path.display()))?;
     write_atomic(&path, &bytes).with_context(|| format!("{}: cannot write", path.display()))?;
-    Ok(format_summary(&summary, &path))
+    Ok((summary.scenes > 0).then(|| format_summary(&summary, &path)))
 }
 
 fn format_rates(name: &str, r: &RateSummary) -> String {

@@ -538,6 +538,29 @@ pub fn violations_of(
     out
 }
 
+/// The colliding pairs of a placed scene only (deeper than `penetration_m`).
+pub fn collisions_of(scene: &PhysicsScene, penetration_m: f64) -> Vec<Collision> {
+    let checked = scene.checked();
+    let mut out = Vec::new();
+    for (x, &i) in checked.iter().enumerate() {
+        let Some(a) = scene.body(i) else { continue };
+        for &j in &checked[x + 1..] {
+            let Some(b) = scene.body(j) else { continue };
+            if let Some(contact) = pair_contact(a, b, 0.0) {
+                if contact.depth_m > penetration_m {
+                    out.push(Collision {
+                        a: i,
+                        b: j,
+                        depth_m: contact.depth_m,
+                        normal: contact.normal,
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Checks a placed scene.
 pub fn check_scene(scene: &PhysicsScene, tolerances: &Tolerances) -> Findings {
     let checked = scene.checked();
