@@ -702,8 +702,6 @@ fn cut_positions(piece: &Pending, axis: usize, surface_edges: bool, margin: f64)
     let mut out = vec![0.5 * (lo + hi)];
     if coords.len() <= MOST {
         out.extend(coords);
-    } else {
-        out.extend((1..=MOST).map(|i| coords[i * (coords.len() - 1) / (MOST + 1)]));
     }
     out
 }
