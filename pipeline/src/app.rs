@@ -57,10 +57,24 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             &crate::stages::place::PlaceStage::new(),
             &resolve(&args, cli.quiet)?,
         ),
+        Command::Pack(args) => run_one(
+            &crate::stages::pack::PackStage::new(),
+            &resolve(&args, cli.quiet)?,
+        ),
+        Command::Ingest(args) => {
+            let mut resolved = resolve(&args.stage, cli.quiet)?;
+            if args.allow_unknown_nodes {
+                resolved.config.ingest.allow_unknown_nodes = true;
+            }
+            run_one(&crate::stages::ingest::IngestStage::new(), &resolved)
+        }
         Command::Check(args) => check(args, cli.quiet),
         Command::Graph(args) => graph(args, cli.quiet),
         Command::Tasks(args) => tasks(args, cli.quiet),
         Command::Records(args) => records(args, cli.quiet),
+        Command::Render(args) => render(args, cli.quiet),
+        Command::Report(args) => report(args, cli.quiet),
+        Command::Release(args) => release(args, cli.quiet),
     }
 }
 
@@ -133,7 +147,7 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
         print!("{}", annotated_toml(&resolved.config)?);
         return Ok(ExitCode::SUCCESS);
     }
-    let stages = pipeline_stages();
+    let stages = pipeline_stages(&resolved.config);
     if stages.is_empty() {
         bail!("this build of mesa has no per-scene stage to run");
     }
@@ -182,8 +196,13 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
             "records: not run by a shard; run `mesa records {}` once every shard is done",
             resolved.dataset.display()
         );
+        eprintln!(
+            "report: not run by a shard; run `mesa report {}` once every shard is done",
+            resolved.dataset.display()
+        );
     } else {
         failed |= run_records_stage(&resolved)? != ExitCode::SUCCESS;
+        failed |= run_report_stage(&resolved)? != ExitCode::SUCCESS;
     }
     Ok(ExitCode::from(if failed { EXIT_FAILED } else { EXIT_OK }))
 }
@@ -466,8 +485,105 @@ fn graph(args: GraphArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     run_one(&crate::stages::graph::GraphStage::new(), &resolved)
 }
 
+fn render(args: crate::cli::RenderArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let mut resolved = resolve(&args.stage, quiet)?;
+    if let Some(layout) = args.layout {
+        resolved.config.render.layout = layout.into();
+    }
+    if args.assets {
+        let options = crate::stages::render::AssetViewsOptions {
+            uids: args.uids.clone(),
+            jobs: resolved.options.jobs,
+            force: resolved.options.force,
+            progress: resolved.options.progress,
+            progress_interval: resolved.options.progress_interval,
+        };
+        let summary = crate::stages::render::render_asset_views(
+            &resolved.dataset,
+            &resolved.config,
+            &options,
+        )?;
+        eprint!(
+            "{}",
+            crate::stages::render::format_asset_views_summary(&summary)
+        );
+        return Ok(ExitCode::from(if summary.failed.is_empty() {
+            EXIT_OK
+        } else {
+            EXIT_FAILED
+        }));
+    }
+    run_one(&crate::stages::render::RenderStage::new(), &resolved)
+}
+
+fn report(args: crate::cli::ReportArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let stage_args = StageArgs {
+        dataset: args.dataset,
+        scenes: None,
+        jobs: args.jobs,
+        // The report covers every scene: no shard applies (nor the Slurm variables).
+        shard: Some(Shard::default()),
+        force: false,
+        config: args.config,
+        progress: None,
+    };
+    let resolved = resolve(&stage_args, quiet)?;
+    run_report_stage(&resolved)
+}
+
+fn run_report_stage(resolved: &Resolved) -> anyhow::Result<ExitCode> {
+    let summary = crate::stages::report::write_report(
+        &resolved.dataset,
+        &resolved.config,
+        resolved.options.jobs,
+    )?;
+    eprint!("{}", crate::stages::report::format_report_summary(&summary));
+    Ok(ExitCode::SUCCESS)
+}
+
+fn release(args: crate::cli::ReleaseArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let stage_args = StageArgs {
+        dataset: args.dataset.clone(),
+        scenes: args.scenes.clone(),
+        jobs: args.jobs,
+        shard: Some(Shard::default()),
+        force: false,
+        config: args.config.clone(),
+        progress: None,
+    };
+    let mut resolved = resolve(&stage_args, quiet)?;
+    if let Some(layout) = args.layout {
+        resolved.config.render.layout = layout.into();
+    }
+    let summary = crate::stages::release::write_release(
+        &resolved.dataset,
+        &args.out,
+        &resolved.config,
+        resolved.options.scenes.as_deref(),
+        resolved.options.jobs,
+    )?;
+    eprint!(
+        "{}",
+        crate::stages::release::format_release_summary(&summary)
+    );
+    Ok(ExitCode::from(if summary.failed.is_empty() {
+        EXIT_OK
+    } else {
+        EXIT_FAILED
+    }))
+}
+
 fn demo(args: DemoArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     use mesa_stages::demo::{write_demo, DemoError, DemoOptions};
+    if let Some(crate::cli::DemoAction::Annotate(stage)) = &args.action {
+        return run_one(
+            &crate::stages::annotate::AnnotateStage,
+            &resolve(stage, quiet)?,
+        );
+    }
+    let Some(dir) = args.dir.clone() else {
+        return Err(UsageError("give the folder to write: `mesa demo DIR`".to_owned()).into());
+    };
     let options = DemoOptions::default()
         .with_scenes(args.scenes)
         .with_seed(args.seed)
@@ -477,16 +593,16 @@ fn demo(args: DemoArgs, quiet: bool) -> anyhow::Result<ExitCode> {
         .build()
         .context("cannot start the worker threads")?;
     let started = std::time::Instant::now();
-    let summary =
-        pool.install(|| write_demo(&args.dir, &options))
-            .map_err(|e| -> anyhow::Error {
-                match e {
-                    DemoError::Options(_)
-                    | DemoError::NotEmpty { .. }
-                    | DemoError::NotADemo { .. } => UsageError(e.to_string()).into(),
-                    other => other.into(),
+    let summary = pool
+        .install(|| write_demo(&dir, &options))
+        .map_err(|e| -> anyhow::Error {
+            match e {
+                DemoError::Options(_) | DemoError::NotEmpty { .. } | DemoError::NotADemo { .. } => {
+                    UsageError(e.to_string()).into()
                 }
-            })?;
+                other => other.into(),
+            }
+        })?;
     if !quiet {
         let objects: usize = summary.scenes.iter().map(|s| s.objects).sum();
         let types: std::collections::BTreeSet<&str> = summary
@@ -520,19 +636,22 @@ fn status(args: StatusArgs) -> anyhow::Result<ExitCode> {
     let cache = DigestCache::default();
     let mut out = String::new();
     out.push_str(&format!(
-        "{}: {} scenes\n{:<10} {:>7} {:>7} {:>7} {:>7}\n",
+        "{}: {} scenes\n{:<10} {:>7} {:>7} {:>7} {:>7} {:>7}\n",
         args.dataset.display(),
         scenes.len(),
         "stage",
         "done",
         "stale",
         "failed",
+        "waiting",
         "pending"
     ));
     let mut notes = Vec::new();
-    for stage in pipeline_stages() {
+    // Scenes awaiting annotation, once each (every stage after ingest waits for them too).
+    let mut awaiting = std::collections::BTreeMap::new();
+    for stage in pipeline_stages(&config) {
         let digest = stage.config_digest(&ctx);
-        let (mut done, mut stale, mut failed, mut pending) = (0, 0, 0, 0);
+        let (mut done, mut stale, mut failed, mut waiting, mut pending) = (0, 0, 0, 0, 0);
         for scene in &scenes {
             match scene_state(stage.as_ref(), &ctx, scene, &digest, &cache) {
                 SceneState::Done => done += 1,
@@ -548,13 +667,23 @@ fn status(args: StatusArgs) -> anyhow::Result<ExitCode> {
                         notes.push(format!("  {} {}: failed: {why}", stage.name(), scene.key()));
                     }
                 }
+                SceneState::Waiting(why) => {
+                    waiting += 1;
+                    awaiting.entry(scene.key()).or_insert(why);
+                }
                 SceneState::Pending => pending += 1,
             }
         }
         out.push_str(&format!(
-            "{:<10} {done:>7} {stale:>7} {failed:>7} {pending:>7}\n",
+            "{:<10} {done:>7} {stale:>7} {failed:>7} {waiting:>7} {pending:>7}\n",
             stage.name()
         ));
+    }
+    if !awaiting.is_empty() {
+        out.push_str(&format!("{} scenes wait:\n", awaiting.len()));
+        for (scene, why) in &awaiting {
+            out.push_str(&format!("  {scene}: {why}\n"));
+        }
     }
     for note in notes {
         out.push_str(&note);
@@ -582,6 +711,7 @@ fn kind_from_file_name(path: &Path) -> Option<&'static Kind> {
         (_, "trl_sft.jsonl") => "trl-sft",
         (_, "trl_dpo.jsonl") => "trl-dpo",
         (_, "dataset_info.json") => "dataset-info",
+        (_, "Asset_annotation.json") | (Some("assets"), "annotations.json") => "asset-annotations",
         _ => return None,
     };
     Kind::by_name(kind)

@@ -53,6 +53,14 @@ pub enum Command {
     /// Scale each retrieved asset isometrically into its lifted box: the coarse layout
     /// (coarse/layout.json).
     Place(StageArgs),
+    /// Write each scene's annotator pack (pack/): the scene as a GLB for Blender (table,
+    /// objects named after their instances, a 1.70 m H1 figure), the photo, a snapshot per
+    /// object, index.json and a README for the annotator.
+    Pack(StageArgs),
+    /// Read each annotator's edited scene (refined/<scene_id>.glb) back into the refined
+    /// layout (refined/layout.json) and what changed (refined/diff.json). Scenes whose edited
+    /// GLB has not arrived are reported as awaiting annotation.
+    Ingest(IngestArgs),
     /// Physics QA of every scene's layout on the assets' collision shapes: colliding pairs with
     /// their penetration depth, floating objects, zone violations, the collision rate
     /// (qa/check.json); with --settle, the least motion that puts the scene at rest
@@ -68,6 +76,18 @@ pub enum Command {
     /// Merge every scene's tasks into the training records under records/ (SFT, DPO and TRL
     /// files, dataset_info.json, split.json). Run it once, after all scenes (and all shards).
     Records(RecordsArgs),
+    /// Render each scene's layout with its assets on the CPU: front, back, left, right and
+    /// perspective views (render/<view>.png) with a camera file each; or, with --assets, eight
+    /// views around every library asset (assets/renders/<uid>/).
+    Render(RenderArgs),
+    /// Write the dataset's statistics and plots (report/stats.json, report/*.svg) and one page
+    /// with a thumbnail, the QA flags and the files of every scene (report/index.html). Run it
+    /// once, after all scenes (and all shards).
+    Report(ReportArgs),
+    /// Write the MesaTask-10K tree of the dataset: Layout_info/<table_type>/<scene_id>/
+    /// {layout.json, front.png} from each scene's refined (or settled) layout and its front
+    /// render, and Asset_annotation.json for the assets they use.
+    Release(ReleaseArgs),
 }
 
 /// Flags shared by every per-scene stage.
@@ -187,11 +207,28 @@ pub struct RunArgs {
     pub print_config: bool,
 }
 
+/// `mesa ingest`.
+#[derive(Debug, Args)]
+pub struct IngestArgs {
+    /// The runner flags.
+    #[command(flatten)]
+    pub stage: StageArgs,
+    /// Ignore nodes that are none of the pack's (overrides [ingest] allow_unknown_nodes);
+    /// they are listed in refined/diff.json.
+    #[arg(long)]
+    pub allow_unknown_nodes: bool,
+}
+
 /// `mesa demo`.
 #[derive(Debug, Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct DemoArgs {
+    /// What else to do with a demo dataset.
+    #[command(subcommand)]
+    pub action: Option<DemoAction>,
     /// The folder to write (created if needed; new, empty, or an earlier `mesa demo` output).
-    pub dir: PathBuf,
+    #[arg(required = true)]
+    pub dir: Option<PathBuf>,
     /// Number of scenes; they cycle through the six table types.
     #[arg(long, value_name = "N", default_value_t = 20)]
     pub scenes: usize,
@@ -205,6 +242,15 @@ pub struct DemoArgs {
     /// Worker threads (0 = one per core); the output does not depend on it.
     #[arg(short, long, value_name = "N", default_value_t = 0)]
     pub jobs: usize,
+}
+
+/// `mesa demo` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum DemoAction {
+    /// Play the annotator on every pack/<scene_id>.glb of a demo dataset: write
+    /// refined/<scene_id>.glb as Blender would export it after a person fixed the scene from
+    /// the photo (here: from truth/).
+    Annotate(StageArgs),
 }
 
 /// `mesa status`.
@@ -340,6 +386,82 @@ pub struct RecordsArgs {
     /// Progress display (default: [run] progress of mesa.toml).
     #[arg(long, value_enum)]
     pub progress: Option<ProgressArg>,
+}
+
+/// `--layout` of `mesa render` and `mesa release`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LayoutArg {
+    /// The most refined present: qa/layout.json (settled), else refined/layout.json.
+    Refined,
+    /// coarse/layout.json (the placement before the annotator).
+    Coarse,
+    /// truth/layout.json of a `mesa demo` scene.
+    Truth,
+}
+
+impl From<LayoutArg> for mesa_stages::render::LayoutChoice {
+    fn from(value: LayoutArg) -> Self {
+        match value {
+            LayoutArg::Refined => Self::Refined,
+            LayoutArg::Coarse => Self::Coarse,
+            LayoutArg::Truth => Self::Truth,
+        }
+    }
+}
+
+/// `mesa render`.
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// The runner flags.
+    #[command(flatten)]
+    pub stage: StageArgs,
+    /// The layout drawn (default: [render] layout of mesa.toml, "refined"). Never falls back
+    /// to another: a scene without it fails.
+    #[arg(long, value_enum)]
+    pub layout: Option<LayoutArg>,
+    /// Render the eight views around z of every library asset (assets/renders/<uid>/
+    /// view_<azimuth>.png, for annotating assets and checking their front) instead of scenes.
+    #[arg(long, conflicts_with_all = ["scenes", "shard", "layout"])]
+    pub assets: bool,
+    /// With --assets: only assets whose uid matches this glob.
+    #[arg(long, value_name = "GLOB", requires = "assets")]
+    pub uids: Option<String>,
+}
+
+/// `mesa report`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// The dataset folder.
+    pub dataset: PathBuf,
+    /// The configuration file (default: DATASET/mesa.toml when it exists).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Worker threads (default: [run] jobs of mesa.toml; 0 = one per core); the files are the
+    /// same for any number.
+    #[arg(short, long, value_name = "N")]
+    pub jobs: Option<usize>,
+}
+
+/// `mesa release`.
+#[derive(Debug, Args)]
+pub struct ReleaseArgs {
+    /// The dataset folder.
+    pub dataset: PathBuf,
+    /// The folder to write the tree into (new or empty, or an earlier release of this dataset,
+    /// which is replaced).
+    pub out: PathBuf,
+    /// The layout released (default: "refined": qa/layout.json, else refined/layout.json).
+    #[arg(long, value_enum)]
+    pub layout: Option<LayoutArg>,
+    /// Only scenes whose "<table_type>/<scene_id>" or "<scene_id>" matches this glob.
+    #[arg(long, value_name = "GLOB")]
+    pub scenes: Option<String>,
+    /// The configuration file (default: DATASET/mesa.toml when it exists).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Worker threads (default: [run] jobs of mesa.toml; 0 = one per core).
+    #[arg(short, long, value_name = "N")]
+    pub jobs: Option<usize>,
 }
 
 /// `mesa parse-output`.

@@ -28,6 +28,12 @@ pub struct Config {
     pub retrieve: mesa_stages::retrieve::RetrieveConfig,
     /// `mesa place`: each asset scaled isometrically into its lifted box.
     pub place: mesa_stages::place::PlaceConfig,
+    /// `mesa pack`: the annotator pack (scene GLB, photo, snapshots, README).
+    pub pack: mesa_stages::pack::PackConfig,
+    /// Who edits the packs between `mesa pack` and `mesa ingest`.
+    pub annotate: mesa_stages::demo::annotator::AnnotateConfig,
+    /// `mesa ingest`: the annotator's edited scene read back into the refined layout.
+    pub ingest: mesa_stages::ingest::IngestConfig,
     /// `mesa check`: mesh-level physics QA (collisions, floating, zones) and settling.
     pub check: mesa_stages::check::CheckConfig,
     /// `mesa graph`: the rule-based scene graph (SCENE_GRAPH.md).
@@ -37,6 +43,8 @@ pub struct Config {
     pub tasks: mesa_stages::tasks::TasksConfig,
     /// `mesa records`: SFT and DPO training records and the split.
     pub records: mesa_stages::records::RecordsConfig,
+    /// `mesa render`: pictures of each scene's layout (and of single assets with --assets).
+    pub render: mesa_stages::render::RenderConfig,
 }
 
 /// The `[run]` section.
@@ -125,7 +133,14 @@ impl Config {
         let config: Self = toml::from_str(text).map_err(|e| e.to_string())?;
         // Values that parse but cannot work: refused before any work starts.
         config.retrieve.check().map_err(|e| format!("{e} "))?;
-        let problems = config.check.problems();
+        let problems: Vec<String> = config
+            .pack
+            .problems()
+            .into_iter()
+            .chain(config.ingest.problems())
+            .chain(config.check.problems())
+            .chain(config.render.problems())
+            .collect();
         if !problems.is_empty() {
             return Err(format!("{} ", problems.join("; ")));
         }
@@ -232,7 +247,10 @@ mod tests {
     #[test]
     fn check_values_that_cannot_work_are_refused_naming_the_key() {
         let err = Config::from_toml("[check]\npenetration_tolerance_mm = -1\n").expect_err("bad");
-        assert!(err.contains("[check] penetration_tolerance_mm is -1"), "{err}");
+        assert!(
+            err.contains("[check] penetration_tolerance_mm is -1"),
+            "{err}"
+        );
         let err = Config::from_toml("[check.settling]\nmax_rounds = 0\n").expect_err("bad");
         assert!(err.contains("[check.settling] max_rounds is 0"), "{err}");
         let err = Config::from_toml("[check]\nlayout = \"truth\"\n").expect_err("bad");

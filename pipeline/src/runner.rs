@@ -126,6 +126,13 @@ pub trait SceneStage: Sync {
 
     /// Processes one scene.
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput>;
+
+    /// Why the scene cannot run yet although nothing is wrong with it (a scene awaiting its
+    /// annotator), or `None`. A waiting scene is neither run nor failed: it is reported, and
+    /// its earlier outputs and marker are left as they are.
+    fn waiting(&self, _ctx: &StageContext<'_>, _scene: &Scene) -> Option<String> {
+        None
+    }
 }
 
 /// The digest of a serialisable configuration section.
@@ -366,6 +373,11 @@ pub enum SceneOutcome {
         /// The error chain, outermost first.
         error: Vec<String>,
     },
+    /// Not run: it waits for something outside mesa (see [`SceneStage::waiting`]).
+    Waiting {
+        /// What it waits for.
+        reason: String,
+    },
 }
 
 /// The result of running a stage over a dataset (one shard of it).
@@ -385,6 +397,9 @@ pub struct StageSummary {
     pub failed: Vec<(String, Vec<String>)>,
     /// Warnings, by scene.
     pub warnings: Vec<(String, String)>,
+    /// Scenes that wait for something outside mesa (an annotator), with what they wait for.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub waiting: Vec<(String, String)>,
     /// Wall time in seconds.
     pub elapsed_s: f64,
 }
@@ -423,6 +438,8 @@ pub enum SceneState {
     Failed(String),
     /// Never run.
     Pending,
+    /// Cannot run yet (the reason): it waits for something outside mesa.
+    Waiting(String),
 }
 
 struct Prepared {
@@ -501,6 +518,9 @@ pub fn scene_state(
     config_digest: &str,
     cache: &DigestCache,
 ) -> SceneState {
+    if let Some(reason) = stage.waiting(ctx, scene) {
+        return SceneState::Waiting(reason);
+    }
     let Some(marker) = read_marker(&marker_path(ctx.dataset, stage.name(), scene)) else {
         return SceneState::Pending;
     };
@@ -549,6 +569,9 @@ pub fn process_scene(
     force: bool,
     cache: &DigestCache,
 ) -> SceneOutcome {
+    if let Some(reason) = stage.waiting(ctx, scene) {
+        return SceneOutcome::Waiting { reason };
+    }
     let marker_file = marker_path(ctx.dataset, stage.name(), scene);
     let mut base = RunMarker {
         schema: MARKER_SCHEMA.to_owned(),
@@ -736,7 +759,7 @@ impl Progress {
             SceneOutcome::Failed { .. } => {
                 self.failed.fetch_add(1, Ordering::Relaxed);
             }
-            SceneOutcome::Done { .. } => {}
+            SceneOutcome::Done { .. } | SceneOutcome::Waiting { .. } => {}
         }
         let failed = self.failed.load(Ordering::Relaxed);
         if let Some(bar) = &self.bar {
@@ -818,6 +841,7 @@ pub fn run_stage(
         skipped: 0,
         failed: Vec::new(),
         warnings: Vec::new(),
+        waiting: Vec::new(),
         elapsed_s: 0.0,
     };
     for (scene, outcome) in scenes.iter().zip(outcomes) {
@@ -830,6 +854,7 @@ pub fn run_stage(
             }
             SceneOutcome::Skipped => summary.skipped += 1,
             SceneOutcome::Failed { error } => summary.failed.push((scene.key(), error)),
+            SceneOutcome::Waiting { reason } => summary.waiting.push((scene.key(), reason)),
         }
     }
     summary.elapsed_s = started.elapsed().as_secs_f64();
@@ -860,9 +885,14 @@ pub fn format_summary(summary: &StageSummary) -> String {
     } else {
         format!(" (shard {})", summary.shard)
     };
+    let waiting = if summary.waiting.is_empty() {
+        String::new()
+    } else {
+        format!(", {} waiting", summary.waiting.len())
+    };
     let _ = writeln!(
         out,
-        "{}{shard}: {} scenes: {} done, {} skipped, {} failed, {} warnings in {:.2} s",
+        "{}{shard}: {} scenes: {} done, {} skipped, {} failed{waiting}, {} warnings in {:.2} s",
         summary.stage,
         summary.scenes,
         summary.done,
@@ -875,6 +905,16 @@ pub fn format_summary(summary: &StageSummary) -> String {
         let _ = writeln!(out, "  failed {scene}: {}", error.join(": "));
     }
     const SHOWN: usize = 10;
+    for (scene, reason) in summary.waiting.iter().take(SHOWN) {
+        let _ = writeln!(out, "  waiting {scene}: {reason}");
+    }
+    if summary.waiting.len() > SHOWN {
+        let _ = writeln!(
+            out,
+            "  ... and {} more waiting (`mesa status` lists them)",
+            summary.waiting.len() - SHOWN
+        );
+    }
     for (scene, warning) in summary.warnings.iter().take(SHOWN) {
         let _ = writeln!(out, "  warning {scene}: {warning}");
     }

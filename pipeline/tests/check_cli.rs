@@ -109,10 +109,20 @@ fn coarse_layouts_are_checked_and_settled() {
 
     // Settling: at rest in at least 95% of the scenes, by a second check of what was written.
     let stderr = ok(
-        &["check", "--layout", "coarse", "--settle", "--progress", "off"],
+        &[
+            "check",
+            "--layout",
+            "coarse",
+            "--settle",
+            "--progress",
+            "off",
+        ],
         &dir,
     );
-    assert!(stderr.contains("after settling: collision rate"), "{stderr}");
+    assert!(
+        stderr.contains("after settling: collision rate"),
+        "{stderr}"
+    );
     let shapes = shapes(&dir);
     let tolerances = Tolerances::default();
     let mut at_rest = 0;
@@ -141,7 +151,10 @@ fn coarse_layouts_are_checked_and_settled() {
         // Sizes and rotations are kept; only positions move.
         let coarse: DatasetLayout = read(&scene.join("coarse/layout.json"));
         for (a, b) in coarse.objects.iter().zip(&settled.objects) {
-            assert_eq!((&a.instance, a.size_cm.0, a.rotation.0), (&b.instance, b.size_cm.0, b.rotation.0));
+            assert_eq!(
+                (&a.instance, a.size_cm.0, a.rotation.0),
+                (&b.instance, b.size_cm.0, b.rotation.0)
+            );
         }
     }
     distances.sort_by(f64::total_cmp);
@@ -170,13 +183,33 @@ fn coarse_layouts_are_checked_and_settled() {
 
     // A rerun skips every scene; another thread count gives the same bytes.
     let stderr = ok(
-        &["check", "--layout", "coarse", "--settle", "--progress", "off"],
+        &[
+            "check",
+            "--layout",
+            "coarse",
+            "--settle",
+            "--progress",
+            "off",
+        ],
         &dir,
     );
-    assert!(stderr.contains(&format!("0 done, {} skipped", scenes.len())), "{stderr}");
+    assert!(
+        stderr.contains(&format!("0 done, {} skipped", scenes.len())),
+        "{stderr}"
+    );
     let before = snapshot(&dir);
     ok(
-        &["check", "--layout", "coarse", "--settle", "--force", "-j", "1", "--progress", "off"],
+        &[
+            "check",
+            "--layout",
+            "coarse",
+            "--settle",
+            "--force",
+            "-j",
+            "1",
+            "--progress",
+            "off",
+        ],
         &dir,
     );
     let after_one = snapshot(&dir);
@@ -186,7 +219,10 @@ fn coarse_layouts_are_checked_and_settled() {
             .map(|(k, v)| (k.clone(), v.clone()))
             .collect()
     };
-    assert!(qa(&before) == qa(&after_one), "outputs differ with one thread");
+    assert!(
+        qa(&before) == qa(&after_one),
+        "outputs differ with one thread"
+    );
 
     // The scene graph now reads the settled layouts.
     ok(&["graph", "--progress", "off"], &dir);
@@ -232,7 +268,9 @@ fn coarse_layouts_are_checked_and_settled() {
                 let layout: DatasetLayout = read(&path);
                 let llm = mesa_schemas::convert::llm_from_dataset(&layout).layout;
                 mesa_stages::records::round_layout(&llm, 1).zone_cm == chosen.layout.zone_cm
-                    && names(&llm).iter().collect::<std::collections::BTreeSet<_>>()
+                    && names(&llm)
+                        .iter()
+                        .collect::<std::collections::BTreeSet<_>>()
                         == names(&chosen.layout).iter().collect()
             })
             .expect("the prompt's scene");
@@ -248,14 +286,25 @@ fn coarse_layouts_are_checked_and_settled() {
             .map(|o| (o.instance.clone(), Arc::clone(&shapes[&o.retrieved_uid])))
             .collect();
         let collider = mesa_stages::records::collide::Collider::Meshes(by_instance);
-        let before: std::collections::BTreeSet<_> =
-            collider.colliding_names(&chosen.layout, 0.2).into_iter().collect();
-        let after: std::collections::BTreeSet<_> =
-            collider.colliding_names(&rejected.layout, 0.2).into_iter().collect();
-        assert!(after.difference(&before).next().is_some(), "no new mesh collision");
+        let before: std::collections::BTreeSet<_> = collider
+            .colliding_names(&chosen.layout, 0.2)
+            .into_iter()
+            .collect();
+        let after: std::collections::BTreeSet<_> = collider
+            .colliding_names(&rejected.layout, 0.2)
+            .into_iter()
+            .collect();
+        assert!(
+            after.difference(&before).next().is_some(),
+            "no new mesh collision"
+        );
         verified += 1;
     }
-    assert!(verified > 0, "no collision corruption among {} DPO records", dpo.len());
+    assert!(
+        verified > 0,
+        "no collision corruption among {} DPO records",
+        dpo.len()
+    );
 
     // Settling off again: the settled layouts go, the reports stay.
     ok(&["check", "--layout", "coarse", "--progress", "off"], &dir);
@@ -275,7 +324,10 @@ fn scenes_without_a_refined_layout_are_reported_and_an_llm_layout_is_refused() {
     // No refined layout: done, with a warning saying what to run, nothing written.
     let stderr = ok(&["check", "--progress", "off"], &dir);
     assert!(stderr.contains("2 done"), "{stderr}");
-    assert!(stderr.contains("not checked: no refined/layout.json yet"), "{stderr}");
+    assert!(
+        stderr.contains("not checked: no refined/layout.json yet"),
+        "{stderr}"
+    );
     assert!(stderr.contains("--layout coarse"), "{stderr}");
     let scenes = scene_dirs(&dir);
     assert!(scenes.iter().all(|s| !s.join("qa").exists()));

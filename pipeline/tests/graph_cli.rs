@@ -295,10 +295,17 @@ fn dataset_graphs_follow_the_most_refined_layout_and_rerun_only_what_changed() {
     let dir = tempfile::tempdir().expect("tempdir");
     let dataset = dir.path();
     let records = gallery();
-    // office_table_0001: only a coarse layout. dining_table_0002: coarse, refined and qa.
+    // office_table_0001: coarse and refined layouts. dining_table_0002: coarse, refined and
+    // qa. coffee_table_0003: only a coarse layout: it awaits its annotator, and the graph
+    // waits for it (the coarse layout is never used after `ingest`).
     let office = scene_dir(dataset, "office_table_0001");
     let office_layout = dataset_of(&gallery_layout(&records[1]));
-    write_dataset_layout(&office.join("coarse/layout.json"), &office_layout);
+    let mut office_coarse = office_layout.clone();
+    office_coarse.objects.pop();
+    write_dataset_layout(&office.join("coarse/layout.json"), &office_coarse);
+    write_dataset_layout(&office.join("refined/layout.json"), &office_layout);
+    let waiting = scene_dir(dataset, "coffee_table_0003");
+    write_dataset_layout(&waiting.join("coarse/layout.json"), &office_layout);
     let dining = scene_dir(dataset, "dining_table_0002");
     let dining_layout = dataset_of(&gallery_layout(&records[0]));
     for stage in ["coarse", "refined", "qa"] {
@@ -313,9 +320,14 @@ fn dataset_graphs_follow_the_most_refined_layout_and_rerun_only_what_changed() {
     let (code, stderr) = run_graph(dataset);
     assert_eq!(code, Some(0), "{stderr}");
     assert!(
-        stderr.contains("graph: 2 scenes: 2 done, 0 skipped, 0 failed"),
+        stderr.contains("graph: 3 scenes: 2 done, 0 skipped, 0 failed, 1 waiting"),
         "{stderr}"
     );
+    assert!(
+        stderr.contains("waiting coffee_table/coffee_table_0003: awaiting annotation: no pack yet"),
+        "{stderr}"
+    );
+    assert!(!waiting.join("graph").exists());
     // No annotations file: the keyword rule, and a warning that says so.
     assert!(
         stderr.contains("containers by the keyword rule"),
@@ -324,7 +336,7 @@ fn dataset_graphs_follow_the_most_refined_layout_and_rerun_only_what_changed() {
     assert!(stderr.contains("(no annotations file)"), "{stderr}");
 
     for (scene, scene_id, rel) in [
-        (&office, "office_table_0001", "coarse/layout.json"),
+        (&office, "office_table_0001", "refined/layout.json"),
         (&dining, "dining_table_0002", "qa/layout.json"),
     ] {
         let text = std::fs::read_to_string(scene.join("graph/graph.txt")).expect("graph.txt");
@@ -356,7 +368,7 @@ fn dataset_graphs_follow_the_most_refined_layout_and_rerun_only_what_changed() {
     // Nothing changed: nothing redone.
     let (code, stderr) = run_graph(dataset);
     assert_eq!(code, Some(0), "{stderr}");
-    assert!(stderr.contains("2 scenes: 0 done, 2 skipped"), "{stderr}");
+    assert!(stderr.contains("3 scenes: 0 done, 2 skipped"), "{stderr}");
 
     // A settled layout appears for the office scene: only that scene is redone, from it.
     let mut settled = office_layout.clone();
@@ -364,7 +376,7 @@ fn dataset_graphs_follow_the_most_refined_layout_and_rerun_only_what_changed() {
     write_dataset_layout(&office.join("qa/layout.json"), &settled);
     let (code, stderr) = run_graph(dataset);
     assert_eq!(code, Some(0), "{stderr}");
-    assert!(stderr.contains("2 scenes: 1 done, 1 skipped"), "{stderr}");
+    assert!(stderr.contains("3 scenes: 1 done, 1 skipped"), "{stderr}");
     assert_eq!(
         read_json(&office.join("graph/graph.json"))["layout"],
         "qa/layout.json"
@@ -378,7 +390,17 @@ fn dataset_graphs_follow_the_most_refined_layout_and_rerun_only_what_changed() {
     .expect("toml");
     let (code, stderr) = run_graph(dataset);
     assert_eq!(code, Some(0), "{stderr}");
-    assert!(stderr.contains("2 scenes: 2 done, 0 skipped"), "{stderr}");
+    assert!(stderr.contains("3 scenes: 2 done, 0 skipped"), "{stderr}");
+
+    // The refined layout of the waiting scene arrives: it is done, from it.
+    write_dataset_layout(&waiting.join("refined/layout.json"), &office_layout);
+    let (code, stderr) = run_graph(dataset);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(stderr.contains("3 scenes: 1 done, 2 skipped"), "{stderr}");
+    assert_eq!(
+        read_json(&waiting.join("graph/graph.json"))["layout"],
+        "refined/layout.json"
+    );
 }
 
 #[test]
@@ -387,7 +409,7 @@ fn annotations_decide_containers_by_retrieved_uid() {
     let dataset = dir.path();
     let scene = scene_dir(dataset, "kitchen_counter_0001");
     let llm: LlmLayout = serde_json::from_value(tray_scene()).expect("layout");
-    write_dataset_layout(&scene.join("coarse/layout.json"), &dataset_of(&llm));
+    write_dataset_layout(&scene.join("refined/layout.json"), &dataset_of(&llm));
     let annotations = dataset.join("assets/annotations.json");
     // The tray's asset is a container, the bowl's is not; the others say nothing.
     write_json(
@@ -448,7 +470,7 @@ fn a_bad_scene_fails_alone() {
     let dataset = dir.path();
     let llm: LlmLayout = serde_json::from_value(tray_scene()).expect("layout");
     let good = scene_dir(dataset, "office_table_0001");
-    write_dataset_layout(&good.join("coarse/layout.json"), &dataset_of(&llm));
+    write_dataset_layout(&good.join("refined/layout.json"), &dataset_of(&llm));
     let bad = scene_dir(dataset, "office_table_0002");
     let mut broken = serde_json::to_value(dataset_of(&llm)).expect("json");
     broken["objects"][1]["size"][2] = json!(-3.0);
@@ -467,9 +489,8 @@ fn a_bad_scene_fails_alone() {
         "{stderr}"
     );
     assert!(
-        stderr.contains(
-            "no layout (expected qa/layout.json, refined/layout.json, coarse/layout.json"
-        ),
+        stderr
+            .contains("no layout (expected qa/layout.json, refined/layout.json; run `mesa place`"),
         "{stderr}"
     );
     assert!(good.join("graph/graph.txt").is_file());
@@ -483,7 +504,7 @@ fn run_runs_graph_and_print_config_documents_its_section() {
     let dataset = dir.path();
     let llm: LlmLayout = serde_json::from_value(tray_scene()).expect("layout");
     let scene = scene_dir(dataset, "coffee_table_0001");
-    write_dataset_layout(&scene.join("coarse/layout.json"), &dataset_of(&llm));
+    write_dataset_layout(&scene.join("refined/layout.json"), &dataset_of(&llm));
     let out = mesa()
         .args(["run", "--print-config"])
         .arg(dataset)

@@ -65,14 +65,14 @@ fn lines<T: serde::de::DeserializeOwned>(path: &Path) -> Vec<T> {
         .collect()
 }
 
-/// Each scene's layout as the records show it (the first of qa/, refined/, coarse/, in the
+/// Each scene's layout as the records show it (the first of qa/ and refined/, in the
 /// LLM form, rounded to 0.1), by scene id.
 fn layouts(dir: &Path) -> BTreeMap<String, LlmLayout> {
     let mut out = BTreeMap::new();
     for table in std::fs::read_dir(dir.join("scenes")).expect("scenes") {
         for scene in std::fs::read_dir(table.expect("entry").path()).expect("table") {
             let scene = scene.expect("entry").path();
-            let Some(path) = ["qa", "refined", "coarse"]
+            let Some(path) = ["qa", "refined"]
                 .iter()
                 .map(|d| scene.join(d).join("layout.json"))
                 .find(|p| p.is_file())
@@ -433,7 +433,7 @@ fn records_are_skipped_when_current_and_identical_for_any_thread_count() {
     // Editing a scene's layout makes its tasks stale: records leave the scene out and say so.
     let layout = common::all_files(dir.path())
         .keys()
-        .find(|k| k.ends_with("coarse/layout.json"))
+        .find(|k| k.ends_with("refined/layout.json"))
         .map(|k| dir.path().join(k))
         .expect("a layout");
     let text = std::fs::read_to_string(&layout).expect("read");

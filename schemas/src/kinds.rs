@@ -6,9 +6,14 @@ use schemars::JsonSchema;
 use serde::de::DeserializeOwned;
 use serde_json::Value;
 
+use crate::annotation::*;
 use crate::artifacts::*;
 use crate::layout::{DatasetLayout, LAYOUT_SCHEMA};
 use crate::llm::{GalleryRecord, LlmLayout, TaskInfo};
+use crate::render::{
+    annotation_problems, AssetAnnotationsFile, RenderCameraArtifact, ReportStats,
+    RENDER_CAMERA_SCHEMA, REPORT_STATS_SCHEMA,
+};
 use crate::validate::{nonfinite_problems, validate_against, Problem};
 
 /// How a kind's file is laid out.
@@ -160,6 +165,22 @@ pub fn kinds() -> &'static [Kind] {
                 semantic: no_semantics,
             },
             Kind {
+                name: "pack-index",
+                schema_id: Some(PACK_INDEX_SCHEMA),
+                form: FileForm::Json,
+                summary: "pack/index.json (the annotator pack: objects, assets, snapshots)",
+                generate: schema_of::<PackIndexArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "ingest-diff",
+                schema_id: Some(INGEST_DIFF_SCHEMA),
+                form: FileForm::Json,
+                summary: "refined/diff.json (what the annotator changed)",
+                generate: schema_of::<IngestDiffArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
                 name: "check",
                 schema_id: Some(CHECK_SCHEMA),
                 form: FileForm::Json,
@@ -171,7 +192,8 @@ pub fn kinds() -> &'static [Kind] {
                 name: "check-summary",
                 schema_id: Some(CHECK_SUMMARY_SCHEMA),
                 form: FileForm::Json,
-                summary: "qa/summary.json (collision rates over the dataset, before and after settling)",
+                summary:
+                    "qa/summary.json (collision rates over the dataset, before and after settling)",
                 generate: schema_of::<CheckSummaryArtifact>,
                 semantic: no_semantics,
             },
@@ -266,6 +288,30 @@ pub fn kinds() -> &'static [Kind] {
                 summary: "truth/scene.json of a demo scene (exact camera, pose, depth noise)",
                 generate: schema_of::<TruthScene>,
                 semantic: no_semantics,
+            },
+            Kind {
+                name: "render-camera",
+                schema_id: Some(RENDER_CAMERA_SCHEMA),
+                form: FileForm::Json,
+                summary: "render/<view>_camera.json (intrinsics and pose of a rendered view)",
+                generate: schema_of::<RenderCameraArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "report-stats",
+                schema_id: Some(REPORT_STATS_SCHEMA),
+                form: FileForm::Json,
+                summary: "report/stats.json (dataset statistics)",
+                generate: schema_of::<ReportStats>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "asset-annotations",
+                schema_id: None,
+                form: FileForm::Json,
+                summary: "assets/annotations.json, a release's Asset_annotation.json (per uid)",
+                generate: schema_of::<AssetAnnotationsFile>,
+                semantic: |v| typed(v, annotation_problems),
             },
             Kind {
                 name: "truth-instances",

@@ -4,8 +4,10 @@
 //! - [`llm`]: the LLM layout, task info and the published MesaTask records.
 //! - [`convert`]: dataset layout ↔ LLM layout.
 //! - [`output`]: the model output text and its parser (the paper's success rule).
+//! - [`annotation`]: the annotator round trip (the pack index, the ingest diff).
 //! - [`artifacts`]: inputs and per-stage artifacts (lift, retrieval, check, graph, tasks,
 //!   records, run markers).
+//! - [`render`]: rendered views' cameras, the report's statistics, the release's annotations.
 //! - [`kinds`] and [`validate`]: the kind registry and a validator that reports every problem
 //!   as `<json path>: <problem> (expected ...)`.
 //! - [`json`]: lenient reading (`NaN` reported, not a syntax error) and sorted-key writing.
@@ -13,6 +15,7 @@
 //! Units live in names: `_cm`, `_deg`, `_m`, `_mm`, `_px`. Layout files are in centimetres in
 //! the table frame (SPEC section 2).
 
+pub mod annotation;
 pub mod artifacts;
 pub mod convert;
 pub mod json;
@@ -21,6 +24,7 @@ pub mod layout;
 pub mod layout_file;
 pub mod llm;
 pub mod output;
+pub mod render;
 pub mod rotation;
 pub mod units;
 pub mod validate;

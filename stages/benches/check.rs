@@ -73,9 +73,15 @@ fn demo_scene() -> (DatasetLayout, BTreeMap<String, Arc<AssetShape>>) {
         if shapes.contains_key(uid) {
             continue;
         }
-        let bytes = std::fs::read(dir.path().join(format!("assets/library/{uid}.glb")))
-            .expect("glb");
-        let indexed = index_asset(uid, "", &bytes, annotations.get(uid), &AssetsConfig::default());
+        let bytes =
+            std::fs::read(dir.path().join(format!("assets/library/{uid}.glb"))).expect("glb");
+        let indexed = index_asset(
+            uid,
+            "",
+            &bytes,
+            annotations.get(uid),
+            &AssetsConfig::default(),
+        );
         let shape = AssetShape::new(
             uid,
             &indexed.shapes.expect("shapes"),

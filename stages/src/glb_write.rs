@@ -50,6 +50,18 @@ pub enum GlbWriteError {
         /// The texture name.
         name: String,
     },
+    /// Image bytes that are not of their stated type, or of a type glTF 2.0 core does not
+    /// allow.
+    #[error(
+        "texture \"{name}\": {problem} (glTF 2.0 embeds PNG and JPEG images; convert it to \
+         PNG)"
+    )]
+    Image {
+        /// The texture name.
+        name: String,
+        /// What is wrong.
+        problem: String,
+    },
     /// Node extras that are not a JSON object.
     #[error("node \"{node}\": extras must be a JSON object")]
     Extras {
@@ -67,6 +79,43 @@ pub enum GlbWriteError {
     Json(#[from] serde_json::Error),
 }
 
+/// How a material's alpha is used (glTF `alphaMode`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum AlphaSpec {
+    /// Alpha ignored.
+    #[default]
+    Opaque,
+    /// Alpha tested against a cutoff.
+    Mask(f32),
+    /// Alpha blended.
+    Blend,
+}
+
+/// How a texture is sampled (glTF sampler constants; `None` filters are the viewer's
+/// choice).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct SamplerSpec {
+    /// `magFilter` (9728 nearest, 9729 linear).
+    pub mag_filter: Option<u32>,
+    /// `minFilter` (9728, 9729, 9984..=9987).
+    pub min_filter: Option<u32>,
+    /// `wrapS` (33071 clamp, 33648 mirrored repeat, 10497 repeat).
+    pub wrap_s: u32,
+    /// `wrapT`.
+    pub wrap_t: u32,
+}
+
+impl Default for SamplerSpec {
+    fn default() -> Self {
+        Self {
+            mag_filter: Some(9729),
+            min_filter: Some(9987),
+            wrap_s: 10497,
+            wrap_t: 10497,
+        }
+    }
+}
+
 /// A metallic-roughness material.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MaterialSpec {
@@ -82,6 +131,18 @@ pub struct MaterialSpec {
     pub roughness: f32,
     /// Render both sides (for open, zero-thickness surfaces).
     pub double_sided: bool,
+    /// The metallic-roughness texture (blue: metalness, green: roughness).
+    pub metallic_roughness_texture: Option<Index<json::Texture>>,
+    /// The tangent-space normal map and its scale.
+    pub normal_texture: Option<(Index<json::Texture>, f32)>,
+    /// The occlusion texture and its strength.
+    pub occlusion_texture: Option<(Index<json::Texture>, f32)>,
+    /// The emissive texture (sRGB).
+    pub emissive_texture: Option<Index<json::Texture>>,
+    /// Linear RGB emission (multiplied with the emissive texture when there is one).
+    pub emissive_factor: [f32; 3],
+    /// How alpha is used.
+    pub alpha: AlphaSpec,
 }
 
 impl MaterialSpec {
@@ -94,7 +155,22 @@ impl MaterialSpec {
             metallic: 0.0,
             roughness,
             double_sided: false,
+            metallic_roughness_texture: None,
+            normal_texture: None,
+            occlusion_texture: None,
+            emissive_texture: None,
+            emissive_factor: [0.0; 3],
+            alpha: AlphaSpec::Opaque,
         }
+    }
+
+    /// Whether the material samples any texture (then primitives carry texture coordinates).
+    pub fn is_textured(&self) -> bool {
+        self.base_color_texture.is_some()
+            || self.metallic_roughness_texture.is_some()
+            || self.normal_texture.is_some()
+            || self.occlusion_texture.is_some()
+            || self.emissive_texture.is_some()
     }
 }
 
@@ -173,7 +249,7 @@ impl NodeSpec {
 pub struct GlbBuilder {
     root: json::Root,
     bin: Vec<u8>,
-    sampler: Option<Index<json::texture::Sampler>>,
+    samplers: Vec<(SamplerSpec, Index<json::texture::Sampler>)>,
     scene_roots: Vec<Index<json::Node>>,
     scene_name: Option<String>,
     /// Per material: whether it samples a texture (only then do primitives carry texture
@@ -200,7 +276,7 @@ impl GlbBuilder {
         Self {
             root,
             bin: Vec::new(),
-            sampler: None,
+            samplers: Vec::new(),
             scene_roots: Vec::new(),
             scene_name: None,
             textured: Vec::new(),
@@ -241,59 +317,151 @@ impl GlbBuilder {
                 name: name.to_owned(),
             });
         }
-        let view = self.push_view(png_bytes, None);
-        let image = self.root.push(json::Image {
-            buffer_view: Some(view),
-            mime_type: Some(json::image::MimeType("image/png".to_owned())),
-            name: Some(name.to_owned()),
-            uri: None,
-            extensions: None,
-            extras: Default::default(),
-        });
-        let sampler = match self.sampler {
-            Some(s) => s,
-            None => {
-                let s = self.root.push(json::texture::Sampler {
-                    mag_filter: Some(Valid(json::texture::MagFilter::Linear)),
-                    min_filter: Some(Valid(json::texture::MinFilter::LinearMipmapLinear)),
-                    wrap_s: Valid(json::texture::WrappingMode::Repeat),
-                    wrap_t: Valid(json::texture::WrappingMode::Repeat),
-                    ..Default::default()
-                });
-                self.sampler = Some(s);
-                s
+        let image = self.add_image(name, png_bytes, "image/png")?;
+        Ok(self.add_texture(name, image, SamplerSpec::default()))
+    }
+
+    /// Embeds a PNG or JPEG image (checked against its signature) and returns its index.
+    pub fn add_image(
+        &mut self,
+        name: &str,
+        bytes: &[u8],
+        mime: &str,
+    ) -> Result<Index<json::Image>, GlbWriteError> {
+        let signature_ok = match mime {
+            "image/png" => bytes.starts_with(PNG_SIGNATURE),
+            "image/jpeg" => bytes.starts_with(&[0xFF, 0xD8, 0xFF]),
+            other => {
+                return Err(GlbWriteError::Image {
+                    name: name.to_owned(),
+                    problem: format!("MIME type \"{other}\""),
+                })
             }
         };
-        Ok(self.root.push(json::Texture {
+        if !signature_ok {
+            return Err(GlbWriteError::Image {
+                name: name.to_owned(),
+                problem: format!("the bytes are not a {mime} image (wrong signature)"),
+            });
+        }
+        let view = self.push_view(bytes, None);
+        Ok(self.root.push(json::Image {
+            buffer_view: Some(view),
+            mime_type: Some(json::image::MimeType(mime.to_owned())),
             name: Some(name.to_owned()),
-            sampler: Some(sampler),
-            source: image,
+            uri: None,
             extensions: None,
             extras: Default::default(),
         }))
     }
 
+    /// A texture sampling `image` with `sampler` (samplers are shared between textures).
+    pub fn add_texture(
+        &mut self,
+        name: &str,
+        image: Index<json::Image>,
+        sampler: SamplerSpec,
+    ) -> Index<json::Texture> {
+        let sampler_index = match self.samplers.iter().find(|(s, _)| *s == sampler) {
+            Some((_, index)) => *index,
+            None => {
+                let mag = match sampler.mag_filter {
+                    Some(9728) => Some(Valid(json::texture::MagFilter::Nearest)),
+                    Some(_) => Some(Valid(json::texture::MagFilter::Linear)),
+                    None => None,
+                };
+                let min = sampler.min_filter.map(|f| {
+                    Valid(match f {
+                        9728 => json::texture::MinFilter::Nearest,
+                        9729 => json::texture::MinFilter::Linear,
+                        9984 => json::texture::MinFilter::NearestMipmapNearest,
+                        9985 => json::texture::MinFilter::LinearMipmapNearest,
+                        9986 => json::texture::MinFilter::NearestMipmapLinear,
+                        _ => json::texture::MinFilter::LinearMipmapLinear,
+                    })
+                });
+                let wrap = |w: u32| {
+                    Valid(match w {
+                        33071 => json::texture::WrappingMode::ClampToEdge,
+                        33648 => json::texture::WrappingMode::MirroredRepeat,
+                        _ => json::texture::WrappingMode::Repeat,
+                    })
+                };
+                let index = self.root.push(json::texture::Sampler {
+                    mag_filter: mag,
+                    min_filter: min,
+                    wrap_s: wrap(sampler.wrap_s),
+                    wrap_t: wrap(sampler.wrap_t),
+                    ..Default::default()
+                });
+                self.samplers.push((sampler, index));
+                index
+            }
+        };
+        self.root.push(json::Texture {
+            name: Some(name.to_owned()),
+            sampler: Some(sampler_index),
+            source: image,
+            extensions: None,
+            extras: Default::default(),
+        })
+    }
+
     /// Adds a material.
     pub fn add_material(&mut self, spec: &MaterialSpec) -> Index<json::Material> {
         let clamp = |v: f32| v.clamp(0.0, 1.0);
-        self.textured.push(spec.base_color_texture.is_some());
+        let info = |index: Index<json::Texture>| json::texture::Info {
+            index,
+            tex_coord: 0,
+            extensions: None,
+            extras: Default::default(),
+        };
+        self.textured.push(spec.is_textured());
+        let (alpha_mode, alpha_cutoff) = match spec.alpha {
+            AlphaSpec::Opaque => (json::material::AlphaMode::Opaque, None),
+            AlphaSpec::Mask(cutoff) => (
+                json::material::AlphaMode::Mask,
+                Some(json::material::AlphaCutoff(cutoff.max(0.0))),
+            ),
+            AlphaSpec::Blend => (json::material::AlphaMode::Blend, None),
+        };
         self.root.push(json::Material {
             name: Some(spec.name.clone()),
             double_sided: spec.double_sided,
+            alpha_mode: Valid(alpha_mode),
+            alpha_cutoff,
             pbr_metallic_roughness: json::material::PbrMetallicRoughness {
                 base_color_factor: json::material::PbrBaseColorFactor(
                     spec.base_color_factor.map(clamp),
                 ),
-                base_color_texture: spec.base_color_texture.map(|index| json::texture::Info {
+                base_color_texture: spec.base_color_texture.map(info),
+                metallic_factor: json::material::StrengthFactor(clamp(spec.metallic)),
+                roughness_factor: json::material::StrengthFactor(clamp(spec.roughness)),
+                metallic_roughness_texture: spec.metallic_roughness_texture.map(info),
+                ..Default::default()
+            },
+            normal_texture: spec.normal_texture.map(|(index, scale)| {
+                json::material::NormalTexture {
                     index,
+                    scale,
                     tex_coord: 0,
                     extensions: None,
                     extras: Default::default(),
-                }),
-                metallic_factor: json::material::StrengthFactor(clamp(spec.metallic)),
-                roughness_factor: json::material::StrengthFactor(clamp(spec.roughness)),
-                ..Default::default()
-            },
+                }
+            }),
+            occlusion_texture: spec.occlusion_texture.map(|(index, strength)| {
+                json::material::OcclusionTexture {
+                    index,
+                    strength: json::material::StrengthFactor(clamp(strength)),
+                    tex_coord: 0,
+                    extensions: None,
+                    extras: Default::default(),
+                }
+            }),
+            emissive_texture: spec.emissive_texture.map(info),
+            emissive_factor: json::material::EmissiveFactor(
+                spec.emissive_factor.map(|v| v.max(0.0)),
+            ),
             ..Default::default()
         })
     }

@@ -9,6 +9,10 @@
 //! - [`text`]: the built-in lexical text encoder of retrieval.
 //! - [`retrieve`]: an asset per instance by text and size, MesaTask's recipe (SPEC 5.2).
 //! - [`place`]: isometric placement into the lifted boxes, the coarse layout (SPEC 5.3).
+//! - [`pack`]: the annotator pack, a scene GLB for Blender with the photo and snapshots
+//!   (SPEC 5.4).
+//! - [`ingest`]: the edited scene read back into the refined layout (SPEC 5.5).
+//! - [`gltf_frames`]: table frame ↔ glTF node transforms.
 //! - [`graph`]: the rule-based scene graph (SPEC 5.7, `SCENE_GRAPH.md`).
 //! - [`demo`]: `mesa demo`, a synthetic dataset workspace with ground truth.
 //! - [`mesh`]: triangle meshes, transforms, bounds and frame conversions.
@@ -18,6 +22,9 @@
 //! - [`tasks`]: task instructions and reasoning texts, from a chat model or the built-in
 //!   template writer (SPEC 5.8).
 //! - [`records`]: SFT and DPO training records, the corruptions, the split (SPEC 5.9).
+//! - [`render`]: pictures of layouts and assets on the CPU, with camera files (SPEC 5.10).
+//! - [`report`]: dataset statistics, SVG plots and the HTML page of a dataset (SPEC 5.10).
+//! - [`release`]: the MesaTask-10K tree's files (SPEC 5.10).
 //! - [`seeding`]: seeded random generators per scene and purpose.
 
 pub mod annotations;
@@ -26,13 +33,19 @@ pub mod check;
 pub mod demo;
 pub mod glb_read;
 pub mod glb_write;
+pub mod gltf_frames;
 pub mod graph;
 pub mod image_io;
+pub mod ingest;
 pub mod lift;
 pub mod mesh;
+pub mod pack;
 pub mod place;
 pub mod raster;
 pub mod records;
+pub mod release;
+pub mod render;
+pub mod report;
 pub mod retrieve;
 pub mod seeding;
 pub mod tasks;

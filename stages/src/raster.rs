@@ -174,6 +174,9 @@ pub struct DrawItem<'a> {
     pub instance: u32,
     /// Whether it casts shadows.
     pub casts_shadow: bool,
+    /// Linear RGB colours multiplied with the material's, one per mesh vertex (glTF
+    /// `COLOR_0`); `None` for none.
+    pub vertex_colors: Option<&'a [[f32; 3]]>,
 }
 
 /// A light infinitely far away.
@@ -636,62 +639,79 @@ pub struct ShadedRender {
     pub rgb: Vec<u8>,
 }
 
-/// Renders a shaded colour image (and its visibility buffer) at the camera's resolution.
-pub fn render_shaded(
-    camera: &PinholeCamera,
-    camera_from_world: &Affine3,
-    items: &[DrawItem<'_>],
-    lighting: &Lighting,
-) -> ShadedRender {
-    let visibility = visibility(camera, camera_from_world, items);
-    let world_from_camera = camera_from_world.inverse().unwrap_or(Affine3::IDENTITY);
-    let camera_center_world = world_from_camera.translation;
-    let shadow = lighting
-        .lights
-        .iter()
-        .find(|l| l.casts_shadow)
-        .zip(lighting.shadow_region.as_ref())
-        .map(|(light, region)| ShadowMap::build(light, region, lighting.shadow_map_px, items));
-    let shadow_light = lighting.lights.iter().position(|l| l.casts_shadow);
+/// An item's (positions, normals) in the world frame.
+type WorldVertices = (Vec<[f64; 3]>, Vec<[f64; 3]>);
 
-    // Per-item world-space vertices and normals, computed once.
-    // (positions, normals) in the world frame.
-    type WorldVertices = (Vec<[f64; 3]>, Vec<[f64; 3]>);
-    let world: Vec<WorldVertices> = items
-        .iter()
-        .map(|item| {
-            let m = &item.world_from_mesh;
-            let nm = m.normal_matrix().unwrap_or(m.linear);
-            let positions = item
-                .mesh
-                .positions
-                .iter()
-                .map(|p| m.apply_point([p[0] as f64, p[1] as f64, p[2] as f64]))
-                .collect();
-            let normals = item
-                .mesh
-                .normals
-                .iter()
-                .map(|n| {
-                    let n = [n[0] as f64, n[1] as f64, n[2] as f64];
-                    normalize3([dot3(nm[0], n), dot3(nm[1], n), dot3(nm[2], n)])
-                })
-                .collect();
-            (positions, normals)
-        })
-        .collect();
+/// Shades visible samples: the per-item world-frame vertices and normals, the shadow map and
+/// the lights of one render, computed once.
+pub struct Shader<'s, 'a> {
+    items: &'s [DrawItem<'a>],
+    lighting: &'s Lighting,
+    /// Per item, in the world frame.
+    world: Vec<WorldVertices>,
+    shadow: Option<ShadowMap>,
+    shadow_light: Option<usize>,
+    camera_center_world: [f64; 3],
+}
 
-    let bg = lighting.background_srgb;
-    let mut rgb = vec![0u8; camera.width as usize * camera.height as usize * 3];
-    for (o, &item_index) in visibility.item.iter().enumerate() {
-        if item_index == u32::MAX {
-            rgb[o * 3..o * 3 + 3].copy_from_slice(&bg);
-            continue;
+impl<'s, 'a> Shader<'s, 'a> {
+    /// Prepares shading `items` seen from a camera at `camera_from_world` under `lighting`
+    /// (builds the shadow map of the first shadowed light when a shadow region is set).
+    pub fn new(
+        camera_from_world: &Affine3,
+        items: &'s [DrawItem<'a>],
+        lighting: &'s Lighting,
+    ) -> Self {
+        let world_from_camera = camera_from_world.inverse().unwrap_or(Affine3::IDENTITY);
+        let camera_center_world = world_from_camera.translation;
+        let shadow = lighting
+            .lights
+            .iter()
+            .find(|l| l.casts_shadow)
+            .zip(lighting.shadow_region.as_ref())
+            .map(|(light, region)| ShadowMap::build(light, region, lighting.shadow_map_px, items));
+        let shadow_light = lighting.lights.iter().position(|l| l.casts_shadow);
+        let world = items
+            .iter()
+            .map(|item| {
+                let m = &item.world_from_mesh;
+                let nm = m.normal_matrix().unwrap_or(m.linear);
+                let positions = item
+                    .mesh
+                    .positions
+                    .iter()
+                    .map(|p| m.apply_point([p[0] as f64, p[1] as f64, p[2] as f64]))
+                    .collect();
+                let normals = item
+                    .mesh
+                    .normals
+                    .iter()
+                    .map(|n| {
+                        let n = [n[0] as f64, n[1] as f64, n[2] as f64];
+                        normalize3([dot3(nm[0], n), dot3(nm[1], n), dot3(nm[2], n)])
+                    })
+                    .collect();
+                (positions, normals)
+            })
+            .collect();
+        Self {
+            items,
+            lighting,
+            world,
+            shadow,
+            shadow_light,
+            camera_center_world,
         }
-        let item = &items[item_index as usize];
-        let (positions, normals) = &world[item_index as usize];
-        let tri = item.mesh.triangles[visibility.triangle[o] as usize];
-        let [b1, b2] = visibility.barycentric[o].map(|b| b as f64);
+    }
+
+    /// The linear RGB colour of triangle `triangle` of item `item_index` at perspective-correct
+    /// barycentrics `(b1, b2)`.
+    pub fn shade(&self, item_index: u32, triangle: u32, barycentric: [f32; 2]) -> [f32; 3] {
+        let lighting = self.lighting;
+        let item = &self.items[item_index as usize];
+        let (positions, normals) = &self.world[item_index as usize];
+        let tri = item.mesh.triangles[triangle as usize];
+        let [b1, b2] = barycentric.map(|b| b as f64);
         let b0 = 1.0 - b1 - b2;
         let weights = [b0, b1, b2];
         let interp = |arr: &[[f64; 3]]| -> [f64; 3] {
@@ -703,7 +723,7 @@ pub fn render_shaded(
         };
         let p = interp(positions);
         let mut n = normalize3(interp(normals));
-        let to_eye = normalize3(sub3(camera_center_world, p));
+        let to_eye = normalize3(sub3(self.camera_center_world, p));
         if dot3(n, to_eye) < 0.0 {
             n = scale3(n, -1.0);
         }
@@ -717,6 +737,13 @@ pub fn render_shaded(
             });
             let t = texture.sample_linear_rgb(uv);
             albedo = [albedo[0] * t[0], albedo[1] * t[1], albedo[2] * t[2]];
+        }
+        if let Some(colors) = item.vertex_colors {
+            for (k, a) in albedo.iter_mut().enumerate() {
+                *a *= (0..3)
+                    .map(|j| weights[j] as f32 * colors[tri[j] as usize][k])
+                    .sum::<f32>();
+            }
         }
         let up = dot3(n, lighting.up_world) as f32;
         let hemi = 0.5 + 0.5 * up;
@@ -733,7 +760,7 @@ pub fn render_shaded(
             if ndotl <= 0.0 {
                 continue;
             }
-            let visible = match (&shadow, shadow_light) {
+            let visible = match (&self.shadow, self.shadow_light) {
                 (Some(map), Some(s)) if s == li => map.light_fraction(p, n),
                 _ => 1.0,
             };
@@ -748,6 +775,31 @@ pub fn render_shaded(
                 color[k] += light.color[k] * visible * (albedo[k] * ndotl + spec * ndotl.sqrt());
             }
         }
+        color
+    }
+}
+
+/// Renders a shaded colour image (and its visibility buffer) at the camera's resolution.
+pub fn render_shaded(
+    camera: &PinholeCamera,
+    camera_from_world: &Affine3,
+    items: &[DrawItem<'_>],
+    lighting: &Lighting,
+) -> ShadedRender {
+    let visibility = visibility(camera, camera_from_world, items);
+    let shader = Shader::new(camera_from_world, items, lighting);
+    let bg = lighting.background_srgb;
+    let mut rgb = vec![0u8; camera.width as usize * camera.height as usize * 3];
+    for (o, &item_index) in visibility.item.iter().enumerate() {
+        if item_index == u32::MAX {
+            rgb[o * 3..o * 3 + 3].copy_from_slice(&bg);
+            continue;
+        }
+        let color = shader.shade(
+            item_index,
+            visibility.triangle[o],
+            visibility.barycentric[o],
+        );
         for k in 0..3 {
             rgb[o * 3 + k] = linear_to_srgb_u8(color[k]);
         }
@@ -822,6 +874,7 @@ mod tests {
             material: &material,
             instance: 7,
             casts_shadow: false,
+            vertex_colors: None,
         }];
         let vis = visibility(&camera(), &Affine3::IDENTITY, &items);
         let ids = vis.instance_ids(&items);
@@ -854,6 +907,7 @@ mod tests {
             material: &material,
             instance: 1,
             casts_shadow: false,
+            vertex_colors: None,
         }];
         let cam = camera();
         let vis = visibility(&cam, &Affine3::IDENTITY, &items);
@@ -881,6 +935,7 @@ mod tests {
                 material: &material,
                 instance: 1,
                 casts_shadow: true,
+                vertex_colors: None,
             },
             DrawItem {
                 mesh: &near,
@@ -888,6 +943,7 @@ mod tests {
                 material: &material,
                 instance: 2,
                 casts_shadow: true,
+                vertex_colors: None,
             },
         ];
         let cam = camera();
@@ -921,6 +977,7 @@ mod tests {
                 material: &material,
                 instance: 1,
                 casts_shadow: true,
+                vertex_colors: None,
             },
             DrawItem {
                 mesh: &block,
@@ -928,6 +985,7 @@ mod tests {
                 material: &material,
                 instance: 2,
                 casts_shadow: true,
+                vertex_colors: None,
             },
         ];
         let lighting = Lighting {

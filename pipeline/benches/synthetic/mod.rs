@@ -162,12 +162,12 @@ pub fn layout(rng: &mut rand_chacha::ChaCha8Rng) -> DatasetLayout {
     }
 }
 
-/// Writes `scenes` layouts (`coarse/layout.json`) into `dir`, spread over the six table types.
+/// Writes `scenes` layouts (`refined/layout.json`, as annotated and ingested) into `dir`, spread over the six table types.
 pub fn write_layouts(dir: &Path, scenes: usize, seed: u64) -> std::io::Result<()> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     for k in 0..scenes {
         let table = TABLE_TYPES[k % TABLE_TYPES.len()];
-        let path = dir.join(format!("scenes/{table}/{table}_{k:05}/coarse/layout.json"));
+        let path = dir.join(format!("scenes/{table}/{table}_{k:05}/refined/layout.json"));
         std::fs::create_dir_all(path.parent().expect("a parent folder"))?;
         let bytes = mesa_schemas::json::to_sorted_pretty(&layout(&mut rng))
             .map_err(std::io::Error::other)?;

@@ -57,7 +57,11 @@ impl ShapeLibrary {
     }
 
     /// The collision shape of an object's asset, or why there is none.
-    pub fn shape_of(&self, dataset: &Path, object: &LayoutObject) -> Result<Arc<AssetShape>, String> {
+    pub fn shape_of(
+        &self,
+        dataset: &Path,
+        object: &LayoutObject,
+    ) -> Result<Arc<AssetShape>, String> {
         let uid = object.retrieved_uid.as_str();
         if uid.is_empty() {
             return Err("no retrieved_uid (run `mesa retrieve` and `mesa place`)".to_owned());
@@ -74,7 +78,9 @@ impl ShapeLibrary {
 
     fn load_shape(&self, dataset: &Path, uid: &str) -> Result<AssetShape, String> {
         let record = self.index.assets.get(uid).ok_or_else(|| {
-            format!("asset {uid} is not in {INDEX} (put its GLB in the library and run `mesa assets`)")
+            format!(
+                "asset {uid} is not in {INDEX} (put its GLB in the library and run `mesa assets`)"
+            )
         })?;
         if !record.valid {
             return Err(format!(
@@ -150,14 +156,22 @@ struct Fingerprint<'a> {
 /// SHA-256 of its bytes.
 pub fn read_dataset_layout(path: &Path) -> anyhow::Result<(DatasetLayout, String)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let text = String::from_utf8(bytes)
-        .map_err(|_| anyhow!("{}: not UTF-8 text (expected a layout JSON)", path.display()))?;
+    let text = String::from_utf8(bytes).map_err(|_| {
+        anyhow!(
+            "{}: not UTF-8 text (expected a layout JSON)",
+            path.display()
+        )
+    })?;
     let read = read_layout_text(&text).map_err(|problems| {
         let lines: Vec<String> = problems
             .iter()
             .map(|p| format!("{}: {p}", path.display()))
             .collect();
-        anyhow!("{} is not a valid layout:\n{}", path.display(), lines.join("\n"))
+        anyhow!(
+            "{} is not a valid layout:\n{}",
+            path.display(),
+            lines.join("\n")
+        )
     })?;
     match read.layout {
         AnyLayout::Dataset(layout) => Ok((layout, sha256_hex(text.as_bytes()))),
@@ -196,6 +210,17 @@ impl SceneStage for CheckStage {
             graph: &ctx.config.graph,
             version: env!("CARGO_PKG_VERSION"),
         })
+    }
+
+    /// A scene whose refined layout has not arrived waits for its annotator (unless the
+    /// coarse layout is checked).
+    fn waiting(&self, ctx: &StageContext<'_>, scene: &Scene) -> Option<String> {
+        let layout = ctx.config.check.layout;
+        if layout == LayoutSource::Refined && !scene.path(layout.file()).is_file() {
+            crate::stages::scene_docs::awaiting_annotation(scene)
+        } else {
+            None
+        }
     }
 
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
@@ -286,7 +311,8 @@ fn rates<'a>(findings: impl Iterator<Item = &'a CheckFindings>) -> RateSummary {
     }
     if summary.pairs_total > 0 {
         summary.collision_rate = summary.colliding_pairs as f64 / summary.pairs_total as f64;
-        summary.mesatask_rule_rate = summary.mesatask_rule_pairs as f64 / summary.pairs_total as f64;
+        summary.mesatask_rule_rate =
+            summary.mesatask_rule_pairs as f64 / summary.pairs_total as f64;
     }
     if summary.scenes > 0 {
         summary.mean_scene_collision_rate = rate_sum / summary.scenes as f64;

@@ -16,12 +16,10 @@ use mesa_stages::graph::{
 
 use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
 
-/// The layouts a scene's graph is read from, most refined first: the first one present is used.
-pub const LAYOUT_CANDIDATES: [&str; 3] = [
-    "qa/layout.json",
-    "refined/layout.json",
-    "coarse/layout.json",
-];
+/// The layouts the stages after `ingest` read, most refined first: the first one present is
+/// used. The coarse layout is not among them: a scene whose annotator has not returned it
+/// waits (see [`crate::stages::scene_docs::awaiting_annotation`]).
+pub const LAYOUT_CANDIDATES: [&str; 2] = ["qa/layout.json", "refined/layout.json"];
 
 /// The asset annotations, relative to the dataset folder.
 pub const ANNOTATIONS: &str = "assets/annotations.json";
@@ -71,7 +69,8 @@ fn present_layouts(scene: &Scene) -> Vec<&'static str> {
 
 fn no_layout(scene: &Scene) -> anyhow::Error {
     anyhow!(
-        "{}: no layout (expected {}; run `mesa place` first)",
+        "{}: no layout (expected {}; run `mesa place`, `mesa pack`, the annotation, then \
+         `mesa ingest` first)",
         scene.dir.display(),
         LAYOUT_CANDIDATES.join(", ")
     )
@@ -113,6 +112,10 @@ impl SceneStage for GraphStage {
 
     fn config_digest(&self, ctx: &StageContext<'_>) -> String {
         digest_of(&ctx.config.graph)
+    }
+
+    fn waiting(&self, _ctx: &StageContext<'_>, scene: &Scene) -> Option<String> {
+        crate::stages::scene_docs::awaiting_annotation(scene)
     }
 
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {

@@ -1,16 +1,14 @@
 //! `mesa place`: the runner adapter of [`mesa_stages::place`]: `coarse/lift.json`,
 //! `coarse/retrieval.json` and the asset index → `coarse/layout.json`.
 
-use std::collections::BTreeMap;
-use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
-use anyhow::{anyhow, bail};
 use mesa_schemas::artifacts::{AssetIndexArtifact, LiftArtifact, RetrievalArtifact};
 use mesa_stages::annotations::Annotations;
 use mesa_stages::place::place_scene;
 
 use super::assets::{ANNOTATIONS, INDEX};
+use super::dataset_cache::{read_annotations, DatasetCache};
 use super::retrieve::read_json;
 use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
 
@@ -23,7 +21,7 @@ struct Library {
 /// The `place` stage.
 #[derive(Default)]
 pub struct PlaceStage {
-    libraries: Mutex<BTreeMap<PathBuf, Result<Arc<Library>, String>>>,
+    libraries: DatasetCache<Library>,
 }
 
 impl PlaceStage {
@@ -33,27 +31,11 @@ impl PlaceStage {
     }
 
     fn library(&self, ctx: &StageContext<'_>) -> anyhow::Result<Arc<Library>> {
-        let mut cache = self
-            .libraries
-            .lock()
-            .map_err(|_| anyhow!("internal error: the library cache is poisoned"))?;
-        let entry = cache.entry(ctx.dataset.to_owned()).or_insert_with(|| {
-            let load = || -> anyhow::Result<Library> {
-                let index = read_json(&ctx.dataset.join(INDEX), "run `mesa assets` to write it")?;
-                let path = ctx.dataset.join(ANNOTATIONS);
-                let annotations = if path.exists() {
-                    Annotations::read(&path)?
-                } else {
-                    Annotations::default()
-                };
-                Ok(Library { index, annotations })
-            };
-            load().map(Arc::new).map_err(|e| format!("{e:#}"))
-        });
-        match entry {
-            Ok(library) => Ok(Arc::clone(library)),
-            Err(message) => bail!("{message}"),
-        }
+        self.libraries.get_or_load(ctx.dataset, || {
+            let index = read_json(&ctx.dataset.join(INDEX), "run `mesa assets` to write it")?;
+            let annotations = read_annotations(ctx.dataset)?;
+            Ok(Library { index, annotations })
+        })
     }
 }
 

@@ -39,9 +39,9 @@ use crate::config::{Config, ProgressMode};
 use crate::fsio::{sha256_hex, write_atomic, AtomicFile};
 use crate::progress::Progress;
 use crate::runner::{discover_scenes, Scene, RUN_DIR};
-use crate::stages::scene_docs::{chosen_layout, read_scene_docs, GRAPH_JSON, GRAPH_TXT};
 use crate::stages::assets::INDEX;
 use crate::stages::check::{read_dataset_layout, ShapeLibrary};
+use crate::stages::scene_docs::{chosen_layout, read_scene_docs, GRAPH_JSON, GRAPH_TXT};
 use crate::stages::tasks::TASKS_FILE;
 use mesa_stages::records::collide::Collider;
 
@@ -75,10 +75,14 @@ pub struct RecordsOptions {
 pub struct RecordsSummary {
     /// True when the records were up to date and nothing was written.
     pub up_to_date: bool,
+    /// True when every scene awaits its annotator: no records yet, nothing written.
+    pub nothing_ready: bool,
     /// Scenes whose records were written.
     pub scenes: usize,
     /// Scenes left out, with why.
     pub excluded: BTreeMap<String, String>,
+    /// Scenes left out because they await their annotator (not a failure).
+    pub waiting: BTreeMap<String, String>,
     /// Scenes per split.
     pub splits: BTreeMap<String, usize>,
     /// Records per file.
@@ -118,9 +122,18 @@ pub fn instruction(dataset: &Path, config: &RecordsConfig) -> Result<String, Str
 struct Planned {
     scene: Scene,
     inputs: Result<String, String>,
+    /// Why the scene has no records yet, when it awaits its annotator.
+    waiting: Option<String>,
 }
 
 fn plan_scene(scene: Scene) -> Planned {
+    if let Some(reason) = crate::stages::scene_docs::awaiting_annotation(&scene) {
+        return Planned {
+            scene,
+            inputs: Err(reason.clone()),
+            waiting: Some(reason),
+        };
+    }
     let inputs = (|| -> Result<String, String> {
         let tasks_path = scene.path(TASKS_FILE);
         if !tasks_path.is_file() {
@@ -155,7 +168,11 @@ fn plan_scene(scene: Scene) -> Planned {
         }
         Ok(sha256_hex(digests.join("\n").as_bytes()))
     })();
-    Planned { scene, inputs }
+    Planned {
+        scene,
+        inputs,
+        waiting: None,
+    }
 }
 
 /// One scene's records, serialised.
@@ -394,7 +411,11 @@ pub fn run_records(
             }
             Err(why) => {
                 inputs.update(format!("{key} excluded: {why}\n"));
-                summary.excluded.insert(key, why);
+                if plan.waiting.is_some() {
+                    summary.waiting.insert(key, why);
+                } else {
+                    summary.excluded.insert(key, why);
+                }
             }
         }
     }
@@ -421,6 +442,12 @@ pub fn run_records(
                 return Ok(summary);
             }
         }
+    }
+    if included.is_empty() && summary.excluded.is_empty() && !summary.waiting.is_empty() {
+        // Every scene awaits its annotator: nothing to build yet, and nothing wrong.
+        summary.nothing_ready = true;
+        summary.elapsed_s = started.elapsed().as_secs_f64();
+        return Ok(summary);
     }
     if included.is_empty() {
         bail!(
@@ -547,7 +574,12 @@ pub fn run_records(
         ratios: config.records.split.by_name(),
         scenes: assigned,
         counts,
-        excluded: summary.excluded.clone(),
+        excluded: summary
+            .excluded
+            .iter()
+            .chain(&summary.waiting)
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect(),
     };
     for (file, bytes) in [
         (DATASET_INFO_FILE, to_sorted_pretty(&dataset_info())?),
@@ -591,6 +623,15 @@ fn file_digest(path: &Path) -> anyhow::Result<String> {
 pub fn format_records_summary(summary: &RecordsSummary) -> String {
     use std::fmt::Write as _;
     let mut out = String::new();
+    if summary.nothing_ready {
+        let _ = writeln!(
+            out,
+            "records: not built: all {} scenes await annotation (`mesa status` lists the packs \
+             to send)",
+            summary.waiting.len()
+        );
+        return out;
+    }
     if summary.up_to_date {
         let _ = writeln!(
             out,
@@ -605,12 +646,14 @@ pub fn format_records_summary(summary: &RecordsSummary) -> String {
     let total: u64 = summary.records.values().sum();
     let _ = writeln!(
         out,
-        "records: {} scenes (train {}, dpo {}, test {}), {} excluded, in {:.2} s ({:.0} records/s)",
+        "records: {} scenes (train {}, dpo {}, test {}), {} excluded, {} awaiting annotation, in \
+         {:.2} s ({:.0} records/s)",
         summary.scenes,
         summary.splits.get("train").copied().unwrap_or(0),
         summary.splits.get("dpo").copied().unwrap_or(0),
         summary.splits.get("test").copied().unwrap_or(0),
         summary.excluded.len(),
+        summary.waiting.len(),
         summary.elapsed_s,
         total as f64 / summary.elapsed_s.max(1e-9)
     );

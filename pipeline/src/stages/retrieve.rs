@@ -1,13 +1,11 @@
 //! `mesa retrieve`: the runner adapter of [`mesa_stages::retrieve`]: `coarse/lift.json` and the
 //! asset index → `coarse/retrieval.json`.
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::path::Path;
+use std::sync::Arc;
 
 use anyhow::{anyhow, bail, Context as _};
 use mesa_schemas::artifacts::{AssetIndexArtifact, LiftArtifact, TextIndexArtifact};
-use mesa_stages::annotations::Annotations;
 use mesa_stages::retrieve::features::FeatureMatrix;
 use mesa_stages::retrieve::lexical::LexicalIndex;
 use mesa_stages::retrieve::{
@@ -16,6 +14,7 @@ use mesa_stages::retrieve::{
 use serde::de::DeserializeOwned;
 
 use super::assets::{ANNOTATIONS, INDEX, TEXT_INDEX};
+use super::dataset_cache::{read_annotations, DatasetCache};
 use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
 
 /// The asset embeddings of the `features` encoder, relative to the dataset.
@@ -41,7 +40,7 @@ struct Library {
 /// The `retrieve` stage.
 #[derive(Default)]
 pub struct RetrieveStage {
-    libraries: Mutex<BTreeMap<PathBuf, Result<Arc<Library>, String>>>,
+    libraries: DatasetCache<Library>,
 }
 
 impl RetrieveStage {
@@ -51,31 +50,15 @@ impl RetrieveStage {
     }
 
     fn library(&self, ctx: &StageContext<'_>) -> anyhow::Result<Arc<Library>> {
-        let mut cache = self
-            .libraries
-            .lock()
-            .map_err(|_| anyhow!("internal error: the library cache is poisoned"))?;
-        let entry = cache.entry(ctx.dataset.to_owned()).or_insert_with(|| {
-            load_library(ctx)
-                .map(Arc::new)
-                .map_err(|e| format!("{e:#}"))
-        });
-        match entry {
-            Ok(library) => Ok(Arc::clone(library)),
-            Err(message) => bail!("{message}"),
-        }
+        self.libraries
+            .get_or_load(ctx.dataset, || load_library(ctx))
     }
 }
 
 fn load_library(ctx: &StageContext<'_>) -> anyhow::Result<Library> {
     let index: AssetIndexArtifact =
         read_json(&ctx.dataset.join(INDEX), "run `mesa assets` to write it")?;
-    let annotations_path = ctx.dataset.join(ANNOTATIONS);
-    let annotations = if annotations_path.exists() {
-        Annotations::read(&annotations_path)?
-    } else {
-        Annotations::default()
-    };
+    let annotations = read_annotations(ctx.dataset)?;
     let scorer = match ctx.config.retrieve.encoder {
         Encoder::Lexical => {
             let text: TextIndexArtifact = read_json(

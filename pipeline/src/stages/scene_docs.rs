@@ -1,6 +1,7 @@
-//! What `tasks` and `records` read of a scene: its layout (the first of `qa/`, `refined/`,
-//! `coarse/` `layout.json`, the rule of `mesa graph`) in the LLM form, and its scene graph
-//! (`graph/graph.txt` and `graph/graph.json`), checked to belong together.
+//! What `tasks` and `records` read of a scene: its layout (the first of `qa/` and `refined/`
+//! `layout.json`, the rule of `mesa graph`) in the LLM form, and its scene graph
+//! (`graph/graph.txt` and `graph/graph.json`), checked to belong together; and whether a scene
+//! still awaits its annotator.
 
 use anyhow::{anyhow, bail, Context as _};
 use mesa_schemas::artifacts::GraphArtifact;
@@ -32,6 +33,30 @@ pub struct SceneDocs {
     pub graph: GraphArtifact,
     /// What the reader noticed (a tilted object, objects not in descending-footprint order).
     pub warnings: Vec<String>,
+}
+
+/// Why a scene cannot go past `ingest` yet: it has no refined (or settled) layout because its
+/// annotator has not returned the edited scene, or it was not ingested yet. `None` when it has
+/// one, or when it is not that far (no coarse layout: the stages before fail instead).
+pub fn awaiting_annotation(scene: &Scene) -> Option<String> {
+    if chosen_layout(scene).is_some() || !scene.path("coarse/layout.json").is_file() {
+        return None;
+    }
+    let id = &scene.scene_id;
+    let refined = format!("refined/{id}.glb");
+    let pack = format!("pack/{id}.glb");
+    Some(if scene.path(&refined).is_file() {
+        format!("{refined} is in but not ingested yet (run `mesa ingest`)")
+    } else if scene.path(&pack).is_file() {
+        format!(
+            "awaiting annotation: send {} (the pack/ folder) to an annotator; put the edited \
+             scene at {}",
+            scene.rel(&pack),
+            scene.rel(&refined)
+        )
+    } else {
+        "awaiting annotation: no pack yet (run `mesa pack`)".to_owned()
+    })
 }
 
 /// The layout file a scene's stages read: the first present of [`LAYOUT_CANDIDATES`].
@@ -77,7 +102,7 @@ fn lines_of(graph: &GraphArtifact) -> Vec<String> {
 pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
     let layout_rel = chosen_layout(scene).ok_or_else(|| {
         anyhow!(
-            "{}: no layout (expected {}; run `mesa place` first)",
+            "{}: no layout (expected {}; run `mesa ingest` first)",
             scene.dir.display(),
             LAYOUT_CANDIDATES.join(", ")
         )

@@ -250,7 +250,7 @@ impl SceneStage for TasksStage {
         let layouts = present_layouts(scene);
         if layouts.is_empty() {
             bail!(
-                "{}: no layout (run `mesa place` first, then `mesa graph`)",
+                "{}: no layout (run `mesa ingest` first, then `mesa graph`)",
                 scene.dir.display()
             );
         }
@@ -271,6 +271,10 @@ impl SceneStage for TasksStage {
             }
         }
         Ok(inputs)
+    }
+
+    fn waiting(&self, _ctx: &StageContext<'_>, scene: &Scene) -> Option<String> {
+        crate::stages::scene_docs::awaiting_annotation(scene)
     }
 
     fn config_digest(&self, ctx: &StageContext<'_>) -> String {

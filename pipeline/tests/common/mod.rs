@@ -413,7 +413,8 @@ pub fn completion_body(content: &str) -> Value {
 
 /// Writes a dataset whose scenes have only a layout: the seven published layouts, converted to
 /// the dataset form (sorted by footprint, as mesa writes layouts), each as
-/// `scenes/<table_type>/<table_type>_000<k>/coarse/layout.json`, spread over table types.
+/// `scenes/<table_type>/<table_type>_000<k>/refined/layout.json` (as annotated and
+/// ingested), spread over table types.
 pub fn gallery_dataset(dir: &Path) {
     use mesa_schemas::convert::dataset_from_llm;
     let table_types = [
@@ -436,7 +437,7 @@ pub fn gallery_dataset(dir: &Path) {
         }
         let table = table_types[k];
         let scene = dir.join(format!(
-            "scenes/{table}/{table}_{:04}/coarse/layout.json",
+            "scenes/{table}/{table}_{:04}/refined/layout.json",
             k + 1
         ));
         std::fs::create_dir_all(scene.parent().expect("parent")).expect("mkdir");

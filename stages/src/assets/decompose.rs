@@ -91,7 +91,10 @@ fn pieces(triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
             continue;
         }
         if let Some(backward) = uses.get(&(*v, *u)).filter(|b| b.len() == 1) {
-            let (a, b) = (find(&mut parent, forward[0]), find(&mut parent, backward[0]));
+            let (a, b) = (
+                find(&mut parent, forward[0]),
+                find(&mut parent, backward[0]),
+            );
             if a != b {
                 parent[a.max(b) as usize] = a.min(b);
             }
@@ -338,7 +341,10 @@ fn candidate(mesh: &Mesh, piece: &Piece) -> Option<Candidate> {
         // next box, not a part of its own.
         let flat = (0..3).any(|k| {
             let lo = points.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min);
-            let hi = points.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max);
+            let hi = points
+                .iter()
+                .map(|p| p[k])
+                .fold(f64::NEG_INFINITY, f64::max);
             hi - lo <= PLANAR_EPS_M
                 && ((lo - piece.cell.min[k]).abs() <= PLANAR_EPS_M
                     || (hi - piece.cell.max[k]).abs() <= PLANAR_EPS_M)
@@ -364,12 +370,7 @@ fn candidate(mesh: &Mesh, piece: &Piece) -> Option<Candidate> {
         .and_then(Result::ok)
         .filter(|(_, t)| !t.is_empty());
     let (hull_points, hull_triangles) = match hull {
-        Some((p, t)) => (
-            p.iter()
-                .map(from_f32)
-                .collect(),
-            t,
-        ),
+        Some((p, t)) => (p.iter().map(from_f32).collect(), t),
         None => {
             points.sort_by(lexical);
             points.dedup();
@@ -435,11 +436,16 @@ fn split_piece(
     high.cell.min[axis] = cut;
     let mut scratch = Vec::with_capacity(9);
     for polygon in &piece.polygons {
-        let lo = polygon.iter().map(|p| p[axis]).fold(f64::INFINITY, f64::min);
-        let hi = polygon.iter().map(|p| p[axis]).fold(f64::NEG_INFINITY, f64::max);
+        let lo = polygon
+            .iter()
+            .map(|p| p[axis])
+            .fold(f64::INFINITY, f64::min);
+        let hi = polygon
+            .iter()
+            .map(|p| p[axis])
+            .fold(f64::NEG_INFINITY, f64::max);
         if hi - lo <= PLANAR_EPS_M && (lo - cut).abs() <= PLANAR_EPS_M {
-            let below =
-                on_plane_below.unwrap_or_else(|| polygon_normal(polygon)[axis] >= 0.0);
+            let below = on_plane_below.unwrap_or_else(|| polygon_normal(polygon)[axis] >= 0.0);
             if below {
                 low.polygons.push(polygon.clone());
             } else {
@@ -559,7 +565,8 @@ pub fn decompose(
         }
     }
     let solid_triangles: usize = welded.solids.iter().map(Vec::len).sum();
-    let all_solid = solids.len() == welded.solids.len() && solid_triangles == welded.triangles.len();
+    let all_solid =
+        solids.len() == welded.solids.len() && solid_triangles == welded.triangles.len();
     let mesh = Mesh {
         welded,
         all_solid,
@@ -589,7 +596,11 @@ pub fn decompose(
             .welded
             .triangles
             .iter()
-            .map(|t| t.iter().map(|&i| mesh.welded.positions[i as usize]).collect())
+            .map(|t| {
+                t.iter()
+                    .map(|&i| mesh.welded.positions[i as usize])
+                    .collect()
+            })
             .collect(),
     };
     let mut pending: BinaryHeap<Pending> = BinaryHeap::new();
@@ -725,7 +736,8 @@ fn split(
     let mut best: Option<(f64, usize, f64)> = None;
     for axis in 0..3 {
         for cut in cut_positions(piece, axis, !mesh.all_solid, params.min_size_m.max(1e-6)) {
-            let (low, high) = split_piece(&piece.piece, axis, cut, on_plane(mesh, piece, axis, cut));
+            let (low, high) =
+                split_piece(&piece.piece, axis, cut, on_plane(mesh, piece, axis, cut));
             let (Some(cl), Some(ch)) = (candidate(mesh, &low), candidate(mesh, &high)) else {
                 continue;
             };
@@ -795,7 +807,8 @@ mod tests {
     fn an_open_surface_is_decomposed_as_a_surface() {
         // A box without its top: not closed, so not a solid; its parts follow its faces.
         let mut open = Synthetic::cuboid([0.1, 0.1, 0.1]);
-        open.triangles.retain(|t| t.iter().any(|&i| open.positions[i as usize][1] < 0.05));
+        open.triangles
+            .retain(|t| t.iter().any(|&i| open.positions[i as usize][1] < 0.05));
         let d = decompose(&open.positions, &open.triangles, &params()).expect("parts");
         assert!(!d.solid);
         assert!(d.parts.len() > 1);

@@ -53,16 +53,12 @@ impl Bounds {
 
     /// Whether the boxes, each grown by `margin` on every side, overlap.
     pub fn overlaps(&self, other: &Bounds, margin: f64) -> bool {
-        (0..3).all(|k| {
-            self.min[k] - margin <= other.max[k] && other.min[k] - margin <= self.max[k]
-        })
+        (0..3).all(|k| self.min[k] - margin <= other.max[k] && other.min[k] - margin <= self.max[k])
     }
 
     /// Whether the boxes' projections on the table plane overlap (grown by `margin`).
     pub fn overlaps_xy(&self, other: &Bounds, margin: f64) -> bool {
-        (0..2).all(|k| {
-            self.min[k] - margin <= other.max[k] && other.min[k] - margin <= self.max[k]
-        })
+        (0..2).all(|k| self.min[k] - margin <= other.max[k] && other.min[k] - margin <= self.max[k])
     }
 
     /// The distance between the boxes (0 when they overlap).
@@ -184,9 +180,7 @@ impl Hull {
         let local = self
             .points
             .iter()
-            .map(|p| {
-                f64::from(p.x) * dir[0] + f64::from(p.y) * dir[1] + f64::from(p.z) * dir[2]
-            })
+            .map(|p| f64::from(p.x) * dir[0] + f64::from(p.y) * dir[1] + f64::from(p.z) * dir[2])
             .fold(f64::NEG_INFINITY, f64::max);
         c + local / MM
     }
@@ -205,13 +199,25 @@ impl Hull {
 pub fn convex_hull(points: &[[f64; 3]]) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
     let scaled: Vec<Point<Real>> = points
         .iter()
-        .map(|p| Point::new((p[0] * MM) as Real, (p[1] * MM) as Real, (p[2] * MM) as Real))
+        .map(|p| {
+            Point::new(
+                (p[0] * MM) as Real,
+                (p[1] * MM) as Real,
+                (p[2] * MM) as Real,
+            )
+        })
         .collect();
     // parry3d's hull can panic on degenerate input.
     match std::panic::catch_unwind(|| parry3d::transformation::try_convex_hull(&scaled)) {
         Ok(Ok((hull, triangles))) if !triangles.is_empty() => (
             hull.iter()
-                .map(|p| [f64::from(p.x) / MM, f64::from(p.y) / MM, f64::from(p.z) / MM])
+                .map(|p| {
+                    [
+                        f64::from(p.x) / MM,
+                        f64::from(p.y) / MM,
+                        f64::from(p.z) / MM,
+                    ]
+                })
                 .collect(),
             triangles,
         ),
@@ -255,16 +261,17 @@ pub fn proximity(a: &Hull, b: &Hull) -> Proximity {
     let pos12 = a.offset_to(b);
     // A huge prediction makes GJK report the closest points of separated parts too, so that
     // `None` only means EPA failed on overlapping parts.
-    let found = contact_support_map_support_map(&pos12, &a.support(), &b.support(), 1e9).map(
-        |contact| Proximity {
-            signed_distance_m: f64::from(contact.dist) / MM,
-            normal: [
-                f64::from(contact.normal1.x),
-                f64::from(contact.normal1.y),
-                f64::from(contact.normal1.z),
-            ],
-        },
-    );
+    let found =
+        contact_support_map_support_map(&pos12, &a.support(), &b.support(), 1e9).map(|contact| {
+            Proximity {
+                signed_distance_m: f64::from(contact.dist) / MM,
+                normal: [
+                    f64::from(contact.normal1.x),
+                    f64::from(contact.normal1.y),
+                    f64::from(contact.normal1.z),
+                ],
+            }
+        });
     if let Some(p) = found {
         let along = overlap_along(a, b, p.normal);
         // f32 in millimetres: consistent to well under a micrometre.

@@ -436,7 +436,9 @@ pub fn fall_of<'a>(
         return (0.0, Support::Table);
     }
     for (j, other) in others.clone() {
-        if body.bounds.distance(&other.bounds) > touch_m || other.bounds.min[2] >= body.bounds.max[2] {
+        if body.bounds.distance(&other.bounds) > touch_m
+            || other.bounds.min[2] >= body.bounds.max[2]
+        {
             continue;
         }
         for hm in &body.hulls {

@@ -202,9 +202,7 @@ fn settle_layout(
     let edges = match holding_edges(layout, containers, graph_options) {
         Ok(edges) => Some(edges),
         Err(e) => {
-            warnings.push(format!(
-                "no scene graph ({e}): settling keeps no relation"
-            ));
+            warnings.push(format!("no scene graph ({e}): settling keeps no relation"));
             None
         }
     };
@@ -233,10 +231,7 @@ fn settle_layout(
             Displacement {
                 instance: o.instance.clone(),
                 offset_cm,
-                distance_cm: round_to(
-                    (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt() * 100.0,
-                    4,
-                ),
+                distance_cm: round_to((t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt() * 100.0, 4),
             }
         })
         .collect();
@@ -247,9 +242,8 @@ fn settle_layout(
     for (object, d) in moved.objects.iter_mut().zip(&displacements) {
         if d.distance_cm > 0.0 {
             let p = object.position_cm.0;
-            object.position_cm = PositionCm(std::array::from_fn(|k| {
-                round_to(p[k] + d.offset_cm[k], 4)
-            }));
+            object.position_cm =
+                PositionCm(std::array::from_fn(|k| round_to(p[k] + d.offset_cm[k], 4)));
             let mut provenance = object.provenance.clone().unwrap_or(Provenance {
                 stage: String::new(),
                 source_instance: None,
@@ -284,7 +278,8 @@ fn settle_layout(
         (Some(edges), Some(s)) => edges
             .iter()
             .filter(|(subject, _, object)| {
-                let (Some(&i), Some(&j)) = (index.get(subject.as_str()), index.get(object.as_str()))
+                let (Some(&i), Some(&j)) =
+                    (index.get(subject.as_str()), index.get(object.as_str()))
                 else {
                     return false;
                 };

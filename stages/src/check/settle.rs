@@ -274,8 +274,14 @@ pub fn settle(
             break;
         }
         order.sort_by(|a, b| {
-            let za = mover.scene.objects[*a].body.as_ref().map_or(0.0, |b| b.bounds.min[2]);
-            let zb = mover.scene.objects[*b].body.as_ref().map_or(0.0, |b| b.bounds.min[2]);
+            let za = mover.scene.objects[*a]
+                .body
+                .as_ref()
+                .map_or(0.0, |b| b.bounds.min[2]);
+            let zb = mover.scene.objects[*b]
+                .body
+                .as_ref()
+                .map_or(0.0, |b| b.bounds.min[2]);
             forest
                 .depth(*a)
                 .cmp(&forest.depth(*b))
@@ -409,11 +415,17 @@ fn footprint(mover: &Mover<'_>, i: usize) -> f64 {
 
 fn push_apart(mover: &mut Mover<'_>, findings: &Findings, tolerances: &Tolerances, clearance: f64) {
     let mut collisions = findings.collisions.clone();
-    collisions.sort_by(|x, y| y.depth_m.total_cmp(&x.depth_m).then((x.a, x.b).cmp(&(y.a, y.b))));
+    collisions.sort_by(|x, y| {
+        y.depth_m
+            .total_cmp(&x.depth_m)
+            .then((x.a, x.b).cmp(&(y.a, y.b)))
+    });
     for c in collisions {
         // Earlier pushes may have moved either: measure again.
-        let (Ok(a), Ok(b)) = (&mover.scene.objects[c.a].body, &mover.scene.objects[c.b].body)
-        else {
+        let (Ok(a), Ok(b)) = (
+            &mover.scene.objects[c.a].body,
+            &mover.scene.objects[c.b].body,
+        ) else {
             continue;
         };
         let Some(contact) = pair_contact(a, b, 0.0) else {
@@ -478,7 +490,10 @@ fn push_apart(mover: &mut Mover<'_>, findings: &Findings, tolerances: &Tolerance
             // Neither way along the normal helps (another pair of parts goes deeper): apart
             // along the line between the centres, which always ends it.
             let d = apart_xy(mover, c.a, c.b);
-            mover.shift(ra, [-d[0] * amount * share_a, -d[1] * amount * share_a, 0.0]);
+            mover.shift(
+                ra,
+                [-d[0] * amount * share_a, -d[1] * amount * share_a, 0.0],
+            );
             let share_b = 1.0 - share_a;
             mover.shift(rb, [d[0] * amount * share_b, d[1] * amount * share_b, 0.0]);
         }

@@ -55,7 +55,9 @@ impl AssetShape {
         let mut parts = Vec::with_capacity(shapes.parts.len());
         for (i, part) in shapes.parts.iter().enumerate() {
             if part.points_m.is_empty() {
-                return Err(format!("part {i} has no point (rerun `mesa assets --force`)"));
+                return Err(format!(
+                    "part {i} has no point (rerun `mesa assets --force`)"
+                ));
             }
             if part.points_m.iter().flatten().any(|v| !v.is_finite()) {
                 return Err(format!(

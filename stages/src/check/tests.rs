@@ -58,7 +58,10 @@ fn ball(r: f64) -> Arc<AssetShape> {
     let profile: Vec<[f64; 2]> = (0..=n)
         .map(|i| {
             let t = std::f64::consts::PI * i as f64 / n as f64;
-            [if i == 0 || i == n { 0.0 } else { r * t.sin() }, r - r * t.cos()]
+            [
+                if i == 0 || i == n { 0.0 } else { r * t.sin() },
+                r - r * t.cos(),
+            ]
         })
         .collect();
     shape("ball", &Mesh::lathe(&profile, 32))
@@ -204,7 +207,10 @@ fn a_turned_slim_object_beside_another_does_not_collide() {
         s.objects[0].body.as_ref().expect("body"),
         s.objects[1].body.as_ref().expect("body"),
     );
-    assert!(a.bounds.overlaps(&b.bounds, 0.0), "the boxes should overlap");
+    assert!(
+        a.bounds.overlaps(&b.bounds, 0.0),
+        "the boxes should overlap"
+    );
     assert!(f.collisions.is_empty(), "{:?}", f.collisions);
     // The same cube on the stick's diagonal does collide.
     let (_, f) = check(&[
@@ -260,7 +266,10 @@ fn zones_and_the_table_top_are_enforced() {
     assert_abs_diff_eq!(found[0].2, 0.03, epsilon = 1e-6);
     assert_eq!((found[1].0, found[1].1), (2, ViolationKind::BelowTable));
     assert_abs_diff_eq!(found[1].2, 0.01, epsilon = 1e-6);
-    assert_eq!((found[2].0, found[2].1), (3, ViolationKind::InRestrictedZone));
+    assert_eq!(
+        (found[2].0, found[2].1),
+        (3, ViolationKind::InRestrictedZone)
+    );
     assert_abs_diff_eq!(found[2].2, 0.02, epsilon = 1e-5);
 }
 

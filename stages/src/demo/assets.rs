@@ -269,7 +269,7 @@ fn write_glb(def: &AssetDef, uid: &str) -> Result<Vec<u8>, GlbWriteError> {
             base_color_texture: texture,
             metallic: m.metallic,
             roughness: m.roughness,
-            double_sided: false,
+            ..MaterialSpec::plain(m.name, [1.0; 3], 1.0)
         }));
     }
     // Children before parents: parts are listed parents first, so go backwards.

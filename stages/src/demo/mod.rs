@@ -13,6 +13,7 @@
 //! Everything is a function of the seed and the scene id: scenes are made in parallel, each
 //! from its own generator, and the output is byte-identical whatever the thread count.
 
+pub mod annotator;
 mod assets;
 mod npy;
 mod room;
@@ -256,7 +257,12 @@ pub fn write_demo(dir: &Path, options: &DemoOptions) -> Result<DemoSummary, Demo
     write_file(
         &dir.join("mesa.toml"),
         b"# mesa configuration of this dataset workspace (written by `mesa demo`).\n\
-          # Every key has a default; `mesa run --print-config` shows the resolved values.\n",
+          # Every key has a default; `mesa run --print-config` shows the resolved values.\n\
+          \n\
+          # The packs are edited by the demo's simulated annotator (from truth/), between\n\
+          # `mesa pack` and `mesa ingest`; a real dataset has a person do it (\"human\").\n\
+          [annotate]\n\
+          annotator = \"simulated\"\n",
     )?;
 
     let scene_assets: Vec<_> = library.assets.iter().filter(|a| a.def.in_scenes).collect();
@@ -422,6 +428,7 @@ fn draw_items<'a>(
                 material: &a.surface_materials[*material],
                 instance: i as u32 + 1,
                 casts_shadow: true,
+                vertex_colors: None,
             });
         }
     }
@@ -432,6 +439,7 @@ fn draw_items<'a>(
             material: &part.material,
             instance: if part.is_table { TABLE_ITEM } else { 0 },
             casts_shadow: part.is_table,
+            vertex_colors: None,
         });
     }
     items

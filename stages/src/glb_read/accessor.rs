@@ -88,7 +88,7 @@ fn component(bytes: &[u8], kind: ComponentType, normalized: bool) -> f64 {
 }
 
 /// The byte range `[start, start + len)` of a buffer view inside its buffer's data, checked.
-fn view_bytes<'b>(
+pub(crate) fn view_bytes<'b>(
     root: &Root,
     buffers: &'b Buffers<'_>,
     view_index: usize,

@@ -24,6 +24,9 @@ pub(crate) struct DracoPrimitive {
     pub positions: Vec<[f64; 3]>,
     /// Triangles as indices into `positions`.
     pub triangles: Vec<[u32; 3]>,
+    /// The other attributes asked for that the stream holds as floats, by glTF name
+    /// (`NORMAL`, `TEXCOORD_0`, ...): one element of `width` values per point, flattened.
+    pub extra: Vec<(String, Vec<f64>, usize)>,
 }
 
 fn draco_error(path: &str, problem: impl Into<String>) -> GlbError {
@@ -35,11 +38,24 @@ fn draco_error(path: &str, problem: impl Into<String>) -> GlbError {
 
 /// Decodes the Draco stream of a primitive whose `extensions.KHR_draco_mesh_compression` is
 /// `extension`.
+#[cfg(test)]
 pub(crate) fn decode_primitive(
     root: &gltf_json::Root,
     buffers: &Buffers<'_>,
     extension: &Value,
     path: &str,
+) -> Result<DracoPrimitive, GlbError> {
+    decode_primitive_with(root, buffers, extension, path, &[])
+}
+
+/// [`decode_primitive`], also returning the attributes named in `wanted` (glTF attribute
+/// names) that the stream holds as 32-bit floats; others are left out.
+pub(crate) fn decode_primitive_with(
+    root: &gltf_json::Root,
+    buffers: &Buffers<'_>,
+    extension: &Value,
+    path: &str,
+    wanted: &[&str],
 ) -> Result<DracoPrimitive, GlbError> {
     let view_index = extension
         .get("bufferView")
@@ -131,9 +147,52 @@ pub(crate) fn decode_primitive(
         }
         triangles.push(tri);
     }
+    let mut extra = Vec::new();
+    for name in wanted {
+        let Some(id) = extension
+            .get("attributes")
+            .and_then(|a| a.get(*name))
+            .and_then(Value::as_u64)
+        else {
+            continue;
+        };
+        let Some(attribute) = decoded
+            .get_attributes()
+            .iter()
+            .find(|a| a.get_id().as_usize() as u64 == id)
+        else {
+            continue;
+        };
+        if attribute.get_component_type() != ComponentDataType::F32 || attribute.len() != points {
+            continue;
+        }
+        let width = attribute.get_num_components();
+        let mut values = Vec::with_capacity(points * width);
+        for i in 0..points {
+            match width {
+                2 => {
+                    let v: NdVector<2, f32> = attribute.get(PointIdx::from(i));
+                    values.extend([f64::from(*v.get(0)), f64::from(*v.get(1))]);
+                }
+                3 => {
+                    let v: NdVector<3, f32> = attribute.get(PointIdx::from(i));
+                    values.extend((0..3).map(|k| f64::from(*v.get(k))));
+                }
+                4 => {
+                    let v: NdVector<4, f32> = attribute.get(PointIdx::from(i));
+                    values.extend((0..4).map(|k| f64::from(*v.get(k))));
+                }
+                _ => break,
+            }
+        }
+        if values.len() == points * width {
+            extra.push(((*name).to_owned(), values, width));
+        }
+    }
     Ok(DracoPrimitive {
         positions,
         triangles,
+        extra,
     })
 }
 

@@ -22,6 +22,9 @@
 mod accessor;
 mod container;
 mod draco;
+mod surface;
+
+pub use surface::{AlphaMode, GlbSurface, SurfaceImage, SurfaceMaterial, SurfacePrimitive};
 
 use std::borrow::Cow;
 use std::collections::{BTreeSet, HashMap};
@@ -255,8 +258,324 @@ fn required_extension_fix(extension: &str) -> Option<&'static str> {
     }
 }
 
+/// A GLB file opened and checked: its container split, its glTF JSON parsed and validated,
+/// its required extensions judged, its buffers resolved. The parts are read on demand.
+pub struct GlbDocument<'a> {
+    root: Root,
+    buffers: Buffers<'a>,
+    warnings: Vec<String>,
+}
+
+impl std::fmt::Debug for GlbDocument<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GlbDocument")
+            .field("nodes", &self.root.nodes.len())
+            .field("meshes", &self.root.meshes.len())
+            .finish()
+    }
+}
+
+/// Opens a GLB file: everything [`read_glb`] checks before it reads geometry.
+pub fn open_glb(bytes: &[u8]) -> Result<GlbDocument<'_>, GlbError> {
+    let mut warnings = Vec::new();
+    let chunks = container::split(bytes, &mut warnings)?;
+    let root = parse_root(chunks.json, &mut warnings)?;
+    validate(&root, &mut warnings)?;
+    for extension in &root.extensions_required {
+        if let Some(fix) = required_extension_fix(extension) {
+            return Err(GlbError::UnsupportedExtension {
+                extension: extension.clone(),
+                fix,
+            });
+        }
+    }
+    if root
+        .extensions_used
+        .iter()
+        .any(|e| e == "EXT_mesh_gpu_instancing")
+    {
+        warnings.push(
+            "EXT_mesh_gpu_instancing is used but not required: the instances it adds are \
+             ignored, the base meshes are read"
+                .to_owned(),
+        );
+    }
+    let buffers = resolve_buffers(&root, chunks.bin)?;
+    Ok(GlbDocument {
+        root,
+        buffers,
+        warnings,
+    })
+}
+
+/// One triangle primitive placed by a node of the scene, in the glTF scene frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlacedPrimitive {
+    /// The node placing it.
+    pub node: usize,
+    /// The mesh and the primitive within it.
+    pub mesh: usize,
+    /// Index of the primitive in the mesh.
+    pub primitive: usize,
+    /// Vertex positions in the scene frame, metres (morphed and skinned as a viewer shows
+    /// them).
+    pub positions_m: Vec<[f64; 3]>,
+    /// Triangles as indices into `positions_m`.
+    pub triangles: Vec<[u32; 3]>,
+    /// Unit normals in the scene frame, one per vertex, when attributes were asked for and
+    /// the primitive has them (never for skinned or morphed primitives, whose normals a
+    /// reader recomputes).
+    pub normals: Option<Vec<[f64; 3]>>,
+    /// `TEXCOORD_0`, one per vertex, when attributes were asked for and the primitive has it.
+    pub uvs: Option<Vec<[f64; 2]>>,
+    /// The primitive's material.
+    pub material: Option<usize>,
+    /// Whether the node's world transform mirrors (negative determinant): its triangles'
+    /// front faces are then the other side (glTF 2.0 §3.7.4), as `positions_m` are placed.
+    pub mirrored: bool,
+}
+
+/// One triangle primitive of a mesh, in the mesh's own frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocalPrimitive {
+    /// Vertex positions, metres.
+    pub positions: Vec<[f64; 3]>,
+    /// Triangles as indices into `positions`.
+    pub triangles: Vec<[u32; 3]>,
+    /// NORMAL, when attributes were asked for and present.
+    pub normals: Option<Vec<[f64; 3]>>,
+    /// TEXCOORD_0, when attributes were asked for and present.
+    pub uvs: Option<Vec<[f64; 2]>>,
+    /// The primitive's material.
+    pub material: Option<usize>,
+}
+
+/// Every triangle primitive of a GLB's scene, with what else the file holds.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PlacedScene {
+    /// The primitives, in node order (depth first from the scene's roots).
+    pub primitives: Vec<PlacedPrimitive>,
+    /// What else the file holds.
+    pub info: GlbInfo,
+    /// What does not stop the file from being used.
+    pub warnings: Vec<String>,
+}
+
+impl<'a> GlbDocument<'a> {
+    /// The glTF document.
+    pub fn root(&self) -> &Root {
+        &self.root
+    }
+
+    /// What opening the file noticed (validator warnings and infos).
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// Every node's world matrix (column vectors, glTF scene frame), `None` for nodes outside
+    /// the default scene. A node reached twice (a cycle, two parents) is an error.
+    pub fn world_matrices(&self) -> Result<Vec<Option<Matrix4<f64>>>, GlbError> {
+        let mut warnings = Vec::new();
+        Ok(scene_instances(&self.root, &mut warnings)?.world)
+    }
+
+    /// The triangle primitives of a mesh in its own frame (before any node transform, morph
+    /// or skin), Draco decoded; with `attributes`, also normals and texture coordinates.
+    pub fn mesh_primitives(
+        &self,
+        mesh: usize,
+        attributes: bool,
+    ) -> Result<Vec<LocalPrimitive>, GlbError> {
+        let primitives = &self
+            .root
+            .meshes
+            .get(mesh)
+            .ok_or_else(|| data_error(format!("meshes[{mesh}]"), "does not exist"))?
+            .primitives;
+        let reader = Reader {
+            root: &self.root,
+            buffers: &self.buffers,
+            world: &[],
+            surface: false,
+            attributes,
+        };
+        let mut info = GlbInfo::default();
+        let mut warnings = Vec::new();
+        let mut out = Vec::new();
+        for (p, primitive) in primitives.iter().enumerate() {
+            let mode = match primitive.mode {
+                Checked::Valid(mode) => mode,
+                Checked::Invalid => {
+                    return Err(data_error(
+                        format!("meshes[{mesh}].primitives[{p}]"),
+                        "invalid mode",
+                    ))
+                }
+            };
+            if !matches!(
+                mode,
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) {
+                continue;
+            }
+            let geometry = reader.primitive(mesh, p, mode, &mut info, &mut warnings)?;
+            out.push(LocalPrimitive {
+                positions: geometry.positions,
+                triangles: geometry.triangles,
+                normals: geometry.normals,
+                uvs: geometry.uvs,
+                material: primitive.material.map(|m| m.value()),
+            });
+        }
+        Ok(out)
+    }
+
+    /// The local vertex positions of every triangle primitive of a mesh (its own frame, before
+    /// any node transform, morph or skin), Draco decoded, concatenated.
+    pub fn mesh_positions(&self, mesh: usize) -> Result<Vec<[f64; 3]>, GlbError> {
+        Ok(self
+            .mesh_primitives(mesh, false)?
+            .into_iter()
+            .flat_map(|p| p.positions)
+            .collect())
+    }
+
+    /// The bytes and MIME type of image `index` (from its buffer view or data URI).
+    pub fn image(&self, index: usize) -> Result<(Cow<'_, [u8]>, Option<String>), GlbError> {
+        let path = format!("images[{index}]");
+        let image = self
+            .root
+            .images
+            .get(index)
+            .ok_or_else(|| data_error(&path, "does not exist"))?;
+        let mime = image.mime_type.as_ref().map(|m| m.0.clone());
+        if let Some(view) = image.buffer_view {
+            let (bytes, _) = accessor::view_bytes(&self.root, &self.buffers, view.value(), &path)?;
+            return Ok((Cow::Borrowed(bytes), mime));
+        }
+        match &image.uri {
+            Some(uri) if uri.starts_with("data:") => {
+                let bytes = data_uri(uri).ok_or_else(|| {
+                    data_error(&path, "INVALID_URI: the data URI cannot be decoded")
+                })?;
+                let mime = mime.or_else(|| {
+                    uri.strip_prefix("data:")
+                        .and_then(|r| r.split([';', ',']).next())
+                        .map(str::to_owned)
+                });
+                Ok((Cow::Owned(bytes), mime))
+            }
+            Some(uri) => Err(GlbError::ExternalUri {
+                what: path,
+                uri: uri.clone(),
+            }),
+            None => Err(data_error(&path, "has neither a bufferView nor a uri")),
+        }
+    }
+
+    /// Every triangle primitive the default scene places, transformed to the scene frame;
+    /// with `attributes`, also normals and texture coordinates. An error when the file has
+    /// no triangle.
+    pub fn placed_primitives(&self, attributes: bool) -> Result<PlacedScene, GlbError> {
+        let root = &self.root;
+        let mut warnings = self.warnings.clone();
+        let mut info = GlbInfo {
+            generator: root.asset.generator.clone(),
+            nodes: root.nodes.len(),
+            textures: root.textures.len(),
+            extensions_used: root.extensions_used.clone(),
+            extensions_required: root.extensions_required.clone(),
+            ..GlbInfo::default()
+        };
+        info.image_mime_types = images(root)?;
+        info.materials = root
+            .materials
+            .iter()
+            .enumerate()
+            .map(|(i, m)| MaterialInfo {
+                name: m.name.clone().unwrap_or_else(|| format!("material_{i}")),
+                textured: m.pbr_metallic_roughness.base_color_texture.is_some(),
+            })
+            .collect();
+        let scene = scene_instances(root, &mut warnings)?;
+        let instances = &scene.instances;
+        let mut unused_meshes: BTreeSet<usize> = (0..root.meshes.len()).collect();
+        let mut cache = HashMap::new();
+        let reader = Reader {
+            root,
+            buffers: &self.buffers,
+            world: &scene.world,
+            surface: false,
+            attributes,
+        };
+        let mut primitives = Vec::new();
+        for instance in instances {
+            unused_meshes.remove(&instance.mesh);
+            info.mesh_instances += 1;
+            reader.add_instance_placed(
+                instance,
+                &mut cache,
+                &mut primitives,
+                &mut info,
+                &mut warnings,
+            )?;
+        }
+        if primitives.iter().all(|p| p.triangles.is_empty()) {
+            let detail = if root.meshes.is_empty() {
+                "the file has no mesh".to_owned()
+            } else if instances.is_empty() {
+                format!(
+                    "no node of the scene places any of its {} meshes",
+                    root.meshes.len()
+                )
+            } else if info.skipped_primitives > 0 {
+                format!(
+                    "its {} primitives are points or lines, not triangles",
+                    info.skipped_primitives
+                )
+            } else {
+                "its primitives have no triangles".to_owned()
+            };
+            return Err(GlbError::NoMesh { detail });
+        }
+        if !unused_meshes.is_empty() {
+            warnings.push(format!(
+                "{} of {} meshes are not placed by any node of the scene and are ignored",
+                unused_meshes.len(),
+                root.meshes.len()
+            ));
+        }
+        if info.skipped_primitives > 0 {
+            warnings.push(format!(
+                "{} point or line primitives are ignored",
+                info.skipped_primitives
+            ));
+        }
+        Ok(PlacedScene {
+            primitives,
+            info,
+            warnings,
+        })
+    }
+}
+
 /// Reads a GLB file's triangles.
 pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
+    read_glb_impl(bytes, false).map(|(mesh, _)| mesh)
+}
+
+/// Reads a GLB file's triangles and what a renderer needs to draw them: per-vertex normals,
+/// texture coordinates and colours, the material of each primitive, and the embedded images
+/// (see [`GlbSurface`]). The triangles are exactly those of [`read_glb`].
+pub fn read_glb_surface(bytes: &[u8]) -> Result<(GlbMesh, GlbSurface), GlbError> {
+    let (mesh, surface) = read_glb_impl(bytes, true)?;
+    Ok((mesh, surface.unwrap_or_default()))
+}
+
+fn read_glb_impl(
+    bytes: &[u8],
+    want_surface: bool,
+) -> Result<(GlbMesh, Option<GlbSurface>), GlbError> {
     let mut warnings = Vec::new();
     let chunks = container::split(bytes, &mut warnings)?;
     let root = parse_root(chunks.json, &mut warnings)?;
@@ -303,6 +622,11 @@ pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
     let scene = scene_instances(&root, &mut warnings)?;
     let instances = &scene.instances;
     let mut mesh = GlbMesh::default();
+    let mut surface = if want_surface {
+        Some(surface::surface_materials(&root, &buffers, &mut warnings))
+    } else {
+        None
+    };
     let mut unused_meshes: BTreeSet<usize> = (0..root.meshes.len()).collect();
     let mut cache = HashMap::new();
     for instance in instances {
@@ -312,8 +636,17 @@ pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
             root: &root,
             buffers: &buffers,
             world: &scene.world,
+            surface: want_surface,
+            attributes: false,
         };
-        reader.add_instance(instance, &mut cache, &mut mesh, &mut info, &mut warnings)?;
+        reader.add_instance(
+            instance,
+            &mut cache,
+            &mut mesh,
+            surface.as_mut(),
+            &mut info,
+            &mut warnings,
+        )?;
     }
     if mesh.triangles.is_empty() {
         let detail = if root.meshes.is_empty() {
@@ -348,7 +681,7 @@ pub fn read_glb(bytes: &[u8]) -> Result<GlbMesh, GlbError> {
     }
     mesh.info = info;
     mesh.warnings = warnings;
-    Ok(mesh)
+    Ok((mesh, surface))
 }
 
 fn parse_root(json: &[u8], warnings: &mut Vec<String>) -> Result<Root, GlbError> {
@@ -396,7 +729,37 @@ fn parse_root(json: &[u8], warnings: &mut Vec<String>) -> Result<Root, GlbError>
     })
 }
 
+/// POSITION attributes that name no accessor: gltf-json's own validation indexes the accessor
+/// list with them without a check (and panics), so they are caught first.
+fn position_indices_out_of_range(root: &Root) -> Vec<String> {
+    let mut problems = Vec::new();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            if let Some(index) = primitive
+                .attributes
+                .get(&Checked::Valid(Semantic::Positions))
+            {
+                if index.value() >= root.accessors.len() {
+                    problems.push(format!(
+                        "meshes[{m}].primitives[{p}].attributes[\"POSITION\"]: Index out of \
+                         range (accessor {} of {})",
+                        index.value(),
+                        root.accessors.len()
+                    ));
+                }
+            }
+        }
+    }
+    problems
+}
+
 fn validate(root: &Root, warnings: &mut Vec<String>) -> Result<(), GlbError> {
+    let out_of_range = position_indices_out_of_range(root);
+    if !out_of_range.is_empty() {
+        return Err(GlbError::Invalid {
+            problems: out_of_range,
+        });
+    }
     let mut problems = Vec::new();
     let mut without_bounds = 0;
     root.validate(root, gltf_json::Path::new, &mut |path, error| {
@@ -632,12 +995,22 @@ fn scene_instances(root: &Root, warnings: &mut Vec<String>) -> Result<SceneNodes
 struct Primitive {
     positions: Vec<[f64; 3]>,
     triangles: Vec<[u32; 3]>,
+    /// Surface attributes, read only for [`read_glb_surface`].
+    attributes: surface::Attributes,
+    /// NORMAL, when the document API asks for attributes and the primitive has them.
+    normals: Option<Vec<[f64; 3]>>,
+    /// TEXCOORD_0, likewise.
+    uvs: Option<Vec<[f64; 2]>>,
 }
 
 struct Reader<'a, 'b> {
     root: &'a Root,
     buffers: &'a Buffers<'b>,
     world: &'a [Option<Matrix4<f64>>],
+    /// Whether to read the surface attributes too.
+    surface: bool,
+    /// Whether to read NORMAL and TEXCOORD_0 for the document API ([`GlbDocument`]).
+    attributes: bool,
 }
 
 fn data_error(path: impl Into<String>, problem: impl Into<String>) -> GlbError {
@@ -723,12 +1096,53 @@ impl Reader<'_, '_> {
             .accessors
             .get(position)
             .is_some_and(|a| a.buffer_view.is_some());
-        let (positions, triangles) = match draco {
+        let wanted = if self.surface {
+            surface::wanted_attributes(self.root, primitive)
+        } else {
+            Vec::new()
+        };
+        let mut attributes = surface::Attributes::default();
+        let (positions, triangles, normals, uvs) = match draco {
             // Uncompressed fallback data wins when a file carries both.
             Some(extension) if !has_fallback => {
                 info.draco = true;
-                let decoded = draco::decode_primitive(self.root, self.buffers, extension, &path)?;
-                (decoded.positions, decoded.triangles)
+                let mut names: Vec<&str> = wanted.iter().map(String::as_str).collect();
+                if self.attributes {
+                    for name in ["NORMAL", "TEXCOORD_0"] {
+                        if !names.contains(&name) {
+                            names.push(name);
+                        }
+                    }
+                }
+                let decoded = draco::decode_primitive_with(
+                    self.root,
+                    self.buffers,
+                    extension,
+                    &path,
+                    &names,
+                )?;
+                let points = decoded.positions.len();
+                let (mut normals, mut uvs) = (None, None);
+                if self.attributes {
+                    for (name, values, width) in &decoded.extra {
+                        match (name.as_str(), width) {
+                            ("NORMAL", 3) => {
+                                normals = Some(
+                                    values.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+                                )
+                            }
+                            ("TEXCOORD_0", 2) => {
+                                uvs = Some(values.chunks_exact(2).map(|c| [c[0], c[1]]).collect())
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+                if self.surface {
+                    attributes =
+                        surface::Attributes::from_named(decoded.extra, points, &path, warnings);
+                }
+                (decoded.positions, decoded.triangles, normals, uvs)
             }
             _ => {
                 let (values, width) = read_accessor(
@@ -761,7 +1175,21 @@ impl Reader<'_, '_> {
                     ));
                 }
                 let triangles = triangles_of(&indices, mode, &path, warnings);
-                (positions, triangles)
+                if !wanted.is_empty() {
+                    attributes = self.surface_attributes(
+                        primitive,
+                        &wanted,
+                        positions.len(),
+                        &path,
+                        warnings,
+                    );
+                }
+                let (normals, uvs) = if self.attributes {
+                    self.plain_attributes(primitive, &path, positions.len())?
+                } else {
+                    (None, None)
+                };
+                (positions, triangles, normals, uvs)
             }
         };
         if positions.iter().flatten().any(|v| !v.is_finite()) {
@@ -773,7 +1201,55 @@ impl Reader<'_, '_> {
         Ok(Primitive {
             positions,
             triangles,
+            attributes,
+            normals,
+            uvs,
         })
+    }
+
+    /// NORMAL and TEXCOORD_0 of an uncompressed primitive, each when present and well formed
+    /// (one element per vertex); a malformed one is an error.
+    #[allow(clippy::type_complexity)]
+    fn plain_attributes(
+        &self,
+        primitive: &gltf_json::mesh::Primitive,
+        path: &str,
+        vertices: usize,
+    ) -> Result<(Option<Vec<[f64; 3]>>, Option<Vec<[f64; 2]>>), GlbError> {
+        let normals = match self.attribute(primitive, Semantic::Normals) {
+            Some(accessor) => {
+                let here = format!("{path}.attributes.NORMAL");
+                let (values, width) = read_accessor(self.root, self.buffers, accessor, &here)?;
+                let normals = vec3s(values, width, &here)?;
+                if normals.len() != vertices {
+                    return Err(data_error(
+                        here,
+                        format!("has {} elements for {vertices} vertices", normals.len()),
+                    ));
+                }
+                Some(normals)
+            }
+            None => None,
+        };
+        let uvs = match self.attribute(primitive, Semantic::TexCoords(0)) {
+            Some(accessor) => {
+                let here = format!("{path}.attributes.TEXCOORD_0");
+                let (values, width) = read_accessor(self.root, self.buffers, accessor, &here)?;
+                if width != 2 || values.len() != 2 * vertices {
+                    return Err(data_error(
+                        here,
+                        format!(
+                            "has {} values of width {width} for {vertices} vertices (expected \
+                             VEC2, one per vertex)",
+                            values.len()
+                        ),
+                    ));
+                }
+                Some(values.chunks_exact(2).map(|c| [c[0], c[1]]).collect())
+            }
+            None => None,
+        };
+        Ok((normals, uvs))
     }
 
     /// Adds the morph target displacements at `weights` to `positions`.
@@ -922,6 +1398,7 @@ impl Reader<'_, '_> {
         instance: &Instance,
         cache: &mut HashMap<(usize, usize), Rc<Primitive>>,
         out: &mut GlbMesh,
+        mut surface: Option<&mut GlbSurface>,
         info: &mut GlbInfo,
         warnings: &mut Vec<String>,
     ) -> Result<(), GlbError> {
@@ -970,6 +1447,21 @@ impl Reader<'_, '_> {
                 Some(joints) => self.skin(primitive, &path, joints, &positions)?,
                 None => None,
             };
+            if let Some(surface) = surface.as_deref_mut() {
+                // Normals follow the node's transform; a morphed or skinned primitive's
+                // normals would need the same deformation, so they are recomputed instead.
+                let deformed =
+                    skinned.is_some() || primitive.targets.as_ref().is_some_and(|t| !t.is_empty());
+                surface.push_primitive(
+                    &geometry.attributes,
+                    (!deformed).then_some(&instance.world),
+                    primitive.material.map(|m| m.value()),
+                    u32::try_from(out.positions_m.len()).unwrap_or(u32::MAX),
+                    positions.len(),
+                    u32::try_from(out.triangles.len()).unwrap_or(u32::MAX),
+                    geometry.triangles.len(),
+                );
+            }
             let placed: Vec<[f64; 3]> = match skinned {
                 Some(skinned) => skinned,
                 None => positions
@@ -988,6 +1480,106 @@ impl Reader<'_, '_> {
                     .iter()
                     .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
             );
+            info.primitives += 1;
+        }
+        Ok(())
+    }
+
+    /// Like `add_instance`, for the document API: each primitive placed on its own, with its
+    /// material and, when asked, its normals and texture coordinates.
+    fn add_instance_placed(
+        &self,
+        instance: &Instance,
+        cache: &mut HashMap<(usize, usize), Rc<Primitive>>,
+        out: &mut Vec<PlacedPrimitive>,
+        info: &mut GlbInfo,
+        warnings: &mut Vec<String>,
+    ) -> Result<(), GlbError> {
+        let mesh = &self.root.meshes[instance.mesh];
+        let node = &self.root.nodes[instance.node];
+        let weights: Vec<f64> = node
+            .weights
+            .as_ref()
+            .or(mesh.weights.as_ref())
+            .map(|w| w.iter().map(|v| f64::from(*v)).collect())
+            .unwrap_or_default();
+        let joints = match node.skin {
+            Some(skin) => {
+                info.skinned = true;
+                Some(self.joint_matrices(skin.value())?)
+            }
+            None => None,
+        };
+        // Normals turn with the inverse transpose of the world matrix's linear part.
+        let linear = instance.world.fixed_view::<3, 3>(0, 0).into_owned();
+        let normal_matrix = linear.try_inverse().map(|m| m.transpose());
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            let path = format!("meshes[{}].primitives[{p}]", instance.mesh);
+            let mode = match primitive.mode {
+                Checked::Valid(mode) => mode,
+                Checked::Invalid => return Err(data_error(path, "invalid mode")),
+            };
+            if !matches!(
+                mode,
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) {
+                info.skipped_primitives += 1;
+                continue;
+            }
+            let geometry = match cache.get(&(instance.mesh, p)) {
+                Some(g) => Rc::clone(g),
+                None => {
+                    let g = Rc::new(self.primitive(instance.mesh, p, mode, info, warnings)?);
+                    cache.insert((instance.mesh, p), Rc::clone(&g));
+                    g
+                }
+            };
+            let mut positions = geometry.positions.clone();
+            let morphed = primitive.targets.as_ref().is_some_and(|t| !t.is_empty());
+            if morphed {
+                info.morph_targets = true;
+                self.morph(primitive, &path, &weights, &mut positions)?;
+            }
+            let skinned = match &joints {
+                Some(joints) => self.skin(primitive, &path, joints, &positions)?,
+                None => None,
+            };
+            let deformed = morphed || skinned.is_some();
+            let placed: Vec<[f64; 3]> = match skinned {
+                Some(skinned) => skinned,
+                None => positions
+                    .iter()
+                    .map(|v| transform(&instance.world, v))
+                    .collect(),
+            };
+            let normals = match (&geometry.normals, &normal_matrix) {
+                (Some(normals), Some(m)) if !deformed => Some(
+                    normals
+                        .iter()
+                        .map(|n| {
+                            let v = m * Vector3::new(n[0], n[1], n[2]);
+                            let len = v.norm();
+                            if len > 0.0 && len.is_finite() {
+                                [v[0] / len, v[1] / len, v[2] / len]
+                            } else {
+                                [0.0, 1.0, 0.0]
+                            }
+                        })
+                        .collect(),
+                ),
+                _ => None,
+            };
+            out.push(PlacedPrimitive {
+                node: instance.node,
+                mesh: instance.mesh,
+                primitive: p,
+                positions_m: placed,
+                triangles: geometry.triangles.clone(),
+                normals,
+                uvs: geometry.uvs.clone(),
+                material: primitive.material.map(|m| m.value()),
+                mirrored: !deformed && linear.determinant() < 0.0,
+            });
             info.primitives += 1;
         }
         Ok(())

@@ -710,3 +710,16 @@ fn the_rich_fixture_reads() {
         mesh.warnings
     );
 }
+
+/// Found by fuzzing (`fuzz/`): gltf-json's validation indexed the accessor list with a
+/// POSITION index without checking it, and panicked.
+#[test]
+fn a_position_naming_no_accessor_is_an_error_not_a_panic() {
+    let mut doc = one_mesh(json!({"attributes": {"POSITION": 3}}), json!({"mesh": 0}));
+    doc["asset"] = json!({"version": "2.0"});
+    let e = error_of(&glb(&doc, &[]));
+    assert_eq!(e.code(), "invalid_gltf", "{e}");
+    assert!(e.to_string().contains("POSITION"), "{e}");
+    let e = open_glb(&glb(&doc, &[])).map(|_| ()).expect_err("invalid");
+    assert_eq!(e.code(), "invalid_gltf");
+}

@@ -6,11 +6,30 @@
 //!    background when no instance is marked `"support": true`; refine it by least squares on
 //!    the inliers; orient its normal toward the camera.
 //! 3. Build the table frame: z = the normal, x = the camera's x axis projected on the plane,
-//!    y = z × x; the origin and the placement zone come from robust percentiles of the table
-//!    points in the plane.
+//!    y = z × x; the origin and the placement zone come from the table's edges (below).
 //! 4. Per instance: erode the mask (drops the flying pixels at depth edges), back-project,
-//!    remove outliers, transform to the table frame, take the axis-aligned box with its bottom
-//!    clamped to the table (z ≥ 0).
+//!    remove outliers, transform to the table frame, take the axis-aligned box (below) with its
+//!    bottom clamped to the table (z ≥ 0).
+//!
+//! ## The zone
+//! Each table pixel stands for a patch of the top whose area grows with the cube of its depth,
+//! so the points, weighted by depth³, are a uniform sample of the visible top. Along x and
+//! along y the weighted distribution is flat near each edge of the rectangle; at each side the
+//! weighted quantiles at `zone_percentile` % and three times that give the local density, and
+//! the edge is where that density, carried outward, leaves the first share behind. Sensor noise
+//! blurs an edge symmetrically without moving it, and objects hiding part of the top further
+//! in do not matter. (Plain percentiles put the edges a share of the width inside; a depth
+//! estimator's global scale error, which no single depth map reveals, scales the zone and every
+//! box with it.)
+//!
+//! ## The box
+//! The extremes of the kept points along each table axis, with three corrections, each a key of
+//! `[lift]`: `restore_px` pixels of width are given back at the left and right (the image's x
+//! is the table's x, a pixel there is depth / fx wide) and at the far side (the far edge of a
+//! top face, foreshortened by the view's elevation), since erosion took `erode_px` off the
+//! silhouette and segmenters' masks spill about one pixel past the object; the top is the
+//! `top_trim` quantile of the heights (the noise of a flat top face spreads it by a few
+//! millimetres); a bottom within `bottom_snap_m` of the table is set on it.
 //!
 //! ## Outlier rule
 //! Statistical outlier removal as Open3D's `remove_statistical_outlier` does it — a point is an
@@ -59,6 +78,16 @@ pub struct LiftConfig {
     pub default_fov_x_deg: f64,
     /// Radius in pixels of the square mask erosion that drops flying pixels at depth edges.
     pub erode_px: u32,
+    /// Pixels of width given back to each box at its left and right after the erosion: the
+    /// erosion takes `erode_px` off the silhouette, but masks from segmenters spill about one
+    /// pixel past the object, so the default gives back one less (see docs/stages.md, lift).
+    pub restore_px: f64,
+    /// Share of an instance's points left out at the top (the noise of a flat top face; see
+    /// the module docs, "The box").
+    pub top_trim: f64,
+    /// A box whose bottom is at most this many metres above the table rests on it: its bottom
+    /// is set to the table (the erosion and the sensor noise lift it a little).
+    pub bottom_snap_m: f64,
     /// Radius in pixels of the neighbourhood of the outlier rule.
     pub outlier_window_px: u32,
     /// Neighbouring pixels belong to one surface when their depths differ by at most this many
@@ -84,7 +113,8 @@ pub struct LiftConfig {
     /// The table is the plane with at least this fraction of the objects' points on its camera
     /// side (objects stand on it); other planes (a cabinet front) are set aside.
     pub plane_min_objects_above: f64,
-    /// Percentile (0-50) of the table points that bounds the placement zone on each side.
+    /// Percent (0-16) of the table's visible area, at each side, over which the local density
+    /// is measured to place the zone's edge (see the module docs, "The zone").
     pub zone_percentile: f64,
     /// Fewest points an instance may keep after filtering.
     pub min_points: u32,
@@ -96,6 +126,9 @@ impl Default for LiftConfig {
             depth_png_scale_m: 0.001,
             default_fov_x_deg: 60.0,
             erode_px: 2,
+            restore_px: 1.0,
+            top_trim: 0.005,
+            bottom_snap_m: 0.01,
             outlier_window_px: 2,
             component_jump_m: 0.01,
             component_jump_relative: 0.02,
@@ -107,7 +140,7 @@ impl Default for LiftConfig {
             plane_min_inlier_fraction: 0.3,
             plane_min_points: 500,
             plane_min_objects_above: 0.8,
-            zone_percentile: 0.5,
+            zone_percentile: 1.0,
             min_points: 10,
         }
     }
@@ -297,22 +330,53 @@ pub fn lift_scene(
                 "check its mask and depth, or lower [lift] min_points",
             ));
         }
-        let mut min = [f64::INFINITY; 3];
-        let mut max = [f64::NEG_INFINITY; 3];
+        let mut table_points = Vec::with_capacity(points.len());
         let mut ply_points = Vec::with_capacity(points.len());
         for &(pixel, point) in &points {
             let t = frame.to_table(point);
-            for axis in 0..3 {
-                min[axis] = min[axis].min(t[axis]);
-                max[axis] = max[axis].max(t[axis]);
-            }
+            table_points.push((t, point));
             let rgb = photo
                 .as_ref()
                 .map_or([128, 128, 128], |p| p[pixel as usize]);
             ply_points.push(([t[0] as f32, t[1] as f32, t[2] as f32], rgb));
         }
+        // Each side of the box at the extreme of its axis (the top at a quantile), with the
+        // camera-frame point there.
+        let top_trim = ((table_points.len() as f64 * config.top_trim).floor() as usize)
+            .min((table_points.len() - 1) / 2);
+        let mut min = [0.0; 3];
+        let mut max = [0.0; 3];
+        let mut edges = [Vector3::zeros(); 3];
+        for axis in 0..3 {
+            table_points.sort_unstable_by(|a, b| a.0[axis].total_cmp(&b.0[axis]));
+            let top = if axis == 2 { top_trim } else { 0 };
+            let (lo, hi) = (
+                &table_points[0],
+                &table_points[table_points.len() - 1 - top],
+            );
+            min[axis] = lo.0[axis];
+            max[axis] = hi.0[axis];
+            match axis {
+                0 => edges[..2].copy_from_slice(&[lo.1, hi.1]),
+                1 => edges[2] = hi.1,
+                _ => {}
+            }
+        }
+        if eroded_px < valid.len() {
+            // The image's x is the table's x: a pixel there is depth / fx wide.
+            min[0] -= config.restore_px * edges[0].z / k.fx;
+            max[0] += config.restore_px * edges[1].z / k.fx;
+            // The far side is the far edge of a top face, foreshortened by the elevation of
+            // the view there.
+            let far = edges[2];
+            let elevation = (plane.normal.dot(&far).abs() / far.norm()).max(0.2);
+            max[1] += config.restore_px * far.z / k.fy / elevation;
+        }
         // Objects rest on the table or above it.
         min[2] = min[2].max(0.0);
+        if min[2] <= config.bottom_snap_m {
+            min[2] = 0.0;
+        }
         max[2] = max[2].max(min[2] + 1e-3);
         let center_cm = PositionCm(std::array::from_fn(|a| (min[a] + max[a]) * 50.0));
         let size_cm = SizeCm(std::array::from_fn(|a| {
@@ -831,17 +895,22 @@ impl TableFrame {
         let x = x.normalize();
         let y = z.cross(&x);
         let threshold = config.plane_threshold_m * 2.0;
+        // Each pixel stands for a patch of the table whose area grows with the cube of its
+        // depth (z² for the distance, z / |n·p| for the slant, and |n·p| is the same for every
+        // point of the plane): weighting by it makes the points a uniform sample of the visible
+        // top, whose marginals along x and y are flat near the edges of a rectangle.
         let mut us = Vec::new();
         let mut vs = Vec::new();
         for p in points {
             if (z.dot(p) + plane.offset_m).abs() < threshold {
-                us.push(x.dot(p));
-                vs.push(y.dot(p));
+                let weight = p.z.abs().powi(3);
+                us.push((x.dot(p), weight));
+                vs.push((y.dot(p), weight));
             }
         }
-        let q = config.zone_percentile.clamp(0.0, 49.0) / 100.0;
-        let (u0, u1) = (percentile(&mut us, q), percentile(&mut us, 1.0 - q));
-        let (v0, v1) = (percentile(&mut vs, q), percentile(&mut vs, 1.0 - q));
+        let q = config.zone_percentile.clamp(0.0, 16.0) / 100.0;
+        let (u0, u1) = sharp_extent(&mut us, q);
+        let (v0, v1) = sharp_extent(&mut vs, q);
         let origin = x * u0 + y * v0 - z * plane.offset_m;
         Ok(Self {
             rotation: Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]),
@@ -868,13 +937,33 @@ impl TableFrame {
     }
 }
 
-fn percentile(values: &mut [f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return 0.0;
+/// The extent of a distribution that is flat near its two sharp edges, from weighted
+/// samples: at each side, the weighted quantiles at `q` and `3q` give the local density, and
+/// the edge is where that density, carried outward, leaves the `q` share behind. Symmetric
+/// noise blurs an edge without moving it, and what happens further in (objects hiding part of
+/// the table) does not matter.
+fn sharp_extent(samples: &mut [(f64, f64)], q: f64) -> (f64, f64) {
+    if samples.is_empty() {
+        return (0.0, 0.0);
     }
-    let i = ((values.len() - 1) as f64 * q).round() as usize;
-    let (_, v, _) = values.select_nth_unstable_by(i, f64::total_cmp);
-    *v
+    samples.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = samples.iter().map(|s| s.1).sum();
+    let quantile = |target: f64| {
+        let mut acc = 0.0;
+        for &(value, weight) in samples.iter() {
+            acc += weight;
+            if acc >= target {
+                return value;
+            }
+        }
+        samples[samples.len() - 1].0
+    };
+    let (lo_a, lo_b) = (quantile(q * total), quantile(3.0 * q * total));
+    let (hi_a, hi_b) = (
+        quantile((1.0 - q) * total),
+        quantile((1.0 - 3.0 * q) * total),
+    );
+    (lo_a - (lo_b - lo_a) / 2.0, hi_a + (hi_a - hi_b) / 2.0)
 }
 
 #[cfg(test)]

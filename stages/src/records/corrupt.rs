@@ -269,8 +269,11 @@ fn collision(
         return Err("a collision needs two objects".to_owned());
     }
     let tolerance_cm = cfg.tolerance_mm / 10.0;
-    let before: BTreeSet<(String, String)> =
-        input.collider.colliding_names(layout, tolerance_cm).into_iter().collect();
+    let before: BTreeSet<(String, String)> = input
+        .collider
+        .colliding_names(layout, tolerance_cm)
+        .into_iter()
+        .collect();
     let [x_min, x_max, y_min, y_max] = layout.zone_cm.0;
     let (width, depth) = (x_max - x_min, y_max - y_min);
     let most = ((n as f64 * cfg.subset_fraction).ceil() as usize).clamp(1, n);

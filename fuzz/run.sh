@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Runs the fuzz targets for SECONDS each (default 600), with seed corpora made on the spot:
+#   glb_reader: the GLBs of ../shared/realdata/glb (every exporter and defect there), the demo's
+#               asset library, a demo pack and a simulated annotator's edit of it;
+#   ingest:     a demo pack and its edit, against that pack (MESA_FUZZ_SCENE).
+# Needs cargo-fuzz (`cargo install cargo-fuzz`) and a nightly toolchain; the corpora grow
+# under fuzz/corpus/ (ignored by git), crashes land in fuzz/artifacts/. The fuzz build goes to
+# $FUZZ_TARGET_DIR (default: $CARGO_TARGET_DIR/fuzz, else fuzz/target). Built with cargo-fuzz's
+# defaults: optimised, debug assertions and overflow checks on, AddressSanitizer.
+#
+#   fuzz/run.sh [SECONDS] [TARGET...]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+seconds="${1:-600}"
+shift || true
+targets=("$@")
+[ ${#targets[@]} -gt 0 ] || targets=(glb_reader ingest)
+mesa="${MESA:-${CARGO_TARGET_DIR:-target}/release/mesa}"
+fuzz_target_dir="${FUZZ_TARGET_DIR:-${CARGO_TARGET_DIR:-$(pwd)/fuzz/target}/fuzz}"
+[ -x "$mesa" ] || cargo build --release
+work="fuzz/work"
+rm -rf "$work"
+"$mesa" demo "$work/demo" --scenes 1 --seed 7 -q
+"$mesa" run "$work/demo" --progress off -q || true
+scene="$work/demo/scenes/office_table/office_table_0001"
+for target in glb_reader ingest; do
+  mkdir -p "fuzz/corpus/$target"
+  cp "$scene/pack/office_table_0001.glb" "fuzz/corpus/$target/pack.glb"
+  cp "$scene/refined/office_table_0001.glb" "fuzz/corpus/$target/refined.glb"
+done
+cp "$work"/demo/assets/library/*.glb fuzz/corpus/glb_reader/
+# The real files are read as a second, read-only corpus (never copied into the repository).
+shared="$(cd "${MESA_SHARED:-../shared}" 2>/dev/null && pwd)/realdata/glb"
+export MESA_FUZZ_SCENE="$(pwd)/$scene"
+for target in "${targets[@]}"; do
+  echo "fuzzing $target for $seconds s"
+  extra=()
+  [ "$target" = glb_reader ] && [ -d "$shared" ] && extra=("$shared")
+  (cd fuzz && cargo +nightly fuzz run --target-dir "$fuzz_target_dir" "$target" "corpus/$target" "${extra[@]}" -- \
+     -max_total_time="$seconds" -rss_limit_mb=4096 -max_len=262144 -print_final_stats=1)
+done

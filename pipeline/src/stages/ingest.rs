@@ -1,0 +1,122 @@
+//! `mesa ingest`: the runner adapter of [`mesa_stages::ingest`]: the annotator's
+//! `refined/<scene_id>.glb`, the pack it was made from and the pack's layout →
+//! `refined/layout.json` and `refined/diff.json`. A scene whose edited GLB has not arrived
+//! waits (it is reported, not failed).
+
+use anyhow::{anyhow, bail, Context as _};
+use mesa_schemas::annotation::PackIndexArtifact;
+use mesa_schemas::layout::DatasetLayout;
+use mesa_stages::ingest::{ingest_scene, IngestRequest};
+
+use super::pack::{pack_glb, refined_glb, PACK_INDEX};
+use super::retrieve::read_json;
+use crate::fsio::sha256_hex;
+use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
+
+/// The refined layout, relative to the scene folder.
+pub const REFINED_LAYOUT: &str = "refined/layout.json";
+/// The diff, relative to the scene folder.
+pub const REFINED_DIFF: &str = "refined/diff.json";
+
+/// The `ingest` stage.
+#[derive(Default)]
+pub struct IngestStage;
+
+impl IngestStage {
+    /// The stage.
+    pub fn new() -> Self {
+        Self
+    }
+}
+
+fn index_of(scene: &Scene) -> anyhow::Result<PackIndexArtifact> {
+    read_json(&scene.path(PACK_INDEX), "run `mesa pack` to write it")
+}
+
+impl SceneStage for IngestStage {
+    fn name(&self) -> &'static str {
+        "ingest"
+    }
+
+    fn waiting(&self, _ctx: &StageContext<'_>, scene: &Scene) -> Option<String> {
+        let refined = refined_glb(scene);
+        if scene.path(&refined).is_file() {
+            return None;
+        }
+        let pack = pack_glb(scene);
+        Some(if scene.path(&pack).is_file() {
+            format!(
+                "awaiting annotation: send {} (the pack/ folder) to an annotator; put the edited \
+                 scene at {}",
+                scene.rel(&pack),
+                scene.rel(&refined)
+            )
+        } else {
+            format!(
+                "awaiting annotation: no pack yet (run `mesa pack`), then the annotator's {}",
+                scene.rel(&refined)
+            )
+        })
+    }
+
+    fn inputs(&self, _ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
+        let mut inputs = vec![
+            scene.rel(&refined_glb(scene)),
+            scene.rel(&pack_glb(scene)),
+            scene.rel(PACK_INDEX),
+        ];
+        // The baseline the pack was made from (a missing index is reported by the runner).
+        if let Ok(index) = index_of(scene) {
+            inputs.push(scene.rel(&index.layout));
+        }
+        Ok(inputs)
+    }
+
+    fn config_digest(&self, ctx: &StageContext<'_>) -> String {
+        digest_of(&ctx.config.ingest)
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
+        let index = index_of(scene)?;
+        let baseline_path = scene.path(&index.layout);
+        let baseline_bytes = std::fs::read(&baseline_path)
+            .with_context(|| format!("{}: cannot read", baseline_path.display()))?;
+        if sha256_hex(&baseline_bytes) != index.layout_sha256 {
+            bail!(
+                "{}: changed since the pack was made ({} holds the digest of the layout the \
+                 annotator worked from): restore that layout, or re-run `mesa pack` and have \
+                 the new pack annotated",
+                baseline_path.display(),
+                scene.path(PACK_INDEX).display()
+            );
+        }
+        let baseline: DatasetLayout = serde_json::from_slice(&baseline_bytes)
+            .map_err(|e| anyhow!("{}: {e}", baseline_path.display()))?;
+        let refined_rel = refined_glb(scene);
+        let refined_path = scene.path(&refined_rel);
+        let refined = std::fs::read(&refined_path)
+            .with_context(|| format!("{}: cannot read", refined_path.display()))?;
+        let pack_path = scene.path(&pack_glb(scene));
+        let pack = std::fs::read(&pack_path)
+            .with_context(|| format!("{}: cannot read", pack_path.display()))?;
+        let output = ingest_scene(
+            &IngestRequest {
+                scene_id: &scene.scene_id,
+                refined_glb: &refined,
+                refined_rel: &refined_rel,
+                pack_glb: &pack,
+                index: &index,
+                baseline: &baseline,
+            },
+            &ctx.config.ingest,
+        )
+        .map_err(|e| anyhow!("{}: {e}", refined_path.display()))?;
+        let mut out = SceneOutput::new();
+        out.add_json(REFINED_LAYOUT, &output.layout)?;
+        out.add_json(REFINED_DIFF, &output.diff)?;
+        for warning in &output.diff.warnings {
+            out.warn(warning.clone());
+        }
+        Ok(out)
+    }
+}

@@ -1,0 +1,267 @@
+//! `mesa release DATASET OUT`: the MesaTask-10K tree, on demand (not part of `mesa run`).
+//!
+//! Per scene, the layout of `[render] layout` (by default the most refined present:
+//! `qa/layout.json`, else `refined/layout.json`) becomes
+//! `OUT/Layout_info/<table_type>/<scene_id>/layout.json` ([`mesa_stages::release`]) beside a
+//! copy of `render/front.png`, which must have been drawn from that very layout (its camera
+//! file records the layout's digest); `OUT/Asset_annotation.json` holds the annotations of
+//! every asset the released layouts use. Every file written is validated (the `layout` and
+//! `asset-annotations` kinds of `mesa validate`). A scene that cannot be released is reported
+//! and left out; the others are written.
+//!
+//! OUT must be new, empty, or an earlier release (nothing but `Layout_info/` and
+//! `Asset_annotation.json`), which is replaced.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{anyhow, bail, Context as _};
+use mesa_schemas::json::parse_lenient;
+use mesa_schemas::render::RenderCameraArtifact;
+use mesa_schemas::Kind;
+use mesa_stages::release::{release_annotations, release_layout};
+use rayon::prelude::*;
+
+use super::assets::ANNOTATIONS;
+use super::render::{no_layout, present_layouts, read_dataset_layout, RENDER_DIR};
+use crate::app::UsageError;
+use crate::config::Config;
+use crate::fsio::{sweep_tmp_for, write_atomic};
+use crate::runner::{discover_scenes, select_scenes, Scene, Shard};
+
+/// The folder of layouts in a release.
+pub const LAYOUT_INFO: &str = "Layout_info";
+/// The annotation file of a release.
+pub const ASSET_ANNOTATION: &str = "Asset_annotation.json";
+
+/// What a release run wrote.
+#[derive(Debug)]
+pub struct ReleaseSummary {
+    /// The release folder.
+    pub out: PathBuf,
+    /// Scenes selected.
+    pub scenes: usize,
+    /// Scenes released.
+    pub released: usize,
+    /// Assets annotated.
+    pub assets: usize,
+    /// What could not be released, with why (`<table_type>/<scene_id>`, or the annotation
+    /// file).
+    pub failed: Vec<(String, String)>,
+    /// Wall time.
+    pub elapsed_s: f64,
+}
+
+/// Checks OUT and clears an earlier release in it.
+fn prepare_out(out: &Path) -> anyhow::Result<()> {
+    if out.exists() && !out.is_dir() {
+        return Err(UsageError(format!(
+            "{}: not a folder (expected a new or empty folder, or an earlier release)",
+            out.display()
+        ))
+        .into());
+    }
+    if out.is_dir() {
+        let mut others = Vec::new();
+        for entry in std::fs::read_dir(out).with_context(|| format!("{}", out.display()))? {
+            let name = entry?.file_name().to_string_lossy().into_owned();
+            if name != LAYOUT_INFO && name != ASSET_ANNOTATION {
+                others.push(name);
+            }
+        }
+        if !others.is_empty() {
+            others.sort();
+            return Err(UsageError(format!(
+                "{}: not empty and not an earlier release (it holds {}): give a new or empty \
+                 folder",
+                out.display(),
+                others.join(", ")
+            ))
+            .into());
+        }
+        let layouts = out.join(LAYOUT_INFO);
+        if layouts.is_dir() {
+            std::fs::remove_dir_all(&layouts).with_context(|| {
+                format!("{}: cannot remove the earlier release", layouts.display())
+            })?;
+        }
+        let annotations = out.join(ASSET_ANNOTATION);
+        if annotations.exists() {
+            std::fs::remove_file(&annotations)
+                .with_context(|| format!("{}: cannot remove", annotations.display()))?;
+        }
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))
+}
+
+fn write(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    sweep_tmp_for(path).with_context(|| format!("{}: sweeping", path.display()))?;
+    write_atomic(path, bytes).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// Problems of a file against a kind, each on a line.
+fn validate(path: &Path, bytes: &[u8], kind: &str) -> anyhow::Result<()> {
+    let kind = Kind::by_name(kind).ok_or_else(|| anyhow!("internal error: no kind {kind}"))?;
+    let text = std::str::from_utf8(bytes).map_err(|_| anyhow!("{}: not UTF-8", path.display()))?;
+    let value = parse_lenient(text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let problems = kind.validate_value(&value);
+    if !problems.is_empty() {
+        let lines: Vec<String> = problems
+            .iter()
+            .map(|p| format!("{}: {p}", path.display()))
+            .collect();
+        bail!("{}", lines.join("\n"));
+    }
+    Ok(())
+}
+
+/// Releases one scene: its layout and front view. Returns the uids it uses.
+fn release_scene(config: &Config, scene: &Scene, out: &Path) -> anyhow::Result<BTreeSet<String>> {
+    let choice = config.render.layout;
+    let rel = *present_layouts(scene, choice)
+        .first()
+        .ok_or_else(|| no_layout(scene, choice))?;
+    let path = scene.path(rel);
+    let (layout, sha) = read_dataset_layout(&path)?;
+    let bytes = release_layout(&layout).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let camera_path = scene.path(&format!("{RENDER_DIR}/front_camera.json"));
+    let png_path = scene.path(&format!("{RENDER_DIR}/front.png"));
+    let camera: RenderCameraArtifact = std::fs::read_to_string(&camera_path)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .ok_or_else(|| {
+            anyhow!(
+                "{}: no front view (run `mesa render` first)",
+                camera_path.display()
+            )
+        })?;
+    if camera.layout_sha256.as_deref() != Some(sha.as_str()) {
+        bail!(
+            "{}: drawn from {} as it was before, not from the released {rel} (run `mesa render` \
+             again{})",
+            png_path.display(),
+            camera.layout.as_deref().unwrap_or("another layout"),
+            if choice == mesa_stages::render::LayoutChoice::Refined {
+                ""
+            } else {
+                " with the same --layout"
+            }
+        );
+    }
+    let png = std::fs::read(&png_path).with_context(|| {
+        format!(
+            "{}: cannot read (run `mesa render` first)",
+            png_path.display()
+        )
+    })?;
+    let dir = out
+        .join(LAYOUT_INFO)
+        .join(&scene.table_type)
+        .join(&scene.scene_id);
+    let layout_out = dir.join("layout.json");
+    validate(&layout_out, &bytes, "layout")?;
+    write(&layout_out, &bytes)?;
+    write(&dir.join("front.png"), &png)?;
+    Ok(layout
+        .objects
+        .iter()
+        .map(|o| o.retrieved_uid.clone())
+        .collect())
+}
+
+/// Writes the release (see the module documentation).
+pub fn write_release(
+    dataset: &Path,
+    out: &Path,
+    config: &Config,
+    scenes_glob: Option<&str>,
+    jobs: usize,
+) -> anyhow::Result<ReleaseSummary> {
+    let started = Instant::now();
+    let scenes = select_scenes(
+        discover_scenes(dataset).map_err(|e| UsageError(e.to_string()))?,
+        scenes_glob,
+        Shard::default(),
+    )
+    .map_err(|e| UsageError(e.to_string()))?;
+    let annotations_path = dataset.join(ANNOTATIONS);
+    let annotations = std::fs::read_to_string(&annotations_path)
+        .map_err(|e| {
+            UsageError(format!(
+                "{}: {e} (a release needs the asset annotations)",
+                annotations_path.display()
+            ))
+        })
+        .and_then(|t| {
+            parse_lenient(&t)
+                .map_err(|e| UsageError(format!("{}: {e}", annotations_path.display())))
+        })?;
+    if out.starts_with(dataset.join("scenes")) {
+        return Err(UsageError(format!(
+            "{}: inside the dataset's scenes/ (give a folder outside it)",
+            out.display()
+        ))
+        .into());
+    }
+    prepare_out(out)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs)
+        .build()
+        .context("cannot start the worker threads")?;
+    let outcomes: Vec<anyhow::Result<BTreeSet<String>>> = pool.install(|| {
+        scenes
+            .par_iter()
+            .map(|scene| release_scene(config, scene, out))
+            .collect()
+    });
+    let mut summary = ReleaseSummary {
+        out: out.to_owned(),
+        scenes: scenes.len(),
+        released: 0,
+        assets: 0,
+        failed: Vec::new(),
+        elapsed_s: 0.0,
+    };
+    let mut uids = BTreeSet::new();
+    for (scene, outcome) in scenes.iter().zip(outcomes) {
+        match outcome {
+            Ok(used) => {
+                summary.released += 1;
+                uids.extend(used);
+            }
+            Err(e) => summary.failed.push((scene.key(), format!("{e:#}"))),
+        }
+    }
+    let path = out.join(ASSET_ANNOTATION);
+    match release_annotations(&annotations, &uids) {
+        Ok(bytes) => {
+            validate(&path, &bytes, "asset-annotations")?;
+            write(&path, &bytes)?;
+            summary.assets = uids.len();
+        }
+        Err(e) => summary
+            .failed
+            .push((ASSET_ANNOTATION.to_owned(), e.to_string())),
+    }
+    summary.elapsed_s = started.elapsed().as_secs_f64();
+    Ok(summary)
+}
+
+/// The human summary of a release run.
+pub fn format_release_summary(summary: &ReleaseSummary) -> String {
+    use std::fmt::Write as _;
+    let mut out = format!(
+        "release: {} of {} scenes released, {} assets annotated, {} failed in {:.2} s: {}\n",
+        summary.released,
+        summary.scenes,
+        summary.assets,
+        summary.failed.len(),
+        summary.elapsed_s,
+        summary.out.display()
+    );
+    for (what, error) in &summary.failed {
+        let _ = writeln!(out, "  failed {what}: {error}");
+    }
+    out
+}

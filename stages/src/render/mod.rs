@@ -1,0 +1,847 @@
+//! `render` (SPEC 5.10): pictures of a layout with its assets, on the CPU, with the
+//! rasterizer of [`crate::raster`].
+//!
+//! - Scene views ([`SceneView`]): `front` and `perspective` (the views the multimodal prompts
+//!   use) and `back`, `left`, `right` for QA, framed as MesaTask's own renderer frames them
+//!   ([`camera`]).
+//! - Asset views: eight views around z of one asset, for annotating assets with a
+//!   vision-language model and checking their front alignment.
+//!
+//! A picture is drawn with base-colour textures (and vertex colours), one directional light
+//! with a shadow map plus a weaker fill light and hemisphere ambient light, the table as a
+//! slab over the placement zone (the sink's restricted zone marked on it), `supersampling`²
+//! samples per pixel, on a transparent (alpha = coverage) or black background. Each view also
+//! gets a camera file (intrinsics, the table-from-camera pose, and the pixels each object
+//! covers).
+//!
+//! An object is drawn as MesaTask's reader (`dataset/reconstruct_blender.py`) places it: the
+//! asset's vertices in its table-aligned frame (the frame `mesa assets` measures), moved so
+//! their bounding-box centre is at the origin, scaled per axis to the layout's `size`, turned
+//! by `rotation`, moved to `position`.
+//!
+//! Everything here is deterministic and single-threaded per view; callers run views and
+//! scenes in parallel.
+
+pub mod asset;
+pub mod camera;
+
+use std::collections::BTreeMap;
+
+use mesa_schemas::render::{RenderCameraArtifact, RENDER_CAMERA_SCHEMA};
+use mesa_schemas::DatasetLayout;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::image_io::{encode_rgb8, encode_rgba8, ImageError};
+use crate::mesh::{normalize3, Aabb, Affine3, TriMesh};
+use crate::raster::{
+    linear_to_srgb_u8, srgb_u8_to_linear, visibility, DirectionalLight, DrawItem, Lighting, Shader,
+    SurfaceMaterial,
+};
+
+pub use asset::{load_render_asset, AssetPart, RenderAsset, RenderAssetError};
+pub use camera::{SceneView, ViewCamera, ASSET_VIEWS};
+
+/// Which layout of a scene `mesa render` draws.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum LayoutChoice {
+    /// The most refined present: `qa/layout.json` (settled), else `refined/layout.json` (what
+    /// the annotator returned). A scene with neither fails.
+    Refined,
+    /// `coarse/layout.json`, the placement before the annotator (for looking at it, and for
+    /// datasets without an annotation round).
+    Coarse,
+    /// `truth/layout.json` of a `mesa demo` scene.
+    Truth,
+}
+
+impl LayoutChoice {
+    /// The layout files this choice reads, in order of preference, relative to the scene.
+    pub fn candidates(self) -> &'static [&'static str] {
+        match self {
+            LayoutChoice::Refined => &["qa/layout.json", "refined/layout.json"],
+            LayoutChoice::Coarse => &["coarse/layout.json"],
+            LayoutChoice::Truth => &["truth/layout.json"],
+        }
+    }
+}
+
+/// Background of the pictures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Background {
+    /// RGBA; alpha is the fraction of a pixel's samples that hit something.
+    Transparent,
+    /// RGB over black.
+    Black,
+}
+
+impl Background {
+    /// The name written into camera files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Background::Transparent => "transparent",
+            Background::Black => "black",
+        }
+    }
+}
+
+/// The `[render]` section of `mesa.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct RenderConfig {
+    /// The layout drawn: "refined" (qa/layout.json, else refined/layout.json; the default),
+    /// "coarse" (coarse/layout.json, before the annotator) or "truth" (a demo scene's
+    /// truth/layout.json). `mesa render --layout` overrides it.
+    pub layout: LayoutChoice,
+    /// Picture width in pixels.
+    pub width_px: u32,
+    /// Picture height in pixels.
+    pub height_px: u32,
+    /// Samples per pixel along each axis (2: 4 samples a pixel, anti-aliased edges).
+    pub supersampling: u32,
+    /// "transparent" (RGBA PNG, as MesaTask's renders) or "black" (RGB PNG).
+    pub background: Background,
+    /// Horizontal field of view of scene views in degrees (39.6: MesaTask's 50 mm lens on a
+    /// 36 mm sensor).
+    pub fov_x_deg: f64,
+    /// Scene views: camera distance as a multiple of the scene box's largest side (MesaTask:
+    /// 1.5); farther when the box would be cut at the picture's edges.
+    pub distance_factor: f64,
+    /// Cast shadows from the main light (a shadow map).
+    pub shadows: bool,
+    /// Textures larger than this on a side, in pixels, are reduced when an asset is loaded.
+    pub max_texture_px: u32,
+    /// Asset views: the camera's elevation above the horizontal, degrees.
+    pub asset_elevation_deg: f64,
+    /// Asset views: the fraction of the picture's half-size the asset's bounding sphere
+    /// fills.
+    pub asset_fill: f64,
+    /// Loaded assets kept in memory between scenes, megabytes (meshes and decoded
+    /// textures); 0 keeps none.
+    pub asset_cache_mb: u64,
+}
+
+impl Default for RenderConfig {
+    fn default() -> Self {
+        Self {
+            layout: LayoutChoice::Refined,
+            width_px: 512,
+            height_px: 512,
+            supersampling: 2,
+            background: Background::Transparent,
+            fov_x_deg: 39.6,
+            distance_factor: 1.5,
+            shadows: true,
+            max_texture_px: 1024,
+            asset_elevation_deg: 20.0,
+            asset_fill: 0.9,
+            asset_cache_mb: 1024,
+        }
+    }
+}
+
+impl RenderConfig {
+    /// Values that parse but cannot work, each with the key and the fix.
+    pub fn problems(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if !(16..=8192).contains(&self.width_px) || !(16..=8192).contains(&self.height_px) {
+            out.push(format!(
+                "[render] width_px = {}, height_px = {}: a picture is 16 to 8192 pixels a side",
+                self.width_px, self.height_px
+            ));
+        }
+        if !(1..=8).contains(&self.supersampling) {
+            out.push(format!(
+                "[render] supersampling = {}: expected 1 to 8 samples per pixel along each axis",
+                self.supersampling
+            ));
+        }
+        if !(self.fov_x_deg > 1.0 && self.fov_x_deg < 170.0) {
+            out.push(format!(
+                "[render] fov_x_deg = {}: expected a field of view between 1 and 170 degrees",
+                self.fov_x_deg
+            ));
+        }
+        if !(self.distance_factor > 0.1 && self.distance_factor.is_finite()) {
+            out.push(format!(
+                "[render] distance_factor = {}: expected a number above 0.1",
+                self.distance_factor
+            ));
+        }
+        if self.max_texture_px < 1 {
+            out.push("[render] max_texture_px = 0: expected at least 1".to_owned());
+        }
+        if !(self.asset_fill > 0.0 && self.asset_fill <= 1.0) {
+            out.push(format!(
+                "[render] asset_fill = {}: expected a fraction in (0, 1]",
+                self.asset_fill
+            ));
+        }
+        if !(-89.0..=89.0).contains(&self.asset_elevation_deg) {
+            out.push(format!(
+                "[render] asset_elevation_deg = {}: expected -89 to 89 degrees",
+                self.asset_elevation_deg
+            ));
+        }
+        out
+    }
+}
+
+/// Why a layout cannot be drawn.
+#[derive(Debug, Error)]
+pub enum RenderError {
+    /// An object names no asset.
+    #[error("$.objects[{index}] ({instance}): retrieved_uid is empty (expected the uid of a library asset; run `mesa retrieve` and `mesa place`, or fix the layout)")]
+    NoAsset {
+        /// The object's index.
+        index: usize,
+        /// Its instance.
+        instance: String,
+    },
+    /// An object's asset is not available.
+    #[error("$.objects[{index}] ({instance}): asset {uid}: {reason}")]
+    Asset {
+        /// The object's index.
+        index: usize,
+        /// Its instance.
+        instance: String,
+        /// The asset.
+        uid: String,
+        /// Why it cannot be drawn.
+        reason: String,
+    },
+    /// An object's size cannot scale its asset.
+    #[error("$.objects[{index}] ({instance}).size: {size_cm:?} cm is not a positive size (expected three numbers above 0)")]
+    BadSize {
+        /// The object's index.
+        index: usize,
+        /// Its instance.
+        instance: String,
+        /// The size.
+        size_cm: [f64; 3],
+    },
+    /// A picture cannot be encoded.
+    #[error("{0}")]
+    Image(#[from] ImageError),
+}
+
+/// One object of a layout, ready to draw.
+#[derive(Debug, Clone)]
+pub struct PlacedObject<'a> {
+    /// Its instance name.
+    pub instance: String,
+    /// Its asset.
+    pub asset: &'a RenderAsset,
+    /// Asset table-aligned frame → table frame (metres).
+    pub table_from_asset: Affine3,
+}
+
+/// The map placing an asset as MesaTask's reader does (see the module documentation), and a
+/// note when the layout's `scale_factor` disagrees with its `size` by more than 1 %.
+pub fn table_from_asset(
+    position_cm: [f64; 3],
+    rotation_xyzw: [f64; 4],
+    size_cm: [f64; 3],
+    scale_factor: [f64; 3],
+    asset_bounds: &Aabb,
+) -> (Affine3, Option<String>) {
+    let asset_size = asset_bounds.size();
+    let centre = asset_bounds.center();
+    let scale: [f64; 3] = std::array::from_fn(|k| {
+        if asset_size[k] > 1e-9 {
+            size_cm[k] / 100.0 / asset_size[k]
+        } else {
+            scale_factor[k]
+        }
+    });
+    let disagrees = (0..3).any(|k| {
+        scale_factor[k] > 0.0 && ((scale[k] - scale_factor[k]) / scale_factor[k]).abs() > 0.01
+    });
+    let note = disagrees.then(|| {
+        format!(
+            "scale_factor {scale_factor:?} disagrees with size {size_cm:?} cm over the asset's \
+             {:?} m: drawn at size (scale {:?}), as MesaTask's reader does",
+            asset_size.map(|v| (v * 1e4).round() / 1e4),
+            scale.map(|v| (v * 1e4).round() / 1e4)
+        )
+    });
+    let q = crate::mesh::quat_normalize(rotation_xyzw);
+    let map = Affine3::from_trs(position_cm.map(|v| v / 100.0), q, scale).mul(
+        &Affine3::from_translation([-centre[0], -centre[1], -centre[2]]),
+    );
+    (map, note)
+}
+
+/// Places every object of a layout, with `asset_of(uid)` giving each asset (or why it cannot
+/// be drawn). Also returns notes about objects drawn differently from their fields.
+pub fn place_layout<'a, F>(
+    layout: &DatasetLayout,
+    mut asset_of: F,
+) -> Result<(Vec<PlacedObject<'a>>, Vec<String>), RenderError>
+where
+    F: FnMut(&str) -> Result<&'a RenderAsset, String>,
+{
+    let mut placed = Vec::with_capacity(layout.objects.len());
+    let mut notes = Vec::new();
+    for (index, object) in layout.objects.iter().enumerate() {
+        if object.retrieved_uid.is_empty() {
+            return Err(RenderError::NoAsset {
+                index,
+                instance: object.instance.clone(),
+            });
+        }
+        let size_cm = object.size_cm.0;
+        if size_cm.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+            return Err(RenderError::BadSize {
+                index,
+                instance: object.instance.clone(),
+                size_cm,
+            });
+        }
+        let asset = asset_of(&object.retrieved_uid).map_err(|reason| RenderError::Asset {
+            index,
+            instance: object.instance.clone(),
+            uid: object.retrieved_uid.clone(),
+            reason,
+        })?;
+        let (map, note) = table_from_asset(
+            object.position_cm.0,
+            object.rotation.0,
+            size_cm,
+            object.scale_factor.0,
+            &asset.bounds,
+        );
+        if let Some(note) = note {
+            notes.push(format!("{}: {note}", object.instance));
+        }
+        placed.push(PlacedObject {
+            instance: object.instance.clone(),
+            asset,
+            table_from_asset: map,
+        });
+    }
+    Ok((placed, notes))
+}
+
+/// Thickness of the drawn table slab, metres.
+const TABLE_THICKNESS_M: f64 = 0.03;
+
+/// The table: a slab over the placement zone with its top at z = 0, and the restricted zone
+/// (the sink) as a thin dark plate on it.
+pub struct TableGeometry {
+    slab: TriMesh,
+    slab_material: SurfaceMaterial,
+    sink: Option<TriMesh>,
+    sink_material: SurfaceMaterial,
+}
+
+fn srgb(c: [u8; 3]) -> [f32; 3] {
+    c.map(srgb_u8_to_linear)
+}
+
+impl TableGeometry {
+    /// The table of a zone `[x_min, x_max, y_min, y_max]` and an optional restricted zone, cm.
+    pub fn new(zone_cm: [f64; 4], restricted_cm: Option<[f64; 4]>) -> Self {
+        let box_of = |z: [f64; 4], bottom: f64, top: f64| {
+            let (x0, x1, y0, y1) = (z[0] / 100.0, z[1] / 100.0, z[2] / 100.0, z[3] / 100.0);
+            TriMesh::cuboid([x1 - x0, y1 - y0, top - bottom]).transformed(
+                &Affine3::from_translation([
+                    (x0 + x1) / 2.0,
+                    (y0 + y1) / 2.0,
+                    (top + bottom) / 2.0,
+                ]),
+            )
+        };
+        Self {
+            slab: box_of(zone_cm, -TABLE_THICKNESS_M, 0.0),
+            slab_material: SurfaceMaterial::plain(srgb([178, 136, 96]), 0.7),
+            // Half a millimetre proud of the top: drawn over it, and far below any contact
+            // tolerance.
+            sink: restricted_cm.map(|z| box_of(z, -0.0005, 0.0005)),
+            sink_material: SurfaceMaterial::plain(srgb([78, 98, 140]), 0.4),
+        }
+    }
+}
+
+/// The draw list of a placed layout: objects (instance = index + 1), then the table and the
+/// sink (instance 0).
+pub fn draw_items<'a>(
+    objects: &'a [PlacedObject<'a>],
+    table: Option<&'a TableGeometry>,
+) -> Vec<DrawItem<'a>> {
+    let mut items = Vec::new();
+    for (i, object) in objects.iter().enumerate() {
+        for part in &object.asset.parts {
+            items.push(DrawItem {
+                mesh: &part.mesh,
+                world_from_mesh: object.table_from_asset,
+                material: &part.material,
+                instance: i as u32 + 1,
+                casts_shadow: true,
+                vertex_colors: part.vertex_colors.as_deref(),
+            });
+        }
+    }
+    if let Some(table) = table {
+        items.push(DrawItem {
+            mesh: &table.slab,
+            world_from_mesh: Affine3::IDENTITY,
+            material: &table.slab_material,
+            instance: 0,
+            casts_shadow: true,
+            vertex_colors: None,
+        });
+        if let Some(sink) = &table.sink {
+            items.push(DrawItem {
+                mesh: sink,
+                world_from_mesh: Affine3::IDENTITY,
+                material: &table.sink_material,
+                instance: 0,
+                casts_shadow: false,
+                vertex_colors: None,
+            });
+        }
+    }
+    items
+}
+
+/// The bounds of every placed object, table frame, metres.
+pub fn objects_bounds(objects: &[PlacedObject<'_>]) -> Option<Aabb> {
+    objects
+        .iter()
+        .map(|o| o.asset.bounds.transformed(&o.table_from_asset))
+        .reduce(|a, b| a.union(&b))
+}
+
+/// The lights: a main light from the front right above (where MesaTask's area light is),
+/// casting shadows over `shadow_region` when `shadows`; a weak fill light from the left; sky
+/// and ground ambient light.
+pub fn lighting(shadow_region: Option<Aabb>, shadows: bool) -> Lighting {
+    Lighting {
+        up_world: [0.0, 0.0, 1.0],
+        sky_color: [0.42, 0.42, 0.45],
+        ground_color: [0.2, 0.19, 0.18],
+        lights: vec![
+            DirectionalLight {
+                toward_light_world: normalize3([0.8, -0.8, 1.2]),
+                color: [0.85, 0.83, 0.8],
+                casts_shadow: shadows,
+            },
+            DirectionalLight {
+                toward_light_world: normalize3([-0.7, -0.3, 0.6]),
+                color: [0.18, 0.18, 0.2],
+                casts_shadow: false,
+            },
+        ],
+        shadow_region: if shadows { shadow_region } else { None },
+        shadow_map_px: 1024,
+        background_srgb: [0, 0, 0],
+    }
+}
+
+/// A rendered picture.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Picture {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Row-major sRGB RGBA, straight alpha (alpha = coverage).
+    pub rgba: Vec<u8>,
+    /// Per pixel, the instance seen at its centre `(u, v)` (0: nothing, or the table).
+    pub instances: Vec<u32>,
+}
+
+impl Picture {
+    /// The PNG of the picture on `background`.
+    pub fn png(&self, background: Background) -> Result<Vec<u8>, ImageError> {
+        match background {
+            Background::Transparent => encode_rgba8(self.width, self.height, &self.rgba),
+            Background::Black => {
+                let rgb: Vec<u8> = self
+                    .rgba
+                    .chunks_exact(4)
+                    .flat_map(|p| {
+                        let a = f32::from(p[3]) / 255.0;
+                        [0, 1, 2].map(|k| linear_to_srgb_u8(srgb_u8_to_linear(p[k]) * a))
+                    })
+                    .collect();
+                encode_rgb8(self.width, self.height, &rgb)
+            }
+        }
+    }
+
+    /// Pixels per instance (instance ids as drawn: 1 + object index).
+    pub fn instance_pixels(&self) -> BTreeMap<u32, u64> {
+        let mut out = BTreeMap::new();
+        for &i in &self.instances {
+            if i != 0 {
+                *out.entry(i).or_insert(0) += 1;
+            }
+        }
+        out
+    }
+}
+
+/// Draws `items` from `camera` with `supersampling`² visibility samples per pixel, shading
+/// each object once per pixel (at its first sample there, as multisampling does): colour is
+/// the sample-weighted mean in linear light over the samples that hit something, alpha their
+/// fraction. The instance map samples each pixel at its centre.
+pub fn render_picture(
+    items: &[DrawItem<'_>],
+    camera: &ViewCamera,
+    lighting: &Lighting,
+    supersampling: u32,
+) -> Picture {
+    let f = supersampling.max(1) as usize;
+    let intrinsics = camera.intrinsics;
+    let big = intrinsics.supersampled(f as u32);
+    let camera_from_table = camera
+        .table_from_camera
+        .inverse()
+        .unwrap_or(Affine3::IDENTITY);
+    let vis = visibility(&big, &camera_from_table, items);
+    let shader = Shader::new(&camera_from_table, items, lighting);
+    let (w, h) = (intrinsics.width as usize, intrinsics.height as usize);
+    let bw = big.width as usize;
+    let mut rgba = vec![0u8; w * h * 4];
+    // What each pixel's centre (u, v) sees, as the camera files say pixels are sampled: the
+    // silhouettes of the picture in SPEC 2's convention, comparable with masks.
+    let centres = visibility(&intrinsics, &camera_from_table, items);
+    let instances: Vec<u32> = centres
+        .item
+        .iter()
+        .map(|&i| {
+            if i == u32::MAX {
+                0
+            } else {
+                items[i as usize].instance
+            }
+        })
+        .collect();
+    // (drawn item, first sample index, samples) of the pixel being resolved.
+    let mut hits: Vec<(u32, usize, usize)> = Vec::with_capacity(f * f);
+    for y in 0..h {
+        for x in 0..w {
+            hits.clear();
+            for dy in 0..f {
+                for dx in 0..f {
+                    let o = (y * f + dy) * bw + x * f + dx;
+                    let item = vis.item[o];
+                    if item == u32::MAX {
+                        continue;
+                    }
+                    match hits.iter_mut().find(|(i, _, _)| *i == item) {
+                        Some((_, _, n)) => *n += 1,
+                        None => hits.push((item, o, 1)),
+                    }
+                }
+            }
+            let p = y * w + x;
+            let covered: usize = hits.iter().map(|(_, _, n)| n).sum();
+            if covered == 0 {
+                continue;
+            }
+            let mut acc = [0f32; 3];
+            for &(item, o, n) in &hits {
+                let c = shader.shade(item, vis.triangle[o], vis.barycentric[o]);
+                for k in 0..3 {
+                    acc[k] += c[k] * n as f32;
+                }
+            }
+            for k in 0..3 {
+                rgba[p * 4 + k] = linear_to_srgb_u8(acc[k] / covered as f32);
+            }
+            rgba[p * 4 + 3] = ((covered * 255 + f * f / 2) / (f * f)) as u8;
+        }
+    }
+    Picture {
+        width: intrinsics.width,
+        height: intrinsics.height,
+        rgba,
+        instances,
+    }
+}
+
+/// One rendered view: its picture (PNG) and camera file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderedView {
+    /// The view's name (the PNG is `<name>.png`, the camera `<name>_camera.json`).
+    pub name: String,
+    /// The PNG bytes.
+    pub png: Vec<u8>,
+    /// The camera file.
+    pub camera: RenderCameraArtifact,
+    /// The decoded picture.
+    pub picture: Picture,
+}
+
+fn camera_artifact(
+    name: &str,
+    camera: &ViewCamera,
+    config: &RenderConfig,
+    visible_px: BTreeMap<String, u64>,
+) -> RenderCameraArtifact {
+    let k = camera.intrinsics;
+    RenderCameraArtifact {
+        schema: RENDER_CAMERA_SCHEMA.to_owned(),
+        view: name.to_owned(),
+        image: format!("{name}.png"),
+        width: k.width,
+        height: k.height,
+        fx: k.fx,
+        fy: k.fy,
+        cx: k.cx,
+        cy: k.cy,
+        fov_x_deg: k.fov_x_deg(),
+        table_from_camera: camera.table_from_camera.to_rows_4x4(),
+        look_at_m: camera.look_at_m,
+        layout: None,
+        layout_sha256: None,
+        uid: None,
+        azimuth_deg: None,
+        elevation_deg: None,
+        background: config.background.name().to_owned(),
+        supersampling: config.supersampling,
+        visible_px,
+    }
+}
+
+/// A placed layout ready to render from any view.
+pub struct LayoutScene<'a> {
+    /// The objects.
+    pub objects: &'a [PlacedObject<'a>],
+    /// The table.
+    pub table: TableGeometry,
+    /// The box scene views frame.
+    pub frame: Aabb,
+    /// The lights.
+    pub lighting: Lighting,
+}
+
+impl<'a> LayoutScene<'a> {
+    /// The scene of placed `objects` on the table of `layout`.
+    pub fn new(
+        layout: &DatasetLayout,
+        objects: &'a [PlacedObject<'a>],
+        config: &RenderConfig,
+    ) -> Self {
+        let zone = layout.zone_cm.0;
+        let table = TableGeometry::new(zone, layout.restricted_zone_cm.as_ref().map(|z| z.0));
+        let bounds = objects_bounds(objects);
+        let top = bounds.as_ref().map_or(0.0, |b| b.max[2]);
+        let zone_m = zone.map(|v| v / 100.0);
+        let frame = camera::scene_box(zone_m, top);
+        let mut shadow_region = Aabb {
+            min: [zone_m[0] - 0.1, zone_m[2] - 0.1, -TABLE_THICKNESS_M],
+            max: [zone_m[1] + 0.1, zone_m[3] + 0.1, top.max(0.01)],
+        };
+        if let Some(b) = bounds {
+            shadow_region = shadow_region.union(&b);
+        }
+        Self {
+            objects,
+            table,
+            frame,
+            lighting: lighting(Some(shadow_region), config.shadows),
+        }
+    }
+
+    /// Renders one scene view.
+    pub fn render_view(
+        &self,
+        view: SceneView,
+        config: &RenderConfig,
+    ) -> Result<RenderedView, RenderError> {
+        let camera = camera::scene_camera(
+            view,
+            &self.frame,
+            config.width_px,
+            config.height_px,
+            config.fov_x_deg,
+            config.distance_factor,
+        );
+        self.render_from(view.name(), &camera, config)
+    }
+
+    /// Renders from any camera (the picture is named `name`).
+    pub fn render_from(
+        &self,
+        name: &str,
+        camera: &ViewCamera,
+        config: &RenderConfig,
+    ) -> Result<RenderedView, RenderError> {
+        let items = draw_items(self.objects, Some(&self.table));
+        let picture = render_picture(&items, camera, &self.lighting, config.supersampling);
+        let pixels = picture.instance_pixels();
+        let visible_px = self
+            .objects
+            .iter()
+            .enumerate()
+            .map(|(i, o)| {
+                (
+                    o.instance.clone(),
+                    pixels.get(&(i as u32 + 1)).copied().unwrap_or(0),
+                )
+            })
+            .collect();
+        Ok(RenderedView {
+            name: name.to_owned(),
+            png: picture.png(config.background)?,
+            camera: camera_artifact(name, camera, config, visible_px),
+            picture,
+        })
+    }
+}
+
+/// The name of asset view `k`: `view_<azimuth>` (`view_000`, `view_045`, ...).
+pub fn asset_view_name(k: usize) -> String {
+    format!("view_{:03}", camera::asset_view_azimuth_deg(k) as u32)
+}
+
+/// Renders asset view `k` of one asset (no table; the asset at its own size).
+pub fn render_asset_view(
+    uid: &str,
+    asset: &RenderAsset,
+    k: usize,
+    config: &RenderConfig,
+) -> Result<RenderedView, RenderError> {
+    let camera = camera::asset_camera(
+        k,
+        &asset.bounds,
+        config.width_px,
+        config.height_px,
+        config.fov_x_deg,
+        config.asset_elevation_deg,
+        config.asset_fill,
+    );
+    let object = [PlacedObject {
+        instance: uid.to_owned(),
+        asset,
+        table_from_asset: Affine3::IDENTITY,
+    }];
+    let items = draw_items(&object, None);
+    let light = lighting(Some(asset.bounds), config.shadows);
+    let picture = render_picture(&items, &camera, &light, config.supersampling);
+    let name = asset_view_name(k);
+    let visible = picture.instance_pixels().get(&1).copied().unwrap_or(0);
+    let mut artifact = camera_artifact(
+        &name,
+        &camera,
+        config,
+        BTreeMap::from([(uid.to_owned(), visible)]),
+    );
+    artifact.uid = Some(uid.to_owned());
+    artifact.azimuth_deg = Some(camera::asset_view_azimuth_deg(k));
+    artifact.elevation_deg = Some(config.asset_elevation_deg);
+    Ok(RenderedView {
+        name,
+        png: picture.png(config.background)?,
+        camera: artifact,
+        picture,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Placed as MesaTask's reader places it: the asset's box centre lands on `position`
+        /// and its box, turned back by the rotation, has exactly the layout's `size`.
+        #[test]
+        fn an_asset_box_becomes_the_layout_box(
+            lo in prop::array::uniform3(-0.5f64..0.5),
+            extent in prop::array::uniform3(0.01f64..0.8),
+            size_cm in prop::array::uniform3(1.0f64..120.0),
+            position_cm in prop::array::uniform3(-50.0f64..150.0),
+            yaw_deg in -180.0f64..180.0,
+        ) {
+            let bounds = Aabb { min: lo, max: [lo[0] + extent[0], lo[1] + extent[1], lo[2] + extent[2]] };
+            let q = mesa_schemas::rotation::quat_xyzw_from_yaw_deg(yaw_deg);
+            let (map, _) = table_from_asset(position_cm, q, size_cm, [1.0; 3], &bounds);
+            let centre = map.apply_point(bounds.center());
+            for (c, p) in centre.iter().zip(position_cm) {
+                prop_assert!((c - p / 100.0).abs() < 1e-9);
+            }
+            let unturn = Affine3::from_quat_xyzw(q).inverse().expect("rotation");
+            let back = bounds.transformed(&unturn.mul(&map));
+            for (b, s) in back.size().iter().zip(size_cm) {
+                prop_assert!((b - s / 100.0).abs() < 1e-9);
+            }
+        }
+
+        /// Every scene view shows the whole scene box, whatever the table's shape.
+        #[test]
+        fn every_view_frames_the_scene(
+            width_cm in 30.0f64..300.0,
+            depth_cm in 20.0f64..120.0,
+            top_cm in 0.0f64..80.0,
+        ) {
+            let scene = camera::scene_box([0.0, width_cm / 100.0, 0.0, depth_cm / 100.0], top_cm / 100.0);
+            for view in SceneView::ALL {
+                let cam = camera::scene_camera(view, &scene, 512, 512, 39.6, 1.5);
+                let camera_from_table = cam.table_from_camera.inverse().expect("rigid");
+                for corner in scene.corners() {
+                    let uv = cam.intrinsics.project(camera_from_table.apply_point(corner));
+                    prop_assert!(uv.is_some_and(|[u, v]| (0.0..=511.0).contains(&u) && (0.0..=511.0).contains(&v)),
+                        "{:?}: {:?} at {:?}", view, corner, uv);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_scale_factor_that_disagrees_with_size_is_noted() {
+        let bounds = Aabb {
+            min: [0.0; 3],
+            max: [0.1, 0.1, 0.2],
+        };
+        let q = [0.0, 0.0, 0.0, 1.0];
+        let (_, note) = table_from_asset([0.0; 3], q, [10.0, 10.0, 20.0], [1.0; 3], &bounds);
+        assert!(note.is_none());
+        let (map, note) = table_from_asset([0.0; 3], q, [10.0, 10.0, 20.0], [2.0; 3], &bounds);
+        assert!(note.expect("a note").contains("drawn at size"));
+        // The picture follows size.
+        assert_abs_diff_eq!(map.linear[0][0], 1.0, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn transparent_and_black_backgrounds() {
+        let picture = Picture {
+            width: 2,
+            height: 1,
+            rgba: vec![255, 255, 255, 255, 255, 0, 0, 0],
+            instances: vec![1, 0],
+        };
+        let png = picture.png(Background::Black).expect("png");
+        let decoded = crate::image_io::decode_png(&png).expect("decodes");
+        assert_eq!(decoded.layout, crate::image_io::PixelLayout::Rgb8);
+        assert_eq!(decoded.samples, vec![255, 255, 255, 0, 0, 0]);
+        let png = picture.png(Background::Transparent).expect("png");
+        let decoded = crate::image_io::decode_png(&png).expect("decodes");
+        assert_eq!(decoded.layout, crate::image_io::PixelLayout::Rgba8);
+        assert_eq!(picture.instance_pixels(), BTreeMap::from([(1, 1)]));
+    }
+
+    #[test]
+    fn configuration_problems_name_the_key() {
+        let config = RenderConfig {
+            supersampling: 0,
+            asset_fill: 1.5,
+            ..RenderConfig::default()
+        };
+        let problems = config.problems().join("\n");
+        assert!(
+            problems.contains("[render] supersampling = 0"),
+            "{problems}"
+        );
+        assert!(problems.contains("[render] asset_fill = 1.5"), "{problems}");
+        assert!(RenderConfig::default().problems().is_empty());
+    }
+}
