@@ -358,9 +358,9 @@ fn candidate(mesh: &Mesh, piece: &Piece) -> Option<Candidate> {
         max: [f64::NEG_INFINITY; 3],
     };
     for p in &points {
-        for k in 0..3 {
-            content.min[k] = content.min[k].min(p[k]);
-            content.max[k] = content.max[k].max(p[k]);
+        for (k, v) in p.iter().enumerate() {
+            content.min[k] = content.min[k].min(*v);
+            content.max[k] = content.max[k].max(*v);
         }
     }
     let as_f32: Vec<Point<f32>> = points.iter().map(|p| to_f32(*p)).collect();
@@ -527,9 +527,9 @@ pub fn decompose(
         for t in tris {
             for &i in &welded.triangles[t as usize] {
                 let p = welded.positions[i as usize];
-                for k in 0..3 {
-                    cell.min[k] = cell.min[k].min(p[k]);
-                    cell.max[k] = cell.max[k].max(p[k]);
+                for (k, v) in p.iter().enumerate() {
+                    cell.min[k] = cell.min[k].min(*v);
+                    cell.max[k] = cell.max[k].max(*v);
                 }
             }
         }

@@ -164,8 +164,8 @@ impl Hull {
 
     /// Moves the hull by `t` (metres).
     pub fn translate(&mut self, t: [f64; 3]) {
-        for k in 0..3 {
-            self.center[k] += t[k];
+        for (c, v) in self.center.iter_mut().zip(t) {
+            *c += v;
         }
         self.bounds = self.bounds.translated(t);
     }

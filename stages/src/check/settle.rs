@@ -194,8 +194,8 @@ impl Mover<'_> {
             if let Ok(body) = &mut self.scene.objects[j].body {
                 body.translate(t);
             }
-            for k in 0..3 {
-                self.offsets[j][k] += t[k];
+            for (o, v) in self.offsets[j].iter_mut().zip(t) {
+                *o += v;
             }
         }
     }

@@ -21,6 +21,9 @@ use mesa_schemas::LayoutObject;
 use super::geometry::{convex_hull, Bounds, Hull};
 use crate::mesh::quat_to_matrix;
 
+/// A convex hull as vertices and triangles.
+type HullMesh = (Vec<[f64; 3]>, Vec<[u32; 3]>);
+
 /// An asset's convex parts, relative to the centre of its bounding box.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AssetShape {
@@ -28,7 +31,7 @@ pub struct AssetShape {
     pub uid: String,
     /// The parts: hull vertices (metres, relative to the bounding-box centre of the asset) and
     /// faces.
-    parts: Vec<(Vec<[f64; 3]>, Vec<[u32; 3]>)>,
+    parts: Vec<HullMesh>,
     /// The asset's size [w, d, h] in its table-aligned frame, metres.
     pub size_m: [f64; 3],
 }
