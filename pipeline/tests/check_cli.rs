@@ -158,11 +158,16 @@ fn coarse_layouts_are_checked_and_settled() {
         }
     }
     distances.sort_by(f64::total_cmp);
+    let moved: Vec<f64> = distances.iter().copied().filter(|d| *d > 0.0).collect();
     println!(
-        "settled: {at_rest} of {} scenes at rest; median displacement {:.2} cm, max {:.2} cm",
+        "settled: {at_rest} of {} scenes at rest; median displacement {:.2} cm, max {:.2} cm; \
+         {} of {} objects moved, by {:.2} cm on median",
         scenes.len(),
         distances[distances.len() / 2],
-        distances.last().copied().unwrap_or(0.0)
+        distances.last().copied().unwrap_or(0.0),
+        moved.len(),
+        distances.len(),
+        moved.get(moved.len() / 2).copied().unwrap_or(0.0)
     );
     assert!(
         at_rest as f64 >= 0.95 * scenes.len() as f64,
@@ -174,6 +179,9 @@ fn coarse_layouts_are_checked_and_settled() {
     assert_eq!(summary.before.colliding_pairs, colliding);
     let after = summary.after.expect("after");
     assert!(after.colliding_pairs < colliding);
+    let settle = summary.settle.expect("settle summary");
+    assert_eq!(settle.moved_objects, moved.len() as u64);
+    assert_eq!(settle.objects, distances.len() as u64);
     mesa()
         .arg("validate")
         .arg(dir.join("scenes"))

@@ -773,6 +773,10 @@ pub struct SettleSummary {
     pub mean_displacement_cm: f64,
     /// Largest displacement, cm.
     pub max_displacement_cm: f64,
+    /// Objects settling moved (displacement above 0).
+    pub moved_objects: u64,
+    /// Median displacement over the moved objects only, cm (0 when none moved).
+    pub median_moved_displacement_cm: f64,
 }
 
 // ---------------------------------------------------------------------------------------------

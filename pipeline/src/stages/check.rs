@@ -369,11 +369,13 @@ pub fn summarize(dataset: &Path) -> anyhow::Result<CheckSummaryArtifact> {
         }
         distances.sort_by(f64::total_cmp);
         let n = distances.len();
-        let median = match n {
+        let median_of = |sorted: &[f64]| match sorted.len() {
             0 => 0.0,
-            n if n % 2 == 1 => distances[n / 2],
-            n => 0.5 * (distances[n / 2 - 1] + distances[n / 2]),
+            n if n % 2 == 1 => sorted[n / 2],
+            n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
         };
+        let median = median_of(&distances);
+        let moved: Vec<f64> = distances.iter().copied().filter(|d| *d > 0.0).collect();
         SettleSummary {
             settled,
             unsettled,
@@ -385,6 +387,8 @@ pub fn summarize(dataset: &Path) -> anyhow::Result<CheckSummaryArtifact> {
                 0.0
             },
             max_displacement_cm: distances.last().copied().unwrap_or(0.0),
+            moved_objects: moved.len() as u64,
+            median_moved_displacement_cm: median_of(&moved),
         }
     });
     Ok(CheckSummaryArtifact {
@@ -438,13 +442,15 @@ pub fn format_summary(summary: &CheckSummaryArtifact, path: &Path) -> String {
     if let Some(s) = &summary.settle {
         out.push_str(&format!(
             "  settling: {} settled, {} unsettled; displacement median {:.2} cm, mean {:.2} cm, \
-             max {:.2} cm over {} objects\n",
+             max {:.2} cm over {} objects; {} moved, by {:.2} cm on median\n",
             s.settled,
             s.unsettled,
             s.median_displacement_cm,
             s.mean_displacement_cm,
             s.max_displacement_cm,
-            s.objects
+            s.objects,
+            s.moved_objects,
+            s.median_moved_displacement_cm
         ));
     }
     out
