@@ -13,7 +13,8 @@ use mesa_schemas::output::parse_model_output;
 use mesa_schemas::{kinds, validate_text, Kind};
 
 use crate::cli::{
-    AssetsArgs, BackendArg, DemoArgs, GraphArgs, RecordsArgs, StatusArgs, TasksArgs, ValidateArgs,
+    AssetsArgs, BackendArg, CheckArgs, DemoArgs, GraphArgs, RecordsArgs, StatusArgs, TasksArgs,
+    ValidateArgs,
 };
 use crate::cli::{Cli, Command, ConvertArgs, LayoutForm, ParseOutputArgs, RunArgs, StageArgs};
 use crate::config::{annotated_toml, Config};
@@ -67,6 +68,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             }
             run_one(&crate::stages::ingest::IngestStage::new(), &resolved)
         }
+        Command::Check(args) => check(args, cli.quiet),
         Command::Graph(args) => graph(args, cli.quiet),
         Command::Tasks(args) => tasks(args, cli.quiet),
         Command::Records(args) => records(args, cli.quiet),
@@ -184,6 +186,9 @@ fn run_all(args: RunArgs, quiet: bool) -> anyhow::Result<ExitCode> {
     for stage in &stages {
         let code = run_one(stage.as_ref(), &resolved)?;
         failed |= code != ExitCode::SUCCESS;
+        if stage.name() == "check" {
+            print_check_summary(&resolved, quiet)?;
+        }
     }
     // The dataset-level stages merge every scene: with shards, each shard has only its part.
     if resolved.options.shard.count > 1 {
@@ -436,6 +441,30 @@ fn assets(args: AssetsArgs, quiet: bool) -> anyhow::Result<ExitCode> {
             EXIT_OK
         },
     ))
+}
+
+fn check(args: CheckArgs, quiet: bool) -> anyhow::Result<ExitCode> {
+    let mut resolved = resolve(&args.stage, quiet)?;
+    if let Some(layout) = args.layout {
+        resolved.config.check.layout = layout.into();
+    }
+    if args.settle {
+        resolved.config.check.settle = true;
+    }
+    let code = run_one(&crate::stages::check::CheckStage::new(), &resolved)?;
+    print_check_summary(&resolved, quiet)?;
+    Ok(code)
+}
+
+/// Writes the dataset's check summary (`qa/summary.json`) and prints it.
+fn print_check_summary(resolved: &Resolved, quiet: bool) -> anyhow::Result<()> {
+    let lines = crate::stages::check::write_summary(&resolved.dataset)?;
+    if !quiet {
+        if let Some(lines) = lines {
+            eprint!("{lines}");
+        }
+    }
+    Ok(())
 }
 
 fn graph(args: GraphArgs, quiet: bool) -> anyhow::Result<ExitCode> {

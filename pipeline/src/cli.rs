@@ -61,6 +61,11 @@ pub enum Command {
     /// layout (refined/layout.json) and what changed (refined/diff.json). Scenes whose edited
     /// GLB has not arrived are reported as awaiting annotation.
     Ingest(IngestArgs),
+    /// Physics QA of every scene's layout on the assets' collision shapes: colliding pairs with
+    /// their penetration depth, floating objects, zone violations, the collision rate
+    /// (qa/check.json); with --settle, the least motion that puts the scene at rest
+    /// (qa/layout.json, read by later stages). Ends with the dataset summary qa/summary.json.
+    Check(CheckArgs),
     /// Extract the scene graph of every scene (graph/graph.json and graph/graph.txt), or print
     /// the triplets of one layout file with --layout.
     Graph(GraphArgs),
@@ -109,6 +114,39 @@ pub struct StageArgs {
     /// Progress display (default: [run] progress of mesa.toml).
     #[arg(long, value_enum)]
     pub progress: Option<ProgressArg>,
+}
+
+/// `--layout` of `mesa check`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CheckLayoutArg {
+    /// refined/layout.json (written by `mesa ingest` from the annotator's GLB).
+    Refined,
+    /// coarse/layout.json (written by `mesa place`).
+    Coarse,
+}
+
+impl From<CheckLayoutArg> for mesa_stages::check::LayoutSource {
+    fn from(value: CheckLayoutArg) -> Self {
+        match value {
+            CheckLayoutArg::Refined => Self::Refined,
+            CheckLayoutArg::Coarse => Self::Coarse,
+        }
+    }
+}
+
+/// `mesa check`.
+#[derive(Debug, Args)]
+pub struct CheckArgs {
+    /// The runner flags.
+    #[command(flatten)]
+    pub stage: StageArgs,
+    /// The layout to check (default: [check] layout of mesa.toml, "refined").
+    #[arg(long, value_enum)]
+    pub layout: Option<CheckLayoutArg>,
+    /// Also settle each scene: the least motion that removes collisions and floating, keeping
+    /// what holds what; writes qa/layout.json (default: [check] settle of mesa.toml).
+    #[arg(long)]
+    pub settle: bool,
 }
 
 /// `mesa assets`.

@@ -34,6 +34,8 @@ pub struct Config {
     pub annotate: mesa_stages::demo::annotator::AnnotateConfig,
     /// `mesa ingest`: the annotator's edited scene read back into the refined layout.
     pub ingest: mesa_stages::ingest::IngestConfig,
+    /// `mesa check`: mesh-level physics QA (collisions, floating, zones) and settling.
+    pub check: mesa_stages::check::CheckConfig,
     /// `mesa graph`: the rule-based scene graph (SCENE_GRAPH.md).
     pub graph: mesa_stages::graph::GraphConfig,
     /// `mesa tasks`: task instructions and reasoning texts (the template writer or a chat
@@ -136,6 +138,7 @@ impl Config {
             .problems()
             .into_iter()
             .chain(config.ingest.problems())
+            .chain(config.check.problems())
             .chain(config.render.problems())
             .collect();
         if !problems.is_empty() {
@@ -239,6 +242,19 @@ mod tests {
                 assert!(lines[i - 1].starts_with("# "), "undocumented: {line}");
             }
         }
+    }
+
+    #[test]
+    fn check_values_that_cannot_work_are_refused_naming_the_key() {
+        let err = Config::from_toml("[check]\npenetration_tolerance_mm = -1\n").expect_err("bad");
+        assert!(
+            err.contains("[check] penetration_tolerance_mm is -1"),
+            "{err}"
+        );
+        let err = Config::from_toml("[check.settling]\nmax_rounds = 0\n").expect_err("bad");
+        assert!(err.contains("[check.settling] max_rounds is 0"), "{err}");
+        let err = Config::from_toml("[check]\nlayout = \"truth\"\n").expect_err("bad");
+        assert!(err.contains("layout"), "{err}");
     }
 
     #[test]

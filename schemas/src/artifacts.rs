@@ -21,6 +21,8 @@ pub const TEXT_INDEX_SCHEMA: &str = "mesa.text-index/1";
 pub const SHAPES_SCHEMA: &str = "mesa.shapes/1";
 /// Schema id of `qa/check.json`.
 pub const CHECK_SCHEMA: &str = "mesa.check/1";
+/// Schema id of the dataset's `qa/summary.json`.
+pub const CHECK_SUMMARY_SCHEMA: &str = "mesa.check-summary/1";
 /// Schema id of `graph/graph.json`.
 pub const GRAPH_SCHEMA: &str = "mesa.graph/1";
 /// Schema id of each line of `tasks/tasks.jsonl`.
@@ -376,20 +378,35 @@ pub struct ConvexPart {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Decomposition {
-    /// `vhacd` (parry3d's V-HACD); `convex` when the asset is a closed mesh filling its
-    /// hull (the hull is its one part); `hull` when the decomposition failed and the parts are
-    /// the single hull (the asset's warnings say why).
+    /// `adaptive` (parts within `tolerance_m` of the mesh); `vhacd` (parry3d's V-HACD);
+    /// `convex` when V-HACD was asked and the asset is a closed mesh filling its hull (the hull
+    /// is its one part); `hull` when the decomposition failed and the parts are the single hull
+    /// (the asset's warnings say why).
     pub method: String,
-    /// Voxels along the longest axis (the configured resolution, or the one a retry used
-    /// when V-HACD failed on the configured one).
-    pub resolution: u32,
-    /// Whether V-HACD approximated the parts' hulls while cutting (its default; a retry turns
-    /// it off).
-    pub convex_hull_approximation: bool,
-    /// Maximum concavity of a part.
-    pub concavity: f64,
     /// Most parts allowed.
     pub max_parts: u32,
+    /// Adaptive: the most a part may reach outside the object, metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance_m: Option<f64>,
+    /// Adaptive: how far the parts reach outside the object at most (sampled on their faces),
+    /// metres; above `tolerance_m` only when `max_parts` ran out (the asset then has a warning).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_deviation_m: Option<f64>,
+    /// Adaptive: whether the mesh was read as a solid (closed and consistently oriented), so
+    /// that its inside counts as the object; otherwise only its surface does.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub solid: Option<bool>,
+    /// V-HACD: voxels along the longest axis (the configured resolution, or the one a retry
+    /// used when V-HACD failed on the configured one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resolution: Option<u32>,
+    /// V-HACD: whether the parts' hulls were approximated while cutting (its default; a retry
+    /// turns it off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub convex_hull_approximation: Option<bool>,
+    /// V-HACD: maximum concavity of a part.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub concavity: Option<f64>,
 }
 
 /// `assets/index/text.json`: the asset texts and their features for the built-in lexical
@@ -507,7 +524,12 @@ pub struct RetrievalCandidate {
 // ---------------------------------------------------------------------------------------------
 // check
 
-/// `qa/check.json`: physics QA of one layout.
+/// `qa/check.json`: the physics QA of one scene layout (SPEC 5.6), on the assets' collision
+/// shapes (the convex decompositions of `assets/index/shapes/`) placed by the layout.
+///
+/// The findings at the top level are those of the layout checked (`layout`); when `mesa check
+/// --settle` ran, `settle` says what it did and holds the findings of the settled layout
+/// (`qa/layout.json`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CheckArtifact {
@@ -515,35 +537,67 @@ pub struct CheckArtifact {
     pub schema: String,
     /// The scene id.
     pub scene_id: String,
-    /// The layout checked, relative to the scene folder.
+    /// The layout checked, relative to the scene folder (`refined/layout.json`, or
+    /// `coarse/layout.json` with `--layout coarse`).
     pub layout: String,
+    /// SHA-256 of that layout file's bytes.
+    pub layout_sha256: String,
     /// Penetration depth above which a pair collides, mm.
     pub penetration_tolerance_mm: f64,
-    /// Gap below which an object counts as supported, mm.
+    /// An object floats when its gap to the nearest support below exceeds this, mm.
     pub floating_tolerance_mm: f64,
-    /// Colliding pairs.
+    /// An object may cross the placement zone's edge, or reach into the restricted zone, by this
+    /// much before it is a violation, mm.
+    pub zone_tolerance_mm: f64,
+    /// The distance under which MesaTask's released code calls a pair colliding, cm (5).
+    pub mesatask_rule_distance_cm: f64,
+    /// Objects in the layout.
+    pub objects: u64,
+    /// Objects that could not be checked (no asset, no collision shapes), with why; they take
+    /// part in no pair, so `pairs_total` counts the checked objects only.
+    pub unchecked: Vec<UncheckedObject>,
+    /// Colliding pairs (penetration deeper than the tolerance), sorted by `a` then `b`.
     pub collisions: Vec<CollisionPair>,
-    /// Floating objects.
+    /// Floating objects, in instance order.
     pub floating: Vec<FloatingObject>,
-    /// Objects outside the zone, inside the restricted zone, or below the table.
+    /// Objects outside the zone, inside the restricted zone, or below the table, in instance
+    /// order then kind.
     pub zone_violations: Vec<ZoneViolation>,
-    /// Number of object pairs, n·(n-1)/2.
+    /// Number of pairs of checked objects, n·(n-1)/2.
     pub pairs_total: u64,
     /// Colliding pairs / all pairs (the paper's collision rate); 0 when there are no pairs.
     pub collision_rate: f64,
-    /// Pairs closer than 5 cm (MesaTask's released rule, for comparison only).
+    /// Pairs whose shapes are closer than `mesatask_rule_distance_cm` (MesaTask's released
+    /// rule, for comparison only: it calls touching and nearby objects colliding).
     pub mesatask_rule_pairs: u64,
+    /// True when every object was checked and there is no collision, no floating object and
+    /// no zone violation.
+    pub clean: bool,
+    /// What `--settle` did; absent when it was not asked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settle: Option<SettleReport>,
+}
+
+/// An object `mesa check` could not test.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct UncheckedObject {
+    /// The instance.
+    pub instance: String,
+    /// Why (no `retrieved_uid`, an asset missing from the index or invalid, no shapes file).
+    pub reason: String,
 }
 
 /// Two objects that interpenetrate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CollisionPair {
-    /// First instance (sorted by name).
+    /// First instance (the smaller name).
     pub a: String,
     /// Second instance.
     pub b: String,
-    /// Penetration depth in mm.
+    /// Penetration depth in mm: the deepest overlap of a convex part of `a` with one of `b`
+    /// (the shortest translation that separates those two parts).
     pub depth_mm: f64,
 }
 
@@ -553,8 +607,10 @@ pub struct CollisionPair {
 pub struct FloatingObject {
     /// The instance.
     pub instance: String,
-    /// Gap to the nearest support below, mm.
+    /// How far it would fall straight down before touching something, mm.
     pub gap_mm: f64,
+    /// What it would land on: `table`, or an instance.
+    pub over: String,
 }
 
 /// An object where it may not be.
@@ -563,10 +619,164 @@ pub struct FloatingObject {
 pub struct ZoneViolation {
     /// The instance.
     pub instance: String,
-    /// `outside_zone`, `in_restricted_zone` or `below_table`.
+    /// `outside_zone` (its shape reaches beyond the item placement zone), `in_restricted_zone`
+    /// (its shape reaches over the restricted zone, the sink) or `below_table` (it sinks into
+    /// the table top).
     pub kind: String,
-    /// How far, in cm.
+    /// How far: beyond the zone's edge, into the restricted zone (the shortest horizontal move
+    /// out of it), or below the table top, in cm.
     pub amount_cm: f64,
+}
+
+/// The findings of a check, as in [`CheckArtifact`]'s top level.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CheckFindings {
+    /// Colliding pairs, sorted by `a` then `b`.
+    pub collisions: Vec<CollisionPair>,
+    /// Floating objects, in instance order.
+    pub floating: Vec<FloatingObject>,
+    /// Zone violations, in instance order then kind.
+    pub zone_violations: Vec<ZoneViolation>,
+    /// Number of pairs of checked objects.
+    pub pairs_total: u64,
+    /// Colliding pairs / all pairs; 0 when there are no pairs.
+    pub collision_rate: f64,
+    /// Pairs closer than MesaTask's 5 cm.
+    pub mesatask_rule_pairs: u64,
+    /// True when every object was checked and there is no collision, no floating object and
+    /// no zone violation.
+    pub clean: bool,
+}
+
+/// What `mesa check --settle` did to a scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SettleReport {
+    /// `settled`: `qa/layout.json` was written and checks clean; `unsettled`: no layout
+    /// was written (`reason` says why; later stages read the unsettled layout).
+    pub status: SettleStatus,
+    /// `least_motion`: objects pushed apart in the plane and dropped onto what is under them,
+    /// stacks and contents moving with what holds them.
+    pub method: String,
+    /// Why the scene could not be settled.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// The settled layout, relative to the scene folder (`qa/layout.json`); absent when
+    /// unsettled.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub layout: Option<String>,
+    /// Rounds of push-apart and drop used.
+    pub iterations: u32,
+    /// How far each object moved, in instance order (every object, moved or not).
+    pub displacements: Vec<Displacement>,
+    /// The largest displacement, cm.
+    pub max_displacement_cm: f64,
+    /// The median displacement over all objects, cm.
+    pub median_displacement_cm: f64,
+    /// Relations of the scene graph (`in`, `above`) the settled layout would lose; a settled
+    /// layout loses none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub relations_lost: Vec<String>,
+    /// The findings of a check of the layout settle arrived at (of `qa/layout.json` when
+    /// settled).
+    pub after: CheckFindings,
+}
+
+/// Whether a scene was settled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum SettleStatus {
+    /// `qa/layout.json` written, clean.
+    Settled,
+    /// Not settled; nothing written.
+    Unsettled,
+}
+
+/// How far settling moved one object.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Displacement {
+    /// The instance.
+    pub instance: String,
+    /// The move [dx, dy, dz], cm.
+    pub offset_cm: [f64; 3],
+    /// Its length, cm.
+    pub distance_cm: f64,
+}
+
+/// `qa/summary.json` (dataset level): the collision rate over every checked scene, before and
+/// after settling (`mesa check` writes it after each run, from every scene's `qa/check.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CheckSummaryArtifact {
+    /// `mesa.check-summary/1`.
+    pub schema: String,
+    /// Scenes with a `qa/check.json`.
+    pub scenes: u64,
+    /// How many scenes were checked on each layout file (`refined/layout.json`, ...).
+    pub layouts: BTreeMap<String, u64>,
+    /// The layouts as checked.
+    pub before: RateSummary,
+    /// The layouts later stages read: the settled layout of settled scenes, the checked one of
+    /// the others; absent when no scene was settled or tried.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub after: Option<RateSummary>,
+    /// Settling, over the scenes where it ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settle: Option<SettleSummary>,
+}
+
+/// Collision and QA rates over a set of scenes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RateSummary {
+    /// Scenes counted.
+    pub scenes: u64,
+    /// Pairs over all scenes.
+    pub pairs_total: u64,
+    /// Colliding pairs over all scenes.
+    pub colliding_pairs: u64,
+    /// colliding_pairs / pairs_total (pooled over the scenes); 0 without pairs.
+    pub collision_rate: f64,
+    /// The mean of the scenes' collision rates.
+    pub mean_scene_collision_rate: f64,
+    /// Scenes with at least one colliding pair.
+    pub scenes_with_collisions: u64,
+    /// Floating objects over all scenes.
+    pub floating_objects: u64,
+    /// Scenes with at least one floating object.
+    pub scenes_with_floating: u64,
+    /// Zone violations over all scenes.
+    pub zone_violations: u64,
+    /// Scenes with no collision, no floating object and no zone violation.
+    pub clean_scenes: u64,
+    /// Pairs under MesaTask's released 5 cm rule, over all scenes.
+    pub mesatask_rule_pairs: u64,
+    /// mesatask_rule_pairs / pairs_total.
+    pub mesatask_rule_rate: f64,
+}
+
+/// What settling did over a dataset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SettleSummary {
+    /// Scenes settled.
+    pub settled: u64,
+    /// Scenes that could not be settled.
+    pub unsettled: u64,
+    /// Object displacements counted (every object of the settled scenes).
+    pub objects: u64,
+    /// Median displacement over those objects, cm.
+    pub median_displacement_cm: f64,
+    /// Mean displacement, cm.
+    pub mean_displacement_cm: f64,
+    /// Largest displacement, cm.
+    pub max_displacement_cm: f64,
+    /// Objects settling moved (displacement above 0).
+    pub moved_objects: u64,
+    /// Median displacement over the moved objects only, cm (0 when none moved).
+    pub median_moved_displacement_cm: f64,
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -184,8 +184,17 @@ pub fn kinds() -> &'static [Kind] {
                 name: "check",
                 schema_id: Some(CHECK_SCHEMA),
                 form: FileForm::Json,
-                summary: "qa/check.json (collisions, floating, zone violations)",
+                summary: "qa/check.json (collisions, floating, zone violations, settling)",
                 generate: schema_of::<CheckArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "check-summary",
+                schema_id: Some(CHECK_SUMMARY_SCHEMA),
+                form: FileForm::Json,
+                summary:
+                    "qa/summary.json (collision rates over the dataset, before and after settling)",
+                generate: schema_of::<CheckSummaryArtifact>,
                 semantic: no_semantics,
             },
             Kind {

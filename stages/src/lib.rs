@@ -29,6 +29,7 @@
 
 pub mod annotations;
 pub mod assets;
+pub mod check;
 pub mod demo;
 pub mod glb_read;
 pub mod glb_write;

@@ -20,7 +20,7 @@ use mesa_schemas::artifacts::{TaskRecord, TASKS_SCHEMA};
 use mesa_schemas::output::{parse_model_output, FINAL_ANSWER_MARKER};
 use mesa_schemas::{GalleryRecord, LlmLayout, TaskInfo};
 use mesa_stages::graph::{extract_graph, keyword_containers, GraphOptions, GraphScene};
-use mesa_stages::records::collide::colliding_names;
+use mesa_stages::records::collide::{colliding_names, Collider};
 use mesa_stages::records::corrupt::{corrupt, triplet_fields, Corruption, WRONG_RELATION};
 use mesa_stages::records::{dpo_pairs, round_layout, sft_record, RecordsConfig, SceneRecordsInput};
 use mesa_stages::tasks::prompts::{layout_instruction, Prompts, LAYOUT_GENERATION};
@@ -111,6 +111,7 @@ fn outputs_assembled_from_published_layouts_reproduce_the_records() {
             graph_lines: lines.clone(),
             containers,
             tasks: Vec::new(),
+            collider: Collider::Boxes,
         };
         let task = task_record(&g.name, 0, g.task.clone(), &g.record.reasoning_paragraph);
         let sft = sft_record(&instruction, &input, &task).expect("an SFT record");
@@ -282,6 +283,7 @@ fn every_corruption_of_every_published_task_is_what_it_says() {
             graph_lines: lines.clone(),
             containers,
             tasks: tasks.clone(),
+            collider: Collider::Boxes,
         };
         let tolerance_cm = records.collision.tolerance_mm / 10.0;
         let before: BTreeSet<(String, String)> = colliding_names(&g.layout, tolerance_cm)

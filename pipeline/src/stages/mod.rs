@@ -4,6 +4,7 @@
 
 pub mod annotate;
 pub mod assets;
+pub mod check;
 pub mod dataset_cache;
 pub mod graph;
 pub mod ingest;
@@ -38,6 +39,7 @@ pub fn pipeline_stages(config: &Config) -> Vec<Box<dyn SceneStage>> {
     }
     stages.extend([
         Box::new(ingest::IngestStage::new()) as Box<dyn SceneStage>,
+        Box::new(check::CheckStage::new()),
         Box::new(graph::GraphStage::new()),
         Box::new(render::RenderStage::for_pipeline()),
         Box::new(tasks::TasksStage::new()),

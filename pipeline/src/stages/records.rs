@@ -39,8 +39,11 @@ use crate::config::{Config, ProgressMode};
 use crate::fsio::{sha256_hex, write_atomic, AtomicFile};
 use crate::progress::Progress;
 use crate::runner::{discover_scenes, Scene, RUN_DIR};
+use crate::stages::assets::INDEX;
+use crate::stages::check::{read_dataset_layout, ShapeLibrary};
 use crate::stages::scene_docs::{chosen_layout, read_scene_docs, GRAPH_JSON, GRAPH_TXT};
 use crate::stages::tasks::TASKS_FILE;
+use mesa_stages::records::collide::Collider;
 
 /// The records folder, relative to the dataset.
 pub const RECORDS_DIR: &str = "records";
@@ -86,6 +89,9 @@ pub struct RecordsSummary {
     pub records: BTreeMap<String, u64>,
     /// DPO pairs per corruption.
     pub corruptions: BTreeMap<String, u64>,
+    /// DPO scenes by how their collision corruptions were verified (`meshes`: the assets'
+    /// collision shapes, as `mesa check` tests; `boxes`: oriented boxes, without assets).
+    pub collision_checks: BTreeMap<String, u64>,
     /// DPO prompts that got fewer rejected outputs than asked.
     pub prompts_short: u64,
     /// Warnings, by scene.
@@ -174,11 +180,17 @@ fn plan_scene(scene: Scene) -> Planned {
 struct SceneOut {
     files: BTreeMap<&'static str, Vec<String>>,
     corruptions: BTreeMap<&'static str, u64>,
+    /// How its collision corruptions were verified (DPO scenes).
+    collider: Option<&'static str>,
     prompts_short: u64,
     warnings: Vec<String>,
 }
 
 struct Shared<'a> {
+    /// The dataset folder.
+    dataset: &'a Path,
+    /// The assets' collision shapes, when the dataset has an asset index.
+    shapes: Option<ShapeLibrary>,
     instruction: &'a str,
     records: &'a RecordsConfig,
     graph: GraphOptions,
@@ -198,6 +210,35 @@ fn read_tasks(scene: &Scene) -> Result<Vec<TaskRecord>, String> {
         .collect()
 }
 
+/// How a DPO scene's collision corruptions are verified: on the assets' collision shapes (as
+/// `mesa check` tests) when every object has one, else on boxes, with why.
+fn collider_of(scene: &Scene, layout_rel: &str, shared: &Shared<'_>) -> (Collider, Option<String>) {
+    let Some(library) = &shared.shapes else {
+        // No asset index (a dataset of published layouts): boxes, as documented.
+        return (Collider::Boxes, None);
+    };
+    let boxes = |why: String| {
+        (
+            Collider::Boxes,
+            Some(format!("collision corruptions verified on boxes: {why}")),
+        )
+    };
+    let layout = match read_dataset_layout(&scene.path(layout_rel)) {
+        Ok((layout, _)) => layout,
+        Err(e) => return boxes(format!("{e:#}")),
+    };
+    let mut shapes = BTreeMap::new();
+    for object in &layout.objects {
+        match library.shape_of(shared.dataset, object) {
+            Ok(shape) => {
+                shapes.insert(object.instance.clone(), shape);
+            }
+            Err(why) => return boxes(format!("{}: {why}", object.instance)),
+        }
+    }
+    (Collider::Meshes(shapes), None)
+}
+
 fn build_scene(scene: &Scene, split: Split, shared: &Shared<'_>) -> Result<SceneOut, String> {
     let docs = read_scene_docs(scene).map_err(|e| format!("{e:#}"))?;
     let tasks = read_tasks(scene)?;
@@ -211,12 +252,21 @@ fn build_scene(scene: &Scene, split: Split, shared: &Shared<'_>) -> Result<Scene
         warnings: docs.warnings.clone(),
         ..SceneOut::default()
     };
+    let collider = if split == Split::Dpo {
+        let (collider, why) = collider_of(scene, docs.layout_rel, shared);
+        out.warnings.extend(why);
+        out.collider = Some(collider.name());
+        collider
+    } else {
+        Collider::Boxes
+    };
     let input = SceneRecordsInput {
         scene_id: scene.scene_id.clone(),
         layout: round_layout(&docs.layout, shared.records.decimals),
         graph_lines: docs.graph_lines,
         containers: docs.graph.nodes.iter().map(|n| n.container).collect(),
         tasks,
+        collider,
     };
     for task in &input.tasks {
         let sft = match sft_record(shared.instruction, &input, task) {
@@ -304,7 +354,7 @@ impl Sink {
 }
 
 /// The digest of everything a records run depends on besides the scene files.
-fn config_digest(config: &Config, instruction: &str) -> String {
+fn config_digest(dataset: &Path, config: &Config, instruction: &str) -> String {
     #[derive(Serialize)]
     struct Fingerprint<'a> {
         records: &'a RecordsConfig,
@@ -312,6 +362,8 @@ fn config_digest(config: &Config, instruction: &str) -> String {
         seed: u64,
         instruction: &'a str,
         version: &'a str,
+        /// The collision corruption reads the assets' shapes (the index has their digests).
+        asset_index: Option<String>,
     }
     crate::runner::digest_of(&Fingerprint {
         records: &config.records,
@@ -319,6 +371,9 @@ fn config_digest(config: &Config, instruction: &str) -> String {
         seed: config.run.seed,
         instruction,
         version: env!("CARGO_PKG_VERSION"),
+        asset_index: std::fs::read(dataset.join(INDEX))
+            .ok()
+            .map(|b| sha256_hex(&b)),
     })
 }
 
@@ -369,7 +424,7 @@ pub fn run_records(
         .iter()
         .map(|b| format!("{b:02x}"))
         .collect();
-    let config_digest = config_digest(config, &instruction);
+    let config_digest = config_digest(dataset, config, &instruction);
     let marker_path = dataset.join(MARKER_FILE);
     let out_dir = dataset.join(RECORDS_DIR);
     if !options.force {
@@ -422,7 +477,14 @@ pub fn run_records(
         let atomic = AtomicFile::create(&path).with_context(|| format!("{}", path.display()))?;
         sinks.insert(file, Sink::Lines(JsonLinesWriter::new(atomic)));
     }
+    let shapes = if dataset.join(INDEX).is_file() {
+        Some(ShapeLibrary::load(dataset)?)
+    } else {
+        None
+    };
     let shared = Shared {
+        dataset,
+        shapes,
         instruction: &instruction,
         records: &config.records,
         graph: GraphOptions::from(&config.graph),
@@ -460,6 +522,12 @@ pub fn run_records(
                     }
                     for (kind, n) in out.corruptions {
                         *summary.corruptions.entry(kind.to_owned()).or_default() += n;
+                    }
+                    if let Some(collider) = out.collider {
+                        *summary
+                            .collision_checks
+                            .entry(collider.to_owned())
+                            .or_default() += 1;
                     }
                     summary.prompts_short += out.prompts_short;
                     summary
@@ -610,11 +678,18 @@ pub fn format_records_summary(summary: &RecordsSummary) -> String {
             .iter()
             .map(|(k, n)| format!("{k} {n}"))
             .collect();
+        let checks: Vec<String> = summary
+            .collision_checks
+            .iter()
+            .map(|(k, n)| format!("{n} scenes on {k}"))
+            .collect();
         let _ = writeln!(
             out,
-            "  DPO rejected outputs by corruption: {}; {} prompts got fewer than asked",
+            "  DPO rejected outputs by corruption: {}; {} prompts got fewer than asked; \
+             collisions verified: {}",
             kinds.join(", "),
-            summary.prompts_short
+            summary.prompts_short,
+            checks.join(", ")
         );
     }
     for (scene, why) in summary.excluded.iter().take(10) {

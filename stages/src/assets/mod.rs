@@ -15,6 +15,7 @@
 //!
 //! [`build_text_index`] makes the text index of the lexical encoder from the annotations.
 
+pub mod decompose;
 pub mod shapes;
 pub mod synthetic;
 
@@ -29,7 +30,7 @@ use crate::text::{document_frequency, features, LEXICAL_ENCODER};
 
 /// Bumped when the indexing of an unchanged asset would give another record: every asset is
 /// then re-indexed.
-pub const INDEX_VERSION: u32 = 2;
+pub const INDEX_VERSION: u32 = 3;
 
 /// How an asset's front is brought to face the observer (-y in the table frame).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
@@ -42,6 +43,19 @@ pub enum FrontAlignment {
     /// 90°, 180°, 270°) turns the asset by -90·k degrees about the vertical
     /// (`pose_z_rot_angle = -deg2rad(angles[frontView])`).
     FrontView,
+}
+
+/// How an asset's collision shape is cut into convex parts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum DecompositionMethod {
+    /// Parts within `decomposition_tolerance_m` of the mesh (a piece's hull is cut in two
+    /// until it reaches no farther outside the object): what `mesa check` needs, so that an
+    /// apple resting in a bowl does not overlap the bowl's parts.
+    Adaptive,
+    /// parry3d's V-HACD (`vhacd_*` keys): fewer parts, but a part may bridge millimetres of a
+    /// cavity.
+    Vhacd,
 }
 
 /// The `[assets]` section of `mesa.toml`.
@@ -60,6 +74,13 @@ pub struct AssetsConfig {
     /// Warn when an annotation bbox differs from the mesh by more than this fraction on
     /// some axis (retrieval scores sizes from the annotation).
     pub bbox_tolerance: f64,
+    /// The convex decomposition: "adaptive" (parts within decomposition_tolerance_m of the
+    /// mesh) or "vhacd" (parry3d's V-HACD).
+    pub decomposition: DecompositionMethod,
+    /// Adaptive decomposition: the most a convex part may reach outside the object, metres.
+    pub decomposition_tolerance_m: f64,
+    /// Adaptive decomposition: most convex parts per asset.
+    pub decomposition_max_parts: u32,
     /// V-HACD voxel resolution (voxels along the longest axis) of the convex decomposition.
     pub vhacd_resolution: u32,
     /// V-HACD maximum concavity of a part (lower: more, tighter parts).
@@ -80,6 +101,9 @@ impl Default for AssetsConfig {
             min_extent_m: 1e-4,
             max_plausible_extent_m: 5.0,
             bbox_tolerance: 0.05,
+            decomposition: DecompositionMethod::Adaptive,
+            decomposition_tolerance_m: 0.001,
+            decomposition_max_parts: 128,
             vhacd_resolution: 64,
             vhacd_concavity: 0.01,
             vhacd_max_parts: 32,

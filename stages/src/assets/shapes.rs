@@ -1,6 +1,7 @@
 //! Collision shapes for `mesa check`: the convex hull of an asset and a convex decomposition
-//! (parry3d's V-HACD), so that a bowl's or a cup's inside stays empty instead of being filled
-//! by one hull.
+//! (by default the adaptive one of [`super::decompose`], whose parts stay within a tolerance of
+//! the mesh; or parry3d's V-HACD), so that a bowl's or a cup's inside stays empty instead of
+//! being filled by one hull.
 
 use mesa_schemas::artifacts::{ConvexPart, Decomposition};
 use parry3d::math::Point;
@@ -8,7 +9,8 @@ use parry3d::transformation::try_convex_hull;
 use parry3d::transformation::vhacd::{VHACDParameters, VHACD};
 use parry3d::transformation::voxelization::FillMode;
 
-use super::AssetsConfig;
+use super::decompose::{decompose, AdaptiveParams};
+use super::{AssetsConfig, DecompositionMethod};
 
 /// The hull and the parts of one asset.
 #[derive(Debug, Clone, PartialEq)]
@@ -124,12 +126,18 @@ pub fn collision_shapes(
         return None;
     }
     let hull = part(&hull_points, &hull_triangles, config.shape_precision_m);
+    if config.decomposition == DecompositionMethod::Adaptive {
+        return Some(adaptive_shapes(positions_m, triangles, hull, config));
+    }
     let decomposition = Decomposition {
         method: "vhacd".to_owned(),
-        resolution: config.vhacd_resolution,
-        convex_hull_approximation: true,
-        concavity: config.vhacd_concavity,
         max_parts: config.vhacd_max_parts,
+        tolerance_m: None,
+        max_deviation_m: None,
+        solid: None,
+        resolution: Some(config.vhacd_resolution),
+        convex_hull_approximation: Some(true),
+        concavity: Some(config.vhacd_concavity),
     };
     if hull.volume_m3 > 0.0
         && closed_volume(positions_m, triangles).is_some_and(|v| v >= CONVEX_FILL * hull.volume_m3)
@@ -185,8 +193,8 @@ pub fn collision_shapes(
                 .filter(|(p, t)| !p.is_empty() && !t.is_empty())
                 .map(|(p, t)| part(p, t, config.shape_precision_m))
                 .collect();
-            used.resolution = resolution;
-            used.convex_hull_approximation = approximation;
+            used.resolution = Some(resolution);
+            used.convex_hull_approximation = Some(approximation);
             if !parts.is_empty() {
                 break;
             }
@@ -214,4 +222,78 @@ pub fn collision_shapes(
         decomposition,
         warning: None,
     })
+}
+
+/// The adaptive decomposition, or the hull with a warning when it gives no part.
+fn adaptive_shapes(
+    positions_m: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    hull: ConvexPart,
+    config: &AssetsConfig,
+) -> Shapes {
+    let params = AdaptiveParams {
+        tolerance_m: config.decomposition_tolerance_m,
+        max_parts: config.decomposition_max_parts.max(1) as usize,
+        // Below a fifth of the tolerance, cutting again cannot help.
+        min_size_m: config.decomposition_tolerance_m / 5.0,
+    };
+    let mut decomposition = Decomposition {
+        method: "adaptive".to_owned(),
+        max_parts: config.decomposition_max_parts,
+        tolerance_m: Some(config.decomposition_tolerance_m),
+        max_deviation_m: None,
+        solid: None,
+        resolution: None,
+        convex_hull_approximation: None,
+        concavity: None,
+    };
+    let decomposed = decompose(positions_m, triangles, &params);
+    let Some(decomposed) = decomposed.filter(|d| !d.parts.is_empty()) else {
+        return Shapes {
+            parts: vec![hull.clone()],
+            hull,
+            decomposition: Decomposition {
+                method: "hull".to_owned(),
+                ..decomposition
+            },
+            warning: Some(
+                "the convex decomposition found no part in this mesh: its collision shape is \
+                 the convex hull (cavities are filled)"
+                    .to_owned(),
+            ),
+        };
+    };
+    let parts = decomposed
+        .parts
+        .iter()
+        .map(|p| ConvexPart {
+            points_m: p
+                .points_m
+                .iter()
+                .map(|q| q.map(|v| round(v as f32, config.shape_precision_m)))
+                .collect(),
+            volume_m3: p.volume_m3,
+        })
+        .collect();
+    decomposition.max_deviation_m = Some(round(
+        decomposed.max_deviation_m as f32,
+        config.shape_precision_m / 10.0,
+    ));
+    decomposition.solid = Some(decomposed.solid);
+    let warning = (decomposed.max_deviation_m > config.decomposition_tolerance_m).then(|| {
+        format!(
+            "the collision shape's {} convex parts (decomposition_max_parts) reach up to {:.1} \
+             mm outside the mesh, more than decomposition_tolerance_m ({:.1} mm): `mesa check` \
+             may see contacts with this asset as collisions",
+            config.decomposition_max_parts,
+            decomposed.max_deviation_m * 1000.0,
+            config.decomposition_tolerance_m * 1000.0
+        )
+    });
+    Shapes {
+        hull,
+        parts,
+        decomposition,
+        warning,
+    }
 }

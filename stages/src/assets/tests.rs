@@ -2,8 +2,6 @@
 
 use approx::assert_abs_diff_eq;
 use parry3d::math::Point;
-use parry3d::query::PointQuery;
-use parry3d::shape::ConvexPolyhedron;
 
 use super::synthetic::Mesh;
 use super::*;
@@ -13,14 +11,46 @@ fn index(mesh: &Mesh, annotation: Option<&AssetAnnotation>, config: &AssetsConfi
     index_asset("uid", "digest", &mesh.to_glb(1.0), annotation, config)
 }
 
+/// Whether a part's convex hull holds `p`: `p` is on the inner side of every face of the hull
+/// (within 1e-6 m). Face planes from parry's hull, oriented away from the hull's centroid;
+/// parry's `ConvexPolyhedron` refuses some valid hulls (coplanar faces it cannot merge).
 fn contains(part: &mesa_schemas::artifacts::ConvexPart, p: [f64; 3]) -> bool {
     let points: Vec<Point<f32>> = part
         .points_m
         .iter()
         .map(|q| Point::new(q[0] as f32, q[1] as f32, q[2] as f32))
         .collect();
-    ConvexPolyhedron::from_convex_hull(&points).is_some_and(|hull| {
-        hull.contains_local_point(&Point::new(p[0] as f32, p[1] as f32, p[2] as f32))
+    let Ok((vertices, faces)) = parry3d::transformation::try_convex_hull(&points) else {
+        return false;
+    };
+    if faces.is_empty() {
+        return false;
+    }
+    let v = |i: u32| {
+        let q = vertices[i as usize];
+        [f64::from(q.x), f64::from(q.y), f64::from(q.z)]
+    };
+    let n = vertices.len() as f64;
+    let centroid: [f64; 3] =
+        std::array::from_fn(|k| vertices.iter().map(|q| f64::from(q[k])).sum::<f64>() / n);
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    faces.iter().all(|f| {
+        let (a, b, c) = (v(f[0]), v(f[1]), v(f[2]));
+        let (e1, e2) = (sub(b, a), sub(c, a));
+        let mut normal = [
+            e1[1] * e2[2] - e1[2] * e2[1],
+            e1[2] * e2[0] - e1[0] * e2[2],
+            e1[0] * e2[1] - e1[1] * e2[0],
+        ];
+        let len = dot(normal, normal).sqrt();
+        if len < 1e-12 {
+            return true;
+        }
+        if dot(normal, sub(centroid, a)) > 0.0 {
+            normal = normal.map(|x| -x);
+        }
+        dot(normal, sub(p, a)) / len <= 1e-6
     })
 }
 
@@ -47,7 +77,8 @@ fn a_box_is_measured_in_the_table_frame() {
     let shapes = indexed.shapes.expect("shapes");
     assert_abs_diff_eq!(shapes.hull.volume_m3, 0.1 * 0.2 * 0.3, epsilon = 1e-5);
     // A closed convex mesh is its own hull: one part.
-    assert_eq!(shapes.decomposition.method, "convex");
+    assert_eq!(shapes.decomposition.method, "adaptive");
+    assert_eq!(shapes.decomposition.solid, Some(true));
     assert_eq!(shapes.parts.len(), 1);
 }
 
@@ -187,7 +218,7 @@ fn the_decomposition_of_a_vessel_keeps_its_cavity() {
         let vessel = Mesh::vessel(radius, height, 0.006, 0.008);
         let indexed = index(&vessel, None, &AssetsConfig::default());
         let shapes = indexed.shapes.expect("shapes");
-        assert_eq!(shapes.decomposition.method, "vhacd", "{name}");
+        assert_eq!(shapes.decomposition.method, "adaptive", "{name}");
         assert!(
             shapes.parts.len() > 1,
             "{name}: {} parts",

@@ -1,17 +1,104 @@
-//! Box-level collision test of an LLM layout: each object is its oriented bounding box (size
-//! before rotation, turned by its yaw about z, centred at its position), and two objects
-//! collide when those boxes interpenetrate deeper than a tolerance.
+//! The collision test of the collision corruption (SPEC 5.9: a corruption is kept only if
+//! `check` finds a new colliding pair), on an LLM layout:
 //!
-//! This stands in for `mesa check` (SPEC 5.6), which tests asset meshes and is not built yet:
-//! boxes overestimate shapes (a mug's box includes the air beside its handle), so a pair can
-//! overlap as boxes and not as meshes. The collision corruption of `mesa records` only needs
-//! to know that it created a new overlap, and compares against the pairs that already overlap
-//! in the chosen layout (fruit in a bowl overlaps the bowl's box), so boxes serve it.
-//! Once `check` exists, the corruption should call it instead.
+//! - [`Collider::Meshes`]: `mesa check`'s own test ([`crate::check`]): each object is its
+//!   asset's collision shape, placed at its position, turned by its yaw, scaled to its size
+//!   along the asset's axes; two collide when their convex parts interpenetrate deeper than the
+//!   tolerance. Used when every object's asset has collision shapes in the asset index.
+//! - [`Collider::Boxes`]: each object is its oriented bounding box (size before rotation, turned
+//!   by its yaw, centred at its position). For layouts without assets (the published records):
+//!   boxes overestimate shapes (a mug's box includes the air beside its handle), but the
+//!   corruption compares against the pairs that already overlap in the chosen layout, so a new
+//!   overlap is still a collision it made.
 
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use mesa_schemas::rotation::quat_xyzw_from_yaw_deg;
 use mesa_schemas::LlmLayout;
 
+use crate::check::{collisions_of, AssetShape, Body, PhysicsScene, PlacedObject, Pose};
 use crate::graph::sin_cos_deg;
+
+/// How the collision corruption tests a layout.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Collider {
+    /// Oriented bounding boxes.
+    Boxes,
+    /// The assets' collision shapes, by instance (every object of the layout has one).
+    Meshes(BTreeMap<String, Arc<AssetShape>>),
+}
+
+impl Collider {
+    /// `meshes` or `boxes`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Boxes => "boxes",
+            Self::Meshes(_) => "meshes",
+        }
+    }
+
+    /// The colliding pairs of a layout by instance names (sorted within and across pairs):
+    /// penetration deeper than `tolerance_cm`.
+    pub fn colliding_names(&self, layout: &LlmLayout, tolerance_cm: f64) -> Vec<(String, String)> {
+        match self {
+            Self::Boxes => colliding_names(layout, tolerance_cm),
+            Self::Meshes(shapes) => mesh_colliding_names(layout, shapes, tolerance_cm),
+        }
+    }
+}
+
+/// The pose of an LLM layout object for its asset: its box centre, its yaw, and the scale that
+/// makes the asset its size (per axis of the asset).
+fn llm_pose(object: &mesa_schemas::LlmObject, shape: &AssetShape) -> Pose {
+    let size_m = object.size_cm.0.map(|v| v / 100.0);
+    Pose {
+        position_m: object.position_cm.0.map(|v| v / 100.0),
+        rotation_xyzw: quat_xyzw_from_yaw_deg(object.z_rotation_deg),
+        scale: std::array::from_fn(|k| {
+            if shape.size_m[k] > 0.0 {
+                size_m[k] / shape.size_m[k]
+            } else {
+                1.0
+            }
+        }),
+    }
+}
+
+fn mesh_colliding_names(
+    layout: &LlmLayout,
+    shapes: &BTreeMap<String, Arc<AssetShape>>,
+    tolerance_cm: f64,
+) -> Vec<(String, String)> {
+    let scene = PhysicsScene {
+        zone_m: layout.zone_cm.0.map(|v| v / 100.0),
+        restricted_zone_m: None,
+        objects: layout
+            .objects
+            .iter()
+            .map(|o| PlacedObject {
+                instance: o.instance.clone(),
+                body: shapes
+                    .get(&o.instance)
+                    .and_then(|shape| Body::new(shape.place(&llm_pose(o, shape))))
+                    .ok_or_else(|| format!("{}: no collision shape", o.instance)),
+            })
+            .collect(),
+    };
+    let mut names: Vec<(String, String)> = collisions_of(&scene, tolerance_cm / 100.0)
+        .into_iter()
+        .map(|c| {
+            let (a, b) = (&layout.objects[c.a].instance, &layout.objects[c.b].instance);
+            if a <= b {
+                (a.clone(), b.clone())
+            } else {
+                (b.clone(), a.clone())
+            }
+        })
+        .collect();
+    names.sort();
+    names
+}
 
 /// An object's oriented bounding box: yaw only (the LLM form has no tilt).
 #[derive(Debug, Clone, Copy, PartialEq)]

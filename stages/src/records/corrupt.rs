@@ -3,8 +3,9 @@
 //!
 //! - **collision**: a random subset of objects is perturbed (position with probability 0.8,
 //!   else rotation or size) by up to 20% of the zone's width / depth, staying inside the zone;
-//!   kept only when the layout then has a colliding pair it did not have (oriented-box overlap
-//!   deeper than the tolerance, see [`crate::records::collide`]). The scene-graph lines are
+//!   kept only when the layout then has a colliding pair it did not have (the assets' collision
+//!   shapes interpenetrating deeper than the tolerance, as `mesa check` tests them; oriented
+//!   boxes for layouts without assets; see [`crate::records::collide`]). The scene-graph lines are
 //!   those of the perturbed layout, so the only flaw is the collision.
 //! - **relation**: a subset of the scene graph's relation edges is removed or replaced by a
 //!   wrong one (left of ↔ right of, in front of ↔ behind, above → below, in → above); the
@@ -26,7 +27,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::graph::{extract_graph, GraphOptions, GraphScene};
-use crate::records::collide::{colliding_names, YawBox};
+use crate::records::collide::YawBox;
 use crate::records::{round_layout, RecordsConfig, SceneRecordsInput};
 use crate::seeding::rng_for;
 use crate::tasks::reasoning::rewrite_counts;
@@ -268,8 +269,11 @@ fn collision(
         return Err("a collision needs two objects".to_owned());
     }
     let tolerance_cm = cfg.tolerance_mm / 10.0;
-    let before: BTreeSet<(String, String)> =
-        colliding_names(layout, tolerance_cm).into_iter().collect();
+    let before: BTreeSet<(String, String)> = input
+        .collider
+        .colliding_names(layout, tolerance_cm)
+        .into_iter()
+        .collect();
     let [x_min, x_max, y_min, y_max] = layout.zone_cm.0;
     let (width, depth) = (x_max - x_min, y_max - y_min);
     let most = ((n as f64 * cfg.subset_fraction).ceil() as usize).clamp(1, n);
@@ -309,7 +313,9 @@ fn collision(
             keep_inside(object, &layout.zone_cm.0);
         }
         let perturbed = round_layout(&perturbed, config.decimals);
-        let new: Vec<(String, String)> = colliding_names(&perturbed, tolerance_cm)
+        let new: Vec<(String, String)> = input
+            .collider
+            .colliding_names(&perturbed, tolerance_cm)
             .into_iter()
             .filter(|pair| !before.contains(pair))
             .collect();

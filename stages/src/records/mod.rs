@@ -6,8 +6,8 @@
 //!   the `input` the task info JSON (zones from the layout), the `output` the model output text
 //!   (SPEC 4): reasoning, scene-graph lines, the marker, the LLM layout JSON;
 //! - [`corrupt`]: the collision, relation and missing-object corruptions, each verified;
-//! - [`collide`]: the oriented-box overlap test the collision corruption uses (in place of
-//!   `mesa check`, not built yet);
+//! - [`collide`]: the collision test of the collision corruption (`mesa check`'s mesh test,
+//!   or oriented boxes for layouts without assets);
 //! - [`split`]: train / dpo / test by scene, deterministic, stratified by table type;
 //! - [`write`](mod@write): streaming JSON array and JSON Lines writers, `dataset_info.json`.
 //!
@@ -157,6 +157,8 @@ pub struct SceneRecordsInput {
     pub containers: Vec<bool>,
     /// The scene's tasks.
     pub tasks: Vec<TaskRecord>,
+    /// How the collision corruption finds colliding pairs.
+    pub collider: collide::Collider,
 }
 
 /// A record that could not be built, with why.

@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# `mesa check` against trimesh's CollisionManager (python-fcl) on the same convex parts: the
+# `mesa demo` scene with the number of objects closest to 15 (its true layout), shapes from
+# `mesa assets`. mesa is timed by the criterion bench (`stages/benches/check.rs`, placement
+# included), FCL by bench/check_vs_fcl.py (transforms set, then the query; shapes built once).
+#
+#   bench/check_vs_fcl.sh [DIR]     (DIR: where the demo dataset goes; default a temp folder)
+#
+# Needs a Python with trimesh, numpy, scipy and python-fcl:
+#   python3 -m venv /work/venv-check
+#   /work/venv-check/bin/pip install trimesh numpy scipy python-fcl
+# (CHECK_BENCH_PYTHON chooses another interpreter.)
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+python="${CHECK_BENCH_PYTHON:-/work/venv-check/bin/python}"
+target="${CARGO_TARGET_DIR:-$root/target}"
+work="${1:-}"
+if [ -z "$work" ]; then
+  work="$(mktemp -d)"
+  trap 'rm -rf "$work"' EXIT
+fi
+(cd "$root" && cargo build --release -q)
+mesa="$target/release/mesa"
+"$mesa" demo "$work/demo" --scenes 6 -q
+"$mesa" assets "$work/demo" --progress off -q >/dev/null
+layout="$(python3 - "$work/demo" <<'PY'
+import glob, json, sys
+best = min(glob.glob(sys.argv[1] + "/scenes/*/*/truth/layout.json"),
+           key=lambda p: (abs(len(json.load(open(p))["objects"]) - 15), p))
+print(best)
+PY
+)"
+echo "scene: $layout"
+(cd "$root" && MESA_CHECK_BENCH_DATASET="$work/demo" MESA_CHECK_BENCH_LAYOUT="$layout" \
+  cargo bench -q -p mesa-stages --bench check 2>&1 | grep -E "check bench|^check/|time:")
+fcl="$("$python" "$root/bench/check_vs_fcl.py" "$work/demo" "$layout")"
+echo "fcl: $fcl"
+python3 - "$target/criterion" "$fcl" <<'PY'
+import json, sys
+crit, fcl = sys.argv[1], json.loads(sys.argv[2])
+def median_s(name):
+    return json.load(open(f"{crit}/check/{name}/new/estimates.json"))["median"]["point_estimate"] / 1e9
+ours_c, ours_f = median_s("collisions"), median_s("full")
+print(f"mesa check, colliding pairs with depth: {ours_c * 1e3:.3f} ms a scene")
+print(f"mesa check, the whole check.json:       {ours_f * 1e3:.3f} ms a scene")
+print(f"FCL in_collision_internal:               {fcl['fcl_collisions_s'] * 1e3:.3f} ms "
+      f"({fcl['objects']} objects, {fcl['triangles']} triangles)")
+print(f"FCL min_distance_internal:               {fcl['fcl_min_distance_s'] * 1e3:.3f} ms")
+print(f"speed-up, collisions: {fcl['fcl_collisions_s'] / ours_c:.1f}x; whole check vs FCL "
+      f"collisions + one distance query: "
+      f"{(fcl['fcl_collisions_s'] + fcl['fcl_min_distance_s']) / ours_f:.1f}x")
+PY

@@ -1,0 +1,136 @@
+//! `mesa check` of one scene of about 15 objects with cached collision shapes (issue 7). Run:
+//! `cargo bench -p mesa-stages --bench check`.
+//!
+//! The scene is a `mesa demo` true layout (real procedural assets: bowls, mugs, lamps, books,
+//! decomposed by `mesa assets`' adaptive decomposition), the one with the number of objects
+//! closest to 15. Shapes are loaded once (the asset index's cache); each iteration places every
+//! object's convex parts (position, rotation, scale) and checks:
+//!
+//! - `collisions`: every pair's penetration depth (what trimesh's `CollisionManager` answers:
+//!   `bench/check_vs_fcl.sh` compares the two on the same convex parts);
+//! - `full`: the whole check of `qa/check.json`: collisions, the fall of every object (floating),
+//!   zones, MesaTask's 5 cm rule.
+//!
+//! `MESA_CHECK_BENCH_DATASET` (a dataset with `assets/index/`) and `MESA_CHECK_BENCH_LAYOUT` (a
+//! dataset layout file) bench that scene instead (what the comparison script does).
+
+use std::collections::BTreeMap;
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use mesa_schemas::artifacts::{AssetIndexArtifact, ShapesArtifact};
+use mesa_schemas::DatasetLayout;
+use mesa_stages::annotations::Annotations;
+use mesa_stages::assets::{index_asset, AssetsConfig};
+use mesa_stages::check::{check_scene, collisions_of, AssetShape, PhysicsScene, Tolerances};
+use mesa_stages::demo::{write_demo, DemoOptions};
+
+fn read<T: serde::de::DeserializeOwned>(path: &Path) -> T {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Shapes from a dataset's asset index.
+fn indexed_shapes(dataset: &Path) -> BTreeMap<String, Arc<AssetShape>> {
+    let index: AssetIndexArtifact = read(&dataset.join("assets/index/assets.json"));
+    index
+        .assets
+        .iter()
+        .filter_map(|(uid, r)| {
+            let (s, g) = (r.shapes.as_ref()?, r.geometry.as_ref()?);
+            let artifact: ShapesArtifact = read(&dataset.join(&s.file));
+            Some((
+                uid.clone(),
+                Arc::new(AssetShape::new(uid, &artifact, g).expect("shape")),
+            ))
+        })
+        .collect()
+}
+
+/// A demo scene of about 15 objects and the shapes of its assets.
+fn demo_scene() -> (DatasetLayout, BTreeMap<String, Arc<AssetShape>>) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let summary = write_demo(dir.path(), &DemoOptions::default().with_scenes(6)).expect("demo");
+    let scene = summary
+        .scenes
+        .iter()
+        .min_by_key(|s| (s.objects as i64 - 15).abs())
+        .expect("a scene");
+    let layout: DatasetLayout = read(
+        &dir.path()
+            .join("scenes")
+            .join(&scene.table_type)
+            .join(&scene.scene_id)
+            .join("truth/layout.json"),
+    );
+    let annotations =
+        Annotations::read(&dir.path().join("assets/annotations.json")).expect("annotations");
+    let mut shapes = BTreeMap::new();
+    for object in &layout.objects {
+        let uid = &object.retrieved_uid;
+        if shapes.contains_key(uid) {
+            continue;
+        }
+        let bytes =
+            std::fs::read(dir.path().join(format!("assets/library/{uid}.glb"))).expect("glb");
+        let indexed = index_asset(
+            uid,
+            "",
+            &bytes,
+            annotations.get(uid),
+            &AssetsConfig::default(),
+        );
+        let shape = AssetShape::new(
+            uid,
+            &indexed.shapes.expect("shapes"),
+            &indexed.geometry.expect("geometry"),
+        )
+        .expect("shape");
+        shapes.insert(uid.clone(), Arc::new(shape));
+    }
+    (layout, shapes)
+}
+
+fn bench(c: &mut Criterion) {
+    let (layout, shapes) = match (
+        std::env::var_os("MESA_CHECK_BENCH_DATASET"),
+        std::env::var_os("MESA_CHECK_BENCH_LAYOUT"),
+    ) {
+        (Some(dataset), Some(layout)) => (
+            read(&PathBuf::from(layout)),
+            indexed_shapes(Path::new(&dataset)),
+        ),
+        _ => demo_scene(),
+    };
+    let parts: usize = layout
+        .objects
+        .iter()
+        .map(|o| shapes[&o.retrieved_uid].part_count())
+        .sum();
+    eprintln!(
+        "check bench: {} objects, {parts} convex parts",
+        layout.objects.len()
+    );
+    let tolerances = Tolerances::default();
+    let place = || {
+        PhysicsScene::from_layout(&layout, |o| {
+            shapes
+                .get(&o.retrieved_uid)
+                .cloned()
+                .ok_or_else(|| "no shape".to_owned())
+        })
+    };
+    let mut group = c.benchmark_group("check");
+    group.bench_function("collisions", |b| {
+        b.iter(|| black_box(collisions_of(&place(), tolerances.penetration_m)))
+    });
+    group.bench_function("full", |b| {
+        b.iter(|| black_box(check_scene(&place(), &tolerances)))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,334 @@
+//! Hand-built scenes with known answers: objects made as library assets are (a synthetic mesh,
+//! its collision shapes from `mesa assets`' decomposition), placed by layout poses.
+
+use std::sync::Arc;
+
+use approx::assert_abs_diff_eq;
+
+use super::*;
+use crate::assets::shapes::collision_shapes;
+use crate::assets::synthetic::Mesh;
+use crate::assets::{table_aligned_from_gltf, AssetsConfig};
+use crate::mesh::quat_from_axis_angle;
+
+/// An asset's collision shape as `mesa assets` makes it from a mesh in the glTF frame.
+fn shape(uid: &str, mesh: &Mesh) -> Arc<AssetShape> {
+    let aligned: Vec<[f64; 3]> = mesh
+        .positions
+        .iter()
+        .map(|p| table_aligned_from_gltf(*p, 0.0))
+        .collect();
+    let shapes =
+        collision_shapes(&aligned, &mesh.triangles, &AssetsConfig::default()).expect("shapes");
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in &aligned {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let c: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
+    let parts = shapes
+        .parts
+        .iter()
+        .map(|part| {
+            part.points_m
+                .iter()
+                .map(|p| [p[0] - c[0], p[1] - c[1], p[2] - c[2]])
+                .collect()
+        })
+        .collect();
+    Arc::new(AssetShape::from_parts(
+        uid,
+        parts,
+        std::array::from_fn(|k| hi[k] - lo[k]),
+    ))
+}
+
+/// A box of `size` (table x, y, z), metres.
+fn cuboid(size: [f64; 3]) -> Arc<AssetShape> {
+    // glTF (X, Y, Z) = table (x, z, -y).
+    shape("box", &Mesh::cuboid([size[0], size[2], size[1]]))
+}
+
+/// A ball of radius `r`.
+fn ball(r: f64) -> Arc<AssetShape> {
+    let n = 16;
+    let profile: Vec<[f64; 2]> = (0..=n)
+        .map(|i| {
+            let t = std::f64::consts::PI * i as f64 / n as f64;
+            [
+                if i == 0 || i == n { 0.0 } else { r * t.sin() },
+                r - r * t.cos(),
+            ]
+        })
+        .collect();
+    shape("ball", &Mesh::lathe(&profile, 32))
+}
+
+/// A bowl 16 cm wide and 6 cm tall: 6 mm wall, 8 mm floor (its inside floor at 8 mm).
+fn bowl() -> Arc<AssetShape> {
+    shape("bowl", &Mesh::vessel(0.08, 0.06, 0.006, 0.008))
+}
+
+struct Item {
+    name: &'static str,
+    shape: Arc<AssetShape>,
+    pose: Pose,
+}
+
+fn at(name: &'static str, shape: &Arc<AssetShape>, position_m: [f64; 3]) -> Item {
+    Item {
+        name,
+        shape: Arc::clone(shape),
+        pose: Pose {
+            position_m,
+            rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+            scale: [1.0; 3],
+        },
+    }
+}
+
+fn scene(items: &[Item]) -> PhysicsScene {
+    PhysicsScene {
+        zone_m: [0.0, 1.0, 0.0, 0.6],
+        restricted_zone_m: None,
+        objects: items
+            .iter()
+            .map(|item| PlacedObject {
+                instance: item.name.to_owned(),
+                body: Body::new(item.shape.place(&item.pose)).ok_or_else(|| "empty".to_owned()),
+            })
+            .collect(),
+    }
+}
+
+fn check(items: &[Item]) -> (PhysicsScene, Findings) {
+    let s = scene(items);
+    let f = check_scene(&s, &Tolerances::default());
+    (s, f)
+}
+
+#[test]
+fn two_interpenetrating_boxes_collide_by_their_overlap() {
+    let cube = cuboid([0.1, 0.1, 0.1]);
+    // 7 mm of overlap along x (the least way out); 3 cm in y and the full height in z.
+    let (_, f) = check(&[
+        at("a", &cube, [0.3, 0.3, 0.05]),
+        at("b", &cube, [0.393, 0.33, 0.05]),
+    ]);
+    assert_eq!(f.collisions.len(), 1);
+    assert_abs_diff_eq!(f.collisions[0].depth_m, 0.007, epsilon = 1e-5);
+    assert_abs_diff_eq!(f.collision_rate(), 1.0);
+    assert!(f.floating.is_empty());
+}
+
+#[test]
+fn touching_boxes_do_not_collide() {
+    let cube = cuboid([0.1, 0.1, 0.1]);
+    for gap in [0.0, 0.0005, -0.001] {
+        let (_, f) = check(&[
+            at("a", &cube, [0.3, 0.3, 0.05]),
+            at("b", &cube, [0.4 + gap, 0.3, 0.05]),
+            // Stacked on the first, touching it.
+            at("c", &cube, [0.3, 0.3, 0.15 + gap.max(0.0)]),
+        ]);
+        assert!(f.collisions.is_empty(), "gap {gap}: {:?}", f.collisions);
+        assert!(f.floating.is_empty(), "gap {gap}: {:?}", f.floating);
+        assert_eq!(f.pairs_total, 3);
+    }
+}
+
+#[test]
+fn an_apple_resting_in_a_bowl_is_not_a_collision_and_one_sunk_into_the_wall_is() {
+    let (bowl, apple) = (bowl(), ball(0.03));
+    // The bowl's centre is 3 cm up; its inside floor at 8 mm above the table. The apple rests
+    // on the floor, 0.5 mm of clearance.
+    let resting = [0.3, 0.3, 0.008 + 0.03 + 0.0005];
+    let (_, f) = check(&[
+        at("bowl_0", &bowl, [0.3, 0.3, 0.03]),
+        at("apple_0", &apple, resting),
+    ]);
+    assert!(f.collisions.is_empty(), "{:?}", f.collisions);
+    assert!(f.floating.is_empty(), "{:?}", f.floating);
+    // Sunk 1 cm into the wall: the inside wall is 7.4 cm from the axis; the apple's side
+    // reaches 8.4 cm.
+    let sunk = [0.3 + 0.074 - 0.03 + 0.01, 0.3, 0.008 + 0.03 + 0.0005 + 0.01];
+    let (_, f) = check(&[
+        at("bowl_0", &bowl, [0.3, 0.3, 0.03]),
+        at("apple_0", &apple, sunk),
+    ]);
+    assert_eq!(f.collisions.len(), 1, "{:?}", f.collisions);
+    let depth = f.collisions[0].depth_m;
+    assert!((0.008..0.012).contains(&depth), "depth {depth}");
+}
+
+#[test]
+fn a_book_a_centimetre_above_the_table_floats() {
+    let book = cuboid([0.2, 0.15, 0.03]);
+    let (s, f) = check(&[at("book_0", &book, [0.5, 0.3, 0.015 + 0.01])]);
+    assert_eq!(f.floating.len(), 1);
+    assert_abs_diff_eq!(f.floating[0].gap_m, 0.01, epsilon = 1e-6);
+    assert_eq!(f.floating[0].over, Support::Table);
+    let schema = f.to_schema(&s);
+    assert_eq!(schema.floating[0].over, "table");
+    assert_abs_diff_eq!(schema.floating[0].gap_mm, 10.0, epsilon = 1e-3);
+    // 1 mm up is within the tolerance.
+    let (_, f) = check(&[at("book_0", &book, [0.5, 0.3, 0.015 + 0.001])]);
+    assert!(f.floating.is_empty());
+}
+
+#[test]
+fn a_book_above_another_floats_over_it_and_rests_once_dropped() {
+    let book = cuboid([0.2, 0.15, 0.03]);
+    let (_, f) = check(&[
+        at("book_0", &book, [0.5, 0.3, 0.015]),
+        at("book_1", &book, [0.52, 0.3, 0.045 + 0.02]),
+    ]);
+    assert_eq!(f.floating.len(), 1);
+    assert_eq!(f.floating[0].object, 1);
+    assert_eq!(f.floating[0].over, Support::Object(0));
+    assert_abs_diff_eq!(f.floating[0].gap_m, 0.02, epsilon = 1e-6);
+}
+
+#[test]
+fn a_turned_slim_object_beside_another_does_not_collide() {
+    // A 30 × 2 × 2 cm stick turned 45°: its bounding box is 22.6 cm square. A 6 cm cube in
+    // that box's corner, clear of the stick.
+    let stick = cuboid([0.3, 0.02, 0.02]);
+    let cube = cuboid([0.06, 0.06, 0.06]);
+    let turn = quat_from_axis_angle([0.0, 0.0, 1.0], std::f64::consts::FRAC_PI_4);
+    let mut slim = at("stick_0", &stick, [0.5, 0.3, 0.01]);
+    slim.pose.rotation_xyzw = turn;
+    let items = [slim, at("cube_0", &cube, [0.5 + 0.07, 0.3 - 0.07, 0.03])];
+    let (s, f) = check(&items);
+    let (a, b) = (
+        s.objects[0].body.as_ref().expect("body"),
+        s.objects[1].body.as_ref().expect("body"),
+    );
+    assert!(
+        a.bounds.overlaps(&b.bounds, 0.0),
+        "the boxes should overlap"
+    );
+    assert!(f.collisions.is_empty(), "{:?}", f.collisions);
+    // The same cube on the stick's diagonal does collide.
+    let (_, f) = check(&[
+        items[0].clone_item(),
+        at("cube_0", &cube, [0.5 + 0.04, 0.3 + 0.04, 0.03]),
+    ]);
+    assert_eq!(f.collisions.len(), 1);
+}
+
+impl Item {
+    fn clone_item(&self) -> Item {
+        Item {
+            name: self.name,
+            shape: Arc::clone(&self.shape),
+            pose: self.pose,
+        }
+    }
+}
+
+#[test]
+fn a_non_uniform_scale_stretches_a_turned_object_along_its_own_axis() {
+    // The stick doubled along its own length and turned 90°: 60 cm along the table's y.
+    let stick = cuboid([0.3, 0.02, 0.02]);
+    let mut item = at("stick_0", &stick, [0.5, 0.3, 0.01]);
+    item.pose.rotation_xyzw = quat_from_axis_angle([0.0, 0.0, 1.0], std::f64::consts::FRAC_PI_2);
+    item.pose.scale = [2.0, 1.0, 1.0];
+    let (s, f) = check(&[item]);
+    let b = s.objects[0].body.as_ref().expect("body").bounds;
+    assert_abs_diff_eq!(b.max[1] - b.min[1], 0.6, epsilon = 1e-6);
+    assert_abs_diff_eq!(b.max[0] - b.min[0], 0.02, epsilon = 1e-6);
+    // It reaches from y = 0 to 0.6, the zone's depth: inside.
+    assert!(f.violations.is_empty(), "{:?}", f.violations);
+}
+
+#[test]
+fn zones_and_the_table_top_are_enforced() {
+    let cube = cuboid([0.1, 0.1, 0.1]);
+    let mut s = scene(&[
+        // 3 cm beyond the right edge (x = 1).
+        at("out_0", &cube, [0.98, 0.3, 0.05]),
+        // 4 mm beyond: within the 5 mm tolerance.
+        at("edge_0", &cube, [0.054 - 0.004 - 0.004, 0.5, 0.05]),
+        // Sunk 1 cm into the table.
+        at("sunk_0", &cube, [0.5, 0.1, 0.04]),
+        // Reaching 2 cm into the sink.
+        at("wet_0", &cube, [0.25, 0.45, 0.05]),
+    ]);
+    s.restricted_zone_m = Some([0.28, 0.6, 0.3, 0.6]);
+    let f = check_scene(&s, &Tolerances::default());
+    let found: Vec<(usize, ViolationKind, f64)> = f.violations.clone();
+    assert_eq!(found.len(), 3, "{found:?}");
+    assert_eq!((found[0].0, found[0].1), (0, ViolationKind::OutsideZone));
+    assert_abs_diff_eq!(found[0].2, 0.03, epsilon = 1e-6);
+    assert_eq!((found[1].0, found[1].1), (2, ViolationKind::BelowTable));
+    assert_abs_diff_eq!(found[1].2, 0.01, epsilon = 1e-6);
+    assert_eq!(
+        (found[2].0, found[2].1),
+        (3, ViolationKind::InRestrictedZone)
+    );
+    assert_abs_diff_eq!(found[2].2, 0.02, epsilon = 1e-5);
+}
+
+#[test]
+fn mesatasks_rule_counts_pairs_closer_than_five_centimetres() {
+    let cube = cuboid([0.1, 0.1, 0.1]);
+    let (s, f) = check(&[
+        at("a", &cube, [0.2, 0.3, 0.05]),
+        // 3 cm from a: a MesaTask "collision", not ours.
+        at("b", &cube, [0.33, 0.3, 0.05]),
+        // 6 cm from b.
+        at("c", &cube, [0.49, 0.3, 0.05]),
+    ]);
+    assert!(f.collisions.is_empty());
+    assert_eq!(f.mesatask_rule_pairs, 1);
+    assert_eq!(f.pairs_total, 3);
+    let schema = f.to_schema(&s);
+    assert!(schema.clean);
+    assert_eq!(schema.collision_rate, 0.0);
+}
+
+#[test]
+fn objects_without_shapes_are_listed_and_make_no_pair() {
+    let cube = cuboid([0.1, 0.1, 0.1]);
+    let mut s = scene(&[
+        at("a", &cube, [0.2, 0.3, 0.05]),
+        at("b", &cube, [0.5, 0.3, 0.05]),
+    ]);
+    s.objects.push(PlacedObject {
+        instance: "ghost_0".to_owned(),
+        body: Err("no retrieved_uid".to_owned()),
+    });
+    let f = check_scene(&s, &Tolerances::default());
+    assert_eq!(f.pairs_total, 1);
+    assert_eq!(f.unchecked, 1);
+    assert!(!f.clean());
+}
+
+#[test]
+fn a_dataset_layout_places_each_asset_by_its_object() {
+    let text = r#"{"item_placement_zone": [0, 100, 0, 60], "objects": [
+        {"instance": "box_0", "retrieved_uid": "box", "position": [30, 30, 5],
+         "rotation": [0, 0, 0, 1], "size": [10, 10, 10], "scale_factor": [1, 1, 1]},
+        {"instance": "box_1", "retrieved_uid": "box", "position": [39.3, 30, 5],
+         "rotation": [0, 0, 0, 1], "size": [10, 10, 10], "scale_factor": [1, 1, 1]},
+        {"instance": "box_2", "retrieved_uid": "missing", "position": [80, 30, 5],
+         "rotation": [0, 0, 0, 1], "size": [10, 10, 10], "scale_factor": [1, 1, 1]}]}"#;
+    let layout: DatasetLayout = serde_json::from_str(text).expect("layout");
+    let cube = cuboid([0.1, 0.1, 0.1]);
+    let s = PhysicsScene::from_layout(&layout, |o| match o.retrieved_uid.as_str() {
+        "box" => Ok(Arc::clone(&cube)),
+        other => Err(format!("asset {other} is not in the index")),
+    });
+    let f = check_scene(&s, &Tolerances::default());
+    assert_eq!(f.collisions.len(), 1);
+    assert_abs_diff_eq!(f.collisions[0].depth_m, 0.007, epsilon = 1e-5);
+    assert_eq!(f.unchecked, 1);
+    let schema = f.to_schema(&s);
+    assert_eq!(schema.collisions[0].a, "box_0");
+    assert_eq!(schema.collisions[0].b, "box_1");
+    assert_abs_diff_eq!(schema.collisions[0].depth_mm, 7.0, epsilon = 1e-2);
+}
