@@ -240,7 +240,9 @@ fn render_never_falls_back_to_the_coarse_layout_and_names_what_is_wrong() {
     std::fs::write(&llm, out.stdout).expect("write");
     render(&ws, &["--scenes", "office_table_0001"])
         .code(1)
-        .stderr(predicate::str::contains("an LLM layout (no retrieved_uid"));
+        .stderr(predicate::str::contains(
+            "an LLM layout has no assets to draw",
+        ));
     // A bad configuration value is refused before any work, naming the key.
     std::fs::write(ws.join("mesa.toml"), "[render]\nsupersampling = 0\n").expect("config");
     render(&ws, &[])

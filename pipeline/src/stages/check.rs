@@ -14,7 +14,6 @@ use mesa_schemas::artifacts::{
     AssetIndexArtifact, CheckArtifact, CheckFindings, CheckSummaryArtifact, RateSummary,
     SettleStatus, SettleSummary, ShapesArtifact, CHECK_SUMMARY_SCHEMA,
 };
-use mesa_schemas::layout_file::{read_layout_text, AnyLayout};
 use mesa_schemas::{DatasetLayout, LayoutObject};
 use mesa_stages::annotations::Annotations;
 use mesa_stages::check::{check_layout, AssetShape, CheckedLayout, LayoutSource, SETTLED_LAYOUT};
@@ -152,35 +151,9 @@ struct Fingerprint<'a> {
     version: &'a str,
 }
 
-/// Reads a dataset layout file (an LLM layout is an error: it names no assets), with the
-/// SHA-256 of its bytes.
+/// Reads a dataset layout file to check, with the SHA-256 of its bytes.
 pub fn read_dataset_layout(path: &Path) -> anyhow::Result<(DatasetLayout, String)> {
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let text = String::from_utf8(bytes).map_err(|_| {
-        anyhow!(
-            "{}: not UTF-8 text (expected a layout JSON)",
-            path.display()
-        )
-    })?;
-    let read = read_layout_text(&text).map_err(|problems| {
-        let lines: Vec<String> = problems
-            .iter()
-            .map(|p| format!("{}: {p}", path.display()))
-            .collect();
-        anyhow!(
-            "{} is not a valid layout:\n{}",
-            path.display(),
-            lines.join("\n")
-        )
-    })?;
-    match read.layout {
-        AnyLayout::Dataset(layout) => Ok((layout, sha256_hex(text.as_bytes()))),
-        AnyLayout::Llm(_) => bail!(
-            "{}: an LLM layout has no assets to check (expected a dataset layout with \
-             retrieved_uid and scale_factor per object; `mesa place` writes one)",
-            path.display()
-        ),
-    }
+    crate::stages::scene_docs::read_dataset_layout(path, "check")
 }
 
 impl SceneStage for CheckStage {

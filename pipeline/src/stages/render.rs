@@ -14,10 +14,9 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Context as _};
+use anyhow::{anyhow, Context as _};
 use mesa_schemas::artifacts::AssetIndexArtifact;
 use mesa_schemas::json::to_sorted_pretty;
-use mesa_schemas::layout_file::{read_layout_text, AnyLayout};
 use mesa_schemas::DatasetLayout;
 use mesa_stages::render::{
     asset_view_name, load_render_asset, place_layout, render_asset_view, LayoutChoice, LayoutScene,
@@ -73,35 +72,9 @@ pub fn no_layout(scene: &Scene, choice: LayoutChoice) -> anyhow::Error {
     )
 }
 
-/// Reads a dataset layout (an LLM layout has no assets to draw).
+/// Reads a dataset layout to draw, with the SHA-256 of its bytes.
 pub fn read_dataset_layout(path: &Path) -> anyhow::Result<(DatasetLayout, String)> {
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let sha = sha256_hex(&bytes);
-    let text = String::from_utf8(bytes).map_err(|_| {
-        anyhow!(
-            "{}: not UTF-8 text (expected a layout JSON)",
-            path.display()
-        )
-    })?;
-    let read = read_layout_text(&text).map_err(|problems| {
-        let lines: Vec<String> = problems
-            .iter()
-            .map(|p| format!("{}: {p}", path.display()))
-            .collect();
-        anyhow!(
-            "{} is not a valid layout:\n{}",
-            path.display(),
-            lines.join("\n")
-        )
-    })?;
-    match read.layout {
-        AnyLayout::Dataset(layout) => Ok((layout, sha)),
-        AnyLayout::Llm(_) => bail!(
-            "{}: an LLM layout (no retrieved_uid, no asset to draw): expected a dataset layout \
-             (`mesa convert --to dataset` gives one without assets)",
-            path.display()
-        ),
-    }
+    crate::stages::scene_docs::read_dataset_layout(path, "draw")
 }
 
 /// Loaded assets shared by the scenes of a run, bounded by `[render] asset_cache_mb`.

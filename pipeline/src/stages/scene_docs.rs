@@ -3,6 +3,8 @@
 //! (`graph/graph.txt` and `graph/graph.json`), checked to belong together; and whether a scene
 //! still awaits its annotator.
 
+use std::path::Path;
+
 use anyhow::{anyhow, bail, Context as _};
 use mesa_schemas::artifacts::GraphArtifact;
 use mesa_schemas::convert::llm_from_dataset;
@@ -11,7 +13,8 @@ use mesa_schemas::LlmLayout;
 use crate::fsio::sha256_hex;
 use crate::runner::Scene;
 use crate::stages::graph::LAYOUT_CANDIDATES;
-use mesa_schemas::layout_file::{read_layout_text, AnyLayout};
+use mesa_schemas::layout_file::{read_layout_text, AnyLayout, ReadLayout};
+use mesa_schemas::DatasetLayout;
 
 /// The scene graph files, relative to the scene folder.
 pub const GRAPH_TXT: &str = "graph/graph.txt";
@@ -97,25 +100,17 @@ fn lines_of(graph: &GraphArtifact) -> Vec<String> {
     lines
 }
 
-/// Reads a scene's layout and scene graph; an error says which file is missing or stale and
-/// which stage to rerun.
-pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
-    let layout_rel = chosen_layout(scene).ok_or_else(|| {
-        anyhow!(
-            "{}: no layout (expected {}; run `mesa ingest` first)",
-            scene.dir.display(),
-            LAYOUT_CANDIDATES.join(", ")
-        )
-    })?;
-    let path = scene.path(layout_rel);
-    let bytes = std::fs::read(&path).with_context(|| format!("{}: cannot read", path.display()))?;
+/// Reads a layout file in either form (dataset or LLM) with the SHA-256 of its bytes. An error
+/// names the file and lists every problem on its own line.
+pub fn read_any_layout(path: &Path) -> anyhow::Result<(ReadLayout, String)> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let sha = sha256_hex(&bytes);
     let text = String::from_utf8(bytes).map_err(|_| {
         anyhow!(
             "{}: not UTF-8 text (expected a layout JSON)",
             path.display()
         )
     })?;
-    let mut warnings = Vec::new();
     let read = read_layout_text(&text).map_err(|problems| {
         let lines: Vec<String> = problems
             .iter()
@@ -127,6 +122,41 @@ pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
             lines.join("\n")
         )
     })?;
+    Ok((read, sha))
+}
+
+/// Reads a dataset layout file (asset uids and scale factors per object) with the SHA-256 of
+/// its bytes. An LLM layout names no assets: an error that says what `needs_assets_to` (like
+/// "check", "draw") cannot do without them.
+pub fn read_dataset_layout(
+    path: &Path,
+    needs_assets_to: &str,
+) -> anyhow::Result<(DatasetLayout, String)> {
+    let (read, sha) = read_any_layout(path)?;
+    match read.layout {
+        AnyLayout::Dataset(layout) => Ok((layout, sha)),
+        AnyLayout::Llm(_) => bail!(
+            "{}: an LLM layout has no assets to {needs_assets_to} (no retrieved_uid or \
+             scale_factor per object): expected a dataset layout (`mesa place` writes one; \
+             `mesa convert --to dataset` gives one without assets)",
+            path.display()
+        ),
+    }
+}
+
+/// Reads a scene's layout and scene graph; an error says which file is missing or stale and
+/// which stage to rerun.
+pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
+    let layout_rel = chosen_layout(scene).ok_or_else(|| {
+        anyhow!(
+            "{}: no layout (expected {}; run `mesa ingest` first)",
+            scene.dir.display(),
+            LAYOUT_CANDIDATES.join(", ")
+        )
+    })?;
+    let path = scene.path(layout_rel);
+    let (read, layout_sha256) = read_any_layout(&path)?;
+    let mut warnings = Vec::new();
     let layout = match read.layout {
         AnyLayout::Dataset(dataset) => {
             let converted = llm_from_dataset(&dataset);
@@ -194,7 +224,7 @@ pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
     }
     Ok(SceneDocs {
         layout_rel,
-        layout_sha256: sha256_hex(text.as_bytes()),
+        layout_sha256,
         layout,
         graph_lines,
         graph,
