@@ -12,7 +12,12 @@ once (the cached shapes), then each repeat sets every object's transform and ask
 - distance: `min_distance_internal(return_names=True)` (FCL has no all-pairs distance query;
   one call is a lower bound of the cost of MesaTask's 5 cm rule).
 
-Prints one JSON object: objects, triangles, and the median seconds of each query.
+- scene from the cache: what checking one scene takes with FCL when the assets' parts are
+  cached unscaled (as `mesa check` has them): each object's mesh scaled (scale factors differ
+  per scene, so FCL's BVHs are built per scene), added, then the collision query. This is
+  the counterpart of mesa's bench, which places every part and checks each iteration.
+
+Prints one JSON object: objects, triangles, and the median seconds of each.
 
 Needs: python -m venv /work/venv-check && /work/venv-check/bin/pip install trimesh numpy scipy
 python-fcl (trimesh's convex hull uses scipy).
@@ -46,28 +51,48 @@ def main():
     repeats = int(sys.argv[3]) if len(sys.argv) > 3 else 200
     index = json.load(open(os.path.join(dataset, "assets/index/assets.json")))["assets"]
     layout = json.load(open(layout_path))
-    manager = trimesh.collision.CollisionManager()
-    transforms = {}
-    triangles = 0
+    # The cache: each asset's convex parts as one mesh, unscaled, centred on its box (what
+    # `mesa assets` caches, made once per asset).
+    cached = {}
     for obj in layout["objects"]:
-        record = index[obj["retrieved_uid"]]
+        uid = obj["retrieved_uid"]
+        if uid in cached:
+            continue
+        record = index[uid]
         shapes = json.load(open(os.path.join(dataset, record["shapes"]["file"])))
         lo = np.array(record["geometry"]["bounds_min_m"])
         hi = np.array(record["geometry"]["bounds_max_m"])
         centre = (lo + hi) / 2
-        scale = np.array(obj["scale_factor"])
-        parts = []
-        for part in shapes["parts"]:
-            points = (np.array(part["points_m"]) - centre) * scale
-            if len(points) >= 4:
-                parts.append(trimesh.convex.convex_hull(points))
-        mesh = trimesh.util.concatenate(parts)
-        triangles += len(mesh.faces)
+        parts = [
+            trimesh.convex.convex_hull(np.array(part["points_m"]) - centre)
+            for part in shapes["parts"]
+            if len(part["points_m"]) >= 4
+        ]
+        cached[uid] = trimesh.util.concatenate(parts)
+
+    def transform_of(obj):
         transform = np.eye(4)
         transform[:3, :3] = quat_matrix(obj["rotation"])
         transform[:3, 3] = np.array(obj["position"]) / 100.0
-        transforms[obj["instance"]] = transform
-        manager.add_object(obj["instance"], mesh, transform=transform)
+        return transform
+
+    def build():
+        """One scene from the cache: each object's mesh scaled by its scale_factor (a scale
+        differs per scene, so FCL's BVH is built per scene), added at its transform."""
+        manager = trimesh.collision.CollisionManager()
+        for obj in layout["objects"]:
+            mesh = cached[obj["retrieved_uid"]]
+            scaled = trimesh.Trimesh(
+                vertices=mesh.vertices * np.array(obj["scale_factor"]),
+                faces=mesh.faces,
+                process=False,
+            )
+            manager.add_object(obj["instance"], scaled, transform=transform_of(obj))
+        return manager
+
+    manager = build()
+    transforms = {obj["instance"]: transform_of(obj) for obj in layout["objects"]}
+    triangles = sum(len(cached[obj["retrieved_uid"]].faces) for obj in layout["objects"])
 
     def timed(query):
         times = []
@@ -83,6 +108,11 @@ def main():
         lambda: manager.in_collision_internal(return_names=True, return_data=True)
     )
     distance_s, _ = timed(lambda: manager.min_distance_internal(return_names=True))
+    scene_times = []
+    for _ in range(max(repeats // 10, 5)):
+        start = time.perf_counter()
+        build().in_collision_internal(return_names=True, return_data=True)
+        scene_times.append(time.perf_counter() - start)
     print(
         json.dumps(
             {
@@ -91,6 +121,7 @@ def main():
                 "fcl_colliding_pairs": len(pairs),
                 "fcl_collisions_s": collide_s,
                 "fcl_min_distance_s": distance_s,
+                "fcl_scene_from_cache_s": statistics.median(scene_times),
             }
         )
     )
