@@ -520,37 +520,14 @@ impl<'a> GlbDocument<'a> {
                 &mut warnings,
             )?;
         }
-        if primitives.iter().all(|p| p.triangles.is_empty()) {
-            let detail = if root.meshes.is_empty() {
-                "the file has no mesh".to_owned()
-            } else if instances.is_empty() {
-                format!(
-                    "no node of the scene places any of its {} meshes",
-                    root.meshes.len()
-                )
-            } else if info.skipped_primitives > 0 {
-                format!(
-                    "its {} primitives are points or lines, not triangles",
-                    info.skipped_primitives
-                )
-            } else {
-                "its primitives have no triangles".to_owned()
-            };
-            return Err(GlbError::NoMesh { detail });
-        }
-        if !unused_meshes.is_empty() {
-            warnings.push(format!(
-                "{} of {} meshes are not placed by any node of the scene and are ignored",
-                unused_meshes.len(),
-                root.meshes.len()
-            ));
-        }
-        if info.skipped_primitives > 0 {
-            warnings.push(format!(
-                "{} point or line primitives are ignored",
-                info.skipped_primitives
-            ));
-        }
+        check_placed(
+            root,
+            instances.is_empty(),
+            primitives.iter().all(|p| p.triangles.is_empty()),
+            &unused_meshes,
+            &info,
+            &mut warnings,
+        )?;
         Ok(PlacedScene {
             primitives,
             info,
@@ -648,10 +625,34 @@ fn read_glb_impl(
             &mut warnings,
         )?;
     }
-    if mesh.triangles.is_empty() {
+    check_placed(
+        &root,
+        instances.is_empty(),
+        mesh.triangles.is_empty(),
+        &unused_meshes,
+        &info,
+        &mut warnings,
+    )?;
+    mesh.info = info;
+    mesh.warnings = warnings;
+    Ok((mesh, surface))
+}
+
+/// What both readers conclude once every instance is read: no triangles at all is an error
+/// that says why (no mesh, no node placing one, only points or lines, empty primitives);
+/// meshes no node places and point or line primitives are warnings.
+fn check_placed(
+    root: &Root,
+    no_instances: bool,
+    no_triangles: bool,
+    unused_meshes: &BTreeSet<usize>,
+    info: &GlbInfo,
+    warnings: &mut Vec<String>,
+) -> Result<(), GlbError> {
+    if no_triangles {
         let detail = if root.meshes.is_empty() {
             "the file has no mesh".to_owned()
-        } else if instances.is_empty() {
+        } else if no_instances {
             format!(
                 "no node of the scene places any of its {} meshes",
                 root.meshes.len()
@@ -679,9 +680,7 @@ fn read_glb_impl(
             info.skipped_primitives
         ));
     }
-    mesh.info = info;
-    mesh.warnings = warnings;
-    Ok((mesh, surface))
+    Ok(())
 }
 
 fn parse_root(json: &[u8], warnings: &mut Vec<String>) -> Result<Root, GlbError> {
