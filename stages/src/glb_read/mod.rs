@@ -1073,6 +1073,41 @@ impl Reader<'_, '_> {
     }
 
     /// The geometry of a primitive, decoded once per file.
+    /// A triangle primitive of a mesh, read once per file (`cache`); `None` for points and
+    /// lines, which are counted in `info.skipped_primitives`.
+    fn cached_primitive(
+        &self,
+        mesh_index: usize,
+        primitive_index: usize,
+        primitive: &gltf_json::mesh::Primitive,
+        cache: &mut HashMap<(usize, usize), Rc<Primitive>>,
+        info: &mut GlbInfo,
+        warnings: &mut Vec<String>,
+    ) -> Result<Option<Rc<Primitive>>, GlbError> {
+        let mode = match primitive.mode {
+            Checked::Valid(mode) => mode,
+            Checked::Invalid => {
+                return Err(data_error(
+                    format!("meshes[{mesh_index}].primitives[{primitive_index}]"),
+                    "invalid mode",
+                ))
+            }
+        };
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            info.skipped_primitives += 1;
+            return Ok(None);
+        }
+        if let Some(g) = cache.get(&(mesh_index, primitive_index)) {
+            return Ok(Some(Rc::clone(g)));
+        }
+        let g = Rc::new(self.primitive(mesh_index, primitive_index, mode, info, warnings)?);
+        cache.insert((mesh_index, primitive_index), Rc::clone(&g));
+        Ok(Some(g))
+    }
+
     fn primitive(
         &self,
         mesh_index: usize,
@@ -1418,24 +1453,10 @@ impl Reader<'_, '_> {
         };
         for (p, primitive) in mesh.primitives.iter().enumerate() {
             let path = format!("meshes[{}].primitives[{p}]", instance.mesh);
-            let mode = match primitive.mode {
-                Checked::Valid(mode) => mode,
-                Checked::Invalid => return Err(data_error(path, "invalid mode")),
-            };
-            if !matches!(
-                mode,
-                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-            ) {
-                info.skipped_primitives += 1;
+            let Some(geometry) =
+                self.cached_primitive(instance.mesh, p, primitive, cache, info, warnings)?
+            else {
                 continue;
-            }
-            let geometry = match cache.get(&(instance.mesh, p)) {
-                Some(g) => Rc::clone(g),
-                None => {
-                    let g = Rc::new(self.primitive(instance.mesh, p, mode, info, warnings)?);
-                    cache.insert((instance.mesh, p), Rc::clone(&g));
-                    g
-                }
             };
             let mut positions = geometry.positions.clone();
             if primitive.targets.as_ref().is_some_and(|t| !t.is_empty()) {
@@ -1514,24 +1535,10 @@ impl Reader<'_, '_> {
         let normal_matrix = linear.try_inverse().map(|m| m.transpose());
         for (p, primitive) in mesh.primitives.iter().enumerate() {
             let path = format!("meshes[{}].primitives[{p}]", instance.mesh);
-            let mode = match primitive.mode {
-                Checked::Valid(mode) => mode,
-                Checked::Invalid => return Err(data_error(path, "invalid mode")),
-            };
-            if !matches!(
-                mode,
-                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-            ) {
-                info.skipped_primitives += 1;
+            let Some(geometry) =
+                self.cached_primitive(instance.mesh, p, primitive, cache, info, warnings)?
+            else {
                 continue;
-            }
-            let geometry = match cache.get(&(instance.mesh, p)) {
-                Some(g) => Rc::clone(g),
-                None => {
-                    let g = Rc::new(self.primitive(instance.mesh, p, mode, info, warnings)?);
-                    cache.insert((instance.mesh, p), Rc::clone(&g));
-                    g
-                }
             };
             let mut positions = geometry.positions.clone();
             let morphed = primitive.targets.as_ref().is_some_and(|t| !t.is_empty());
