@@ -33,9 +33,6 @@ use serde_json::Value;
 
 use crate::fsio::{sha256_hex, write_atomic};
 
-/// Where replies are cached, relative to the dataset.
-pub const CACHE_DIR: &str = ".mesa/cache/chat";
-
 /// The request URL of OpenAI Batch input lines.
 pub const BATCH_URL: &str = "/v1/chat/completions";
 
@@ -121,7 +118,7 @@ impl ReplyCache {
     /// The cache of a dataset folder.
     pub fn of_dataset(dataset: &Path) -> Self {
         Self {
-            dir: dataset.join(CACHE_DIR),
+            dir: dataset.join(mesa_stages::paths::dataset::CHAT_CACHE),
         }
     }
 

@@ -12,6 +12,8 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
+use anyhow::{anyhow, Context as _};
+use serde::de::DeserializeOwned;
 use sha2::{Digest, Sha256};
 
 /// The marker in the names of temporary files (also in `.gitignore`).
@@ -194,6 +196,13 @@ impl DigestCache {
         // A poisoned cache only means another thread panicked mid-insert; the map is fine.
         self.shared.lock().unwrap_or_else(|e| e.into_inner())
     }
+}
+
+/// Reads a JSON artifact, naming the file in every error.
+pub fn read_json<T: DeserializeOwned>(path: &Path, hint: &str) -> anyhow::Result<T> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read ({hint})", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e} ({hint})", path.display()))
 }
 
 #[cfg(test)]

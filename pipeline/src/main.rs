@@ -3,23 +3,19 @@
 use std::process::ExitCode;
 
 use clap::Parser;
-use mesa_pipeline::app::{self, UsageError, EXIT_FAILED, EXIT_USAGE};
-use mesa_pipeline::cli::Cli;
+use mesa_pipeline::cli::{Cli, Global};
+use mesa_pipeline::exit::code_of;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     init_logging(cli.verbose, cli.quiet);
     quiet_worker_panics();
-    match app::run(cli) {
+    match cli.command.run(Global { quiet: cli.quiet }) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("mesa: error: {e:#}");
             // Usage and configuration errors are 2; anything else stopped the work: 1.
-            if e.downcast_ref::<UsageError>().is_some() {
-                ExitCode::from(EXIT_USAGE)
-            } else {
-                ExitCode::from(EXIT_FAILED)
-            }
+            code_of(&e)
         }
     }
 }

@@ -1,5 +1,6 @@
-//! Progress of a dataset-level stage (`records`): a bar on a terminal, periodic lines
-//! otherwise, nothing with `--progress off`, as `[run] progress` says.
+//! The one progress display of every stage, per-scene or dataset-level: a bar on a terminal,
+//! periodic lines otherwise, nothing with `--progress off` or `--quiet`, as `[run] progress`
+//! says. The runner owns it; a stage only says what one unit of work is.
 
 use std::io::IsTerminal as _;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -8,23 +9,36 @@ use std::time::{Duration, Instant};
 
 use crate::config::ProgressMode;
 
-/// A counter of items done out of a total.
+/// How one unit of work ended, for the counts of the display.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tick {
+    /// Done (or waiting: it counts as handled).
+    Done,
+    /// Skipped: still done from an earlier run.
+    Skipped,
+    /// Failed.
+    Failed,
+}
+
+/// A counter of units done out of a total, shown as a bar or as periodic lines.
 #[derive(Debug)]
 pub struct Progress {
-    label: &'static str,
+    label: String,
     unit: &'static str,
     total: usize,
-    done: AtomicUsize,
     bar: Option<indicatif::ProgressBar>,
     interval: Option<Duration>,
-    last: Mutex<Instant>,
+    last_line: Mutex<Instant>,
     started: Instant,
+    finished: AtomicUsize,
+    skipped: AtomicUsize,
+    failed: AtomicUsize,
 }
 
 impl Progress {
-    /// A display for `total` items (`unit`, like "scenes") of the stage `label`.
+    /// A display for `total` units (`unit`, like "scenes") of the stage `label`.
     pub fn new(
-        label: &'static str,
+        label: &str,
         unit: &'static str,
         total: usize,
         mode: ProgressMode,
@@ -39,40 +53,69 @@ impl Progress {
         };
         let bar = bar.then(|| {
             let bar = indicatif::ProgressBar::new(total as u64);
-            if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
-                "{{prefix:>8}} [{{bar:40}}] {{pos}}/{{len}} {unit} {{per_sec}} eta {{eta}}"
-            )) {
-                bar.set_style(style.progress_chars("=> "));
-            }
-            bar.set_prefix(label);
+            let style = indicatif::ProgressStyle::with_template(&format!(
+                "{{prefix:>8}} [{{bar:40}}] {{pos}}/{{len}} {unit} {{per_sec}} eta {{eta}} {{msg}}"
+            ))
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> ");
+            bar.set_style(style);
+            bar.set_prefix(label.to_owned());
             bar
         });
         Self {
-            label,
+            label: label.to_owned(),
             unit,
             total,
-            done: AtomicUsize::new(0),
             bar,
             interval: lines.then_some(interval),
-            last: Mutex::new(Instant::now()),
+            last_line: Mutex::new(Instant::now()),
             started: Instant::now(),
+            finished: AtomicUsize::new(0),
+            skipped: AtomicUsize::new(0),
+            failed: AtomicUsize::new(0),
         }
     }
 
-    /// Counts `n` more items done.
+    /// Counts one unit that ended as `tick`.
+    pub fn tick(&self, tick: Tick) {
+        self.count(1, tick);
+    }
+
+    /// Counts `n` more units done.
     pub fn advance(&self, n: usize) {
-        let done = self.done.fetch_add(n, Ordering::Relaxed) + n;
+        self.count(n, Tick::Done);
+    }
+
+    fn count(&self, n: usize, tick: Tick) {
+        let finished = self.finished.fetch_add(n, Ordering::Relaxed) + n;
+        match tick {
+            Tick::Skipped => {
+                self.skipped.fetch_add(n, Ordering::Relaxed);
+            }
+            Tick::Failed => {
+                self.failed.fetch_add(n, Ordering::Relaxed);
+            }
+            Tick::Done => {}
+        }
+        let failed = self.failed.load(Ordering::Relaxed);
         if let Some(bar) = &self.bar {
             bar.inc(n as u64);
+            if failed > 0 {
+                bar.set_message(format!("{failed} failed"));
+            }
         }
         if let Some(interval) = self.interval {
-            let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
-            if last.elapsed() >= interval || done == self.total {
+            let mut last = self.last_line.lock().unwrap_or_else(|e| e.into_inner());
+            if last.elapsed() >= interval || finished == self.total {
                 *last = Instant::now();
-                let rate = done as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
+                let rate = finished as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
                 eprintln!(
-                    "{}: {done}/{} {}, {rate:.0} {}/s",
-                    self.label, self.total, self.unit, self.unit
+                    "{}: {finished}/{} {} ({} skipped, {failed} failed), {rate:.1} {}/s",
+                    self.label,
+                    self.total,
+                    self.unit,
+                    self.skipped.load(Ordering::Relaxed),
+                    self.unit,
                 );
             }
         }

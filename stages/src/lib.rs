@@ -26,6 +26,7 @@
 //! - [`report`]: dataset statistics, SVG plots and the HTML page of a dataset (SPEC 5.10).
 //! - [`release`]: the MesaTask-10K tree's files (SPEC 5.10).
 //! - [`seeding`]: seeded random generators per scene and purpose.
+//! - [`paths`]: where every artifact of a dataset lives (the one owner of those paths).
 
 pub mod annotations;
 pub mod assets;
@@ -40,6 +41,7 @@ pub mod ingest;
 pub mod lift;
 pub mod mesh;
 pub mod pack;
+pub mod paths;
 pub mod place;
 pub mod raster;
 pub mod records;

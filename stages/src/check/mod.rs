@@ -50,8 +50,8 @@ impl LayoutSource {
     /// The layout file, relative to the scene folder.
     pub fn file(self) -> &'static str {
         match self {
-            Self::Refined => "refined/layout.json",
-            Self::Coarse => "coarse/layout.json",
+            Self::Refined => crate::paths::scene::REFINED_LAYOUT,
+            Self::Coarse => crate::paths::scene::COARSE_LAYOUT,
         }
     }
 }

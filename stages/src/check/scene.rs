@@ -15,7 +15,7 @@ use super::{check_scene, pair_contact, round_to, AssetShape, CheckConfig, Findin
 use crate::graph::{extract_graph, GraphOptions, GraphScene, Relation};
 
 /// The settled layout's file, relative to the scene folder.
-pub const SETTLED_LAYOUT: &str = "qa/layout.json";
+pub use crate::paths::scene::SETTLED_LAYOUT;
 
 /// What a scene's check gives.
 #[derive(Debug, Clone)]

@@ -61,9 +61,9 @@ impl LayoutChoice {
     /// The layout files this choice reads, in order of preference, relative to the scene.
     pub fn candidates(self) -> &'static [&'static str] {
         match self {
-            LayoutChoice::Refined => &["qa/layout.json", "refined/layout.json"],
-            LayoutChoice::Coarse => &["coarse/layout.json"],
-            LayoutChoice::Truth => &["truth/layout.json"],
+            LayoutChoice::Refined => &crate::paths::scene::LAYOUT_CANDIDATES,
+            LayoutChoice::Coarse => &[crate::paths::scene::COARSE_LAYOUT],
+            LayoutChoice::Truth => &[crate::paths::scene::TRUTH_LAYOUT],
         }
     }
 }

@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex};
 use anyhow::{anyhow, bail};
 use mesa_stages::annotations::Annotations;
 
-use super::assets::ANNOTATIONS;
+use mesa_stages::paths::dataset::ANNOTATIONS;
 
 /// One value per dataset folder, loaded by the first scene that asks for it; a load that
 /// failed is remembered, and every later scene fails with the same message without retrying.

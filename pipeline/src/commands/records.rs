@@ -12,11 +12,14 @@
 //! when all are complete; the done marker comes last), and skipped when nothing it reads has
 //! changed since the last run (`--force` redoes it).
 
+use mesa_stages::paths::dataset::RECORDS_DIR;
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::time::{Duration, Instant};
+use std::process::ExitCode;
+use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context as _};
+use clap::Args as ClapArgs;
 use mesa_schemas::artifacts::{
     MarkerStatus, RunMarker, SplitArtifact, TaskRecord, MARKER_SCHEMA, SPLIT_SCHEMA,
 };
@@ -31,44 +34,78 @@ use mesa_stages::records::{
     dpo_pairs, round_layout, sft_record, trl_dpo, trl_sft, RecordsConfig, SceneRecordsInput,
 };
 use mesa_stages::tasks::prompts::{layout_instruction, LAYOUT_GENERATION};
-use rayon::prelude::*;
 use serde::Serialize;
 use sha2::{Digest as _, Sha256};
 
-use crate::config::{Config, ProgressMode};
-use crate::fsio::{sha256_hex, write_atomic, AtomicFile};
-use crate::progress::Progress;
-use crate::runner::{discover_scenes, Scene, RUN_DIR};
-use crate::stages::assets::INDEX;
-use crate::stages::check::{read_dataset_layout, ShapeLibrary};
-use crate::stages::scene_docs::{chosen_layout, read_scene_docs, GRAPH_JSON, GRAPH_TXT};
-use crate::stages::tasks::TASKS_FILE;
+use mesa_stages::paths::dataset::INDEX;
+use mesa_stages::paths::scene::{GRAPH_JSON, GRAPH_TXT, TASKS as TASKS_FILE};
 use mesa_stages::records::collide::Collider;
 
-/// The records folder, relative to the dataset.
-pub const RECORDS_DIR: &str = "records";
+use crate::cli::{DatasetArgs, Global};
+use crate::commands::check::ShapeLibrary;
+use crate::config::Config;
+use crate::exit::UsageError;
+use crate::fsio::{sha256_hex, write_atomic, AtomicFile};
+use crate::layouts::{chosen_layout, read_dataset_layout};
+use crate::runner::{
+    digest_of, discover_scenes, DatasetReport, DatasetStage, Executor, RunError, Scene,
+    StageContext,
+};
+use crate::scene_docs::read_scene_docs;
+
+/// `mesa records`.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// The dataset and its run flags.
+    #[command(flatten)]
+    pub common: DatasetArgs,
+    /// Rebuild the records even when nothing they read has changed.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Runs `mesa records`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    let mut resolved = args.common.resolve(global)?;
+    resolved.options.force = args.force;
+    resolved.run_dataset(&RecordsStage)
+}
+
+/// The `records` stage: the training records, once over the dataset.
+#[derive(Debug, Default)]
+pub struct RecordsStage;
+
+impl DatasetStage for RecordsStage {
+    fn name(&self) -> &'static str {
+        "records"
+    }
+
+    fn preflight(&self, ctx: &StageContext<'_>) -> Result<(), UsageError> {
+        let problems = ctx.config.records.problems();
+        if !problems.is_empty() {
+            return Err(UsageError(problems.join("\n")));
+        }
+        instruction(ctx.dataset, &ctx.config.records).map_err(UsageError)?;
+        Ok(())
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
+        let summary = run_records(ctx, exec)?;
+        Ok(DatasetReport {
+            success: summary.excluded.is_empty(),
+            text: format_records_summary(&summary),
+            record: serde_json::to_value(&summary)?,
+        })
+    }
+}
+
 /// `records/split.json`.
 pub const SPLIT_FILE: &str = "split.json";
 /// `records/dataset_info.json`.
 pub const DATASET_INFO_FILE: &str = "dataset_info.json";
-/// The done marker of the last complete run, relative to the dataset.
-pub const MARKER_FILE: &str = ".mesa/markers/records.json";
 
 /// Scenes handled together: built in parallel, then written in order.
 const CHUNK: usize = 64;
-
-/// How a records run is asked to go.
-#[derive(Debug, Clone)]
-pub struct RecordsOptions {
-    /// Worker threads (0 = one per core).
-    pub jobs: usize,
-    /// Rebuild even when nothing changed.
-    pub force: bool,
-    /// Progress display.
-    pub progress: ProgressMode,
-    /// Seconds between progress lines.
-    pub progress_interval: Duration,
-}
 
 /// What a records run did.
 #[derive(Debug, Clone, Default, Serialize)]
@@ -127,7 +164,7 @@ struct Planned {
 }
 
 fn plan_scene(scene: Scene) -> Planned {
-    if let Some(reason) = crate::stages::scene_docs::awaiting_annotation(&scene) {
+    if let Some(reason) = crate::scene_docs::awaiting_annotation(&scene) {
         return Planned {
             scene,
             inputs: Err(reason.clone()),
@@ -223,7 +260,7 @@ fn collider_of(scene: &Scene, layout_rel: &str, shared: &Shared<'_>) -> (Collide
             Some(format!("collision corruptions verified on boxes: {why}")),
         )
     };
-    let layout = match read_dataset_layout(&scene.path(layout_rel)) {
+    let layout = match read_dataset_layout(&scene.path(layout_rel), "check") {
         Ok((layout, _)) => layout,
         Err(e) => return boxes(format!("{e:#}")),
     };
@@ -365,7 +402,7 @@ fn config_digest(dataset: &Path, config: &Config, instruction: &str) -> String {
         /// The collision corruption reads the assets' shapes (the index has their digests).
         asset_index: Option<String>,
     }
-    crate::runner::digest_of(&Fingerprint {
+    digest_of(&Fingerprint {
         records: &config.records,
         graph: &config.graph,
         seed: config.run.seed,
@@ -377,27 +414,22 @@ fn config_digest(dataset: &Path, config: &Config, instruction: &str) -> String {
     })
 }
 
-/// Builds the records of a dataset.
-pub fn run_records(
-    dataset: &Path,
-    config: &Config,
-    options: &RecordsOptions,
-) -> anyhow::Result<RecordsSummary> {
+/// Builds the records of a dataset, a scene a unit of `exec`.
+pub fn run_records(ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<RecordsSummary> {
+    let (dataset, config) = (ctx.dataset, ctx.config);
     let started = Instant::now();
     let problems = config.records.problems();
     if !problems.is_empty() {
         bail!("{}", problems.join("\n"));
     }
     let instruction = instruction(dataset, &config.records).map_err(|e| anyhow!(e))?;
-    let scenes = discover_scenes(dataset)?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(options.jobs)
-        .thread_name(|i| format!("mesa-records-{i}"))
-        .build()
-        .map_err(|e| anyhow!("cannot start {} worker threads: {e}", options.jobs))?;
+    let scenes = discover_scenes(dataset).map_err(RunError::into_anyhow)?;
 
     // 1. Which scenes have current tasks, and the digests of what their records read.
-    let planned: Vec<Planned> = pool.install(|| scenes.into_par_iter().map(plan_scene).collect());
+    let planned: Vec<Planned> = exec.install(|| {
+        use rayon::prelude::*;
+        scenes.into_par_iter().map(plan_scene).collect()
+    });
     let mut summary = RecordsSummary::default();
     // One line per scene, in scene order, into one digest: nothing per scene stays in memory.
     let mut inputs = Sha256::new();
@@ -425,13 +457,10 @@ pub fn run_records(
         .map(|b| format!("{b:02x}"))
         .collect();
     let config_digest = config_digest(dataset, config, &instruction);
-    let marker_path = dataset.join(MARKER_FILE);
+    let marker_path = exec.marker_path(ctx);
     let out_dir = dataset.join(RECORDS_DIR);
-    if !options.force {
-        if let Some(marker) = std::fs::read(&marker_path)
-            .ok()
-            .and_then(|b| serde_json::from_slice::<RunMarker>(&b).ok())
-        {
+    if !exec.options().force {
+        if let Some(marker) = exec.read_marker(ctx) {
             let current = marker.status == MarkerStatus::Done
                 && marker.config_digest == config_digest
                 && marker.inputs.get("scenes") == Some(&inputs_digest)
@@ -490,18 +519,13 @@ pub fn run_records(
         graph: GraphOptions::from(&config.graph),
         seed: config.run.seed,
     };
-    let progress = Progress::new(
-        "records",
-        "scenes",
-        included.len(),
-        options.progress,
-        options.progress_interval,
-    );
+    let progress = exec.progress("scenes", included.len());
     let mut assigned: BTreeMap<String, String> = BTreeMap::new();
     let mut counts: BTreeMap<String, BTreeMap<String, u64>> = BTreeMap::new();
     let work: Vec<(Scene, Split)> = included.into_iter().zip(splits).collect();
     for chunk in work.chunks(CHUNK) {
-        let built: Vec<Result<SceneOut, String>> = pool.install(|| {
+        let built: Vec<Result<SceneOut, String>> = exec.install(|| {
+            use rayon::prelude::*;
             chunk
                 .par_iter()
                 .map(|(scene, split)| build_scene(scene, *split, &shared))
@@ -605,13 +629,6 @@ pub fn run_records(
     };
     write_atomic(&marker_path, &to_sorted_pretty(&marker)?)
         .with_context(|| format!("{}: cannot write", marker_path.display()))?;
-    let record = dataset.join(RUN_DIR).join("runs/records/run.json");
-    if let Ok(bytes) = to_sorted_pretty(&summary) {
-        // Informational: failing to write it must not fail the run.
-        if let Err(e) = write_atomic(&record, &bytes) {
-            tracing::warn!("{}: cannot write run record: {e}", record.display());
-        }
-    }
     Ok(summary)
 }
 

@@ -8,15 +8,36 @@ use mesa_schemas::annotation::PackIndexArtifact;
 use mesa_schemas::layout::DatasetLayout;
 use mesa_stages::ingest::{ingest_scene, IngestRequest};
 
-use super::pack::{pack_glb, refined_glb, PACK_INDEX};
-use super::retrieve::read_json;
+use mesa_stages::paths::scene::{pack_glb, refined_glb, PACK_INDEX, REFINED_DIFF, REFINED_LAYOUT};
+use std::process::ExitCode;
+
+use clap::Args as ClapArgs;
+
+use crate::cli::{Global, SceneArgs};
+use crate::fsio::read_json;
 use crate::fsio::sha256_hex;
 use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
 
-/// The refined layout, relative to the scene folder.
-pub const REFINED_LAYOUT: &str = "refined/layout.json";
-/// The diff, relative to the scene folder.
-pub const REFINED_DIFF: &str = "refined/diff.json";
+/// `mesa ingest`.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// The runner flags.
+    #[command(flatten)]
+    pub stage: SceneArgs,
+    /// Ignore nodes that are none of the pack's (overrides [ingest] allow_unknown_nodes);
+    /// they are listed in refined/diff.json.
+    #[arg(long)]
+    pub allow_unknown_nodes: bool,
+}
+
+/// Runs `mesa ingest`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    let mut resolved = args.stage.resolve(global)?;
+    if args.allow_unknown_nodes {
+        resolved.config.ingest.allow_unknown_nodes = true;
+    }
+    resolved.run(&IngestStage::new())
+}
 
 /// The `ingest` stage.
 #[derive(Default)]
@@ -39,11 +60,11 @@ impl SceneStage for IngestStage {
     }
 
     fn waiting(&self, _ctx: &StageContext<'_>, scene: &Scene) -> Option<String> {
-        let refined = refined_glb(scene);
+        let refined = refined_glb(&scene.scene_id);
         if scene.path(&refined).is_file() {
             return None;
         }
-        let pack = pack_glb(scene);
+        let pack = pack_glb(&scene.scene_id);
         Some(if scene.path(&pack).is_file() {
             format!(
                 "awaiting annotation: send {} (the pack/ folder) to an annotator; put the edited \
@@ -61,8 +82,8 @@ impl SceneStage for IngestStage {
 
     fn inputs(&self, _ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
         let mut inputs = vec![
-            scene.rel(&refined_glb(scene)),
-            scene.rel(&pack_glb(scene)),
+            scene.rel(&refined_glb(&scene.scene_id)),
+            scene.rel(&pack_glb(&scene.scene_id)),
             scene.rel(PACK_INDEX),
         ];
         // The baseline the pack was made from (a missing index is reported by the runner).
@@ -92,11 +113,11 @@ impl SceneStage for IngestStage {
         }
         let baseline: DatasetLayout = serde_json::from_slice(&baseline_bytes)
             .map_err(|e| anyhow!("{}: {e}", baseline_path.display()))?;
-        let refined_rel = refined_glb(scene);
+        let refined_rel = refined_glb(&scene.scene_id);
         let refined_path = scene.path(&refined_rel);
         let refined = std::fs::read(&refined_path)
             .with_context(|| format!("{}: cannot read", refined_path.display()))?;
-        let pack_path = scene.path(&pack_glb(scene));
+        let pack_path = scene.path(&pack_glb(&scene.scene_id));
         let pack = std::fs::read(&pack_path)
             .with_context(|| format!("{}: cannot read", pack_path.display()))?;
         let output = ingest_scene(

@@ -10,9 +10,16 @@
 //! - `report/index.html`: the summary, the plots inline, and a card per scene with its
 //!   thumbnail, QA flags and relative links to its files; no script and no network.
 
+use mesa_stages::paths::dataset::REPORT_DIR;
+use mesa_stages::paths::scene::{
+    CHECK, GRAPH_JSON, GRAPH_TXT, IMAGE, RENDER_DIR, SETTLED_LAYOUT, TASKS,
+};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use std::process::ExitCode;
 use std::time::Instant;
+
+use clap::Args as ClapArgs;
 
 use anyhow::{anyhow, Context as _};
 use mesa_schemas::artifacts::{GraphArtifact, MarkerStatus, CHECK_SCHEMA};
@@ -22,22 +29,22 @@ use mesa_schemas::layout_file::{read_layout_text, AnyLayout};
 use mesa_schemas::render::RenderCameraArtifact;
 use mesa_stages::render::SceneView;
 use mesa_stages::report::{compute_stats, html, plots, CheckFacts, SceneFacts, SceneLink};
-use rayon::prelude::*;
+use serde::Serialize;
 use serde_json::Value;
 
-use super::render::RENDER_DIR;
-use super::scene_docs::chosen_layout;
-use crate::config::Config;
+use crate::cli::{DatasetArgs, Global};
 use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic};
-use crate::runner::{discover_scenes, read_marker, Scene, RUN_DIR};
+use crate::layouts::chosen_layout;
+use crate::runner::{
+    discover_scenes, read_marker, DatasetReport, DatasetStage, Executor, RunError, Scene,
+    StageContext, RUN_DIR,
+};
 
-/// The report folder, relative to the dataset.
-pub const REPORT_DIR: &str = "report";
 /// Side of the thumbnails, pixels.
 pub const THUMBNAIL_PX: u32 = 232;
 
 /// What a report run wrote.
-#[derive(Debug)]
+#[derive(Debug, Serialize)]
 pub struct ReportSummary {
     /// Scenes reported.
     pub scenes: usize,
@@ -161,7 +168,7 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
             Err(e) => facts.failed.push(("layout".into(), format!("{rel}: {e}"))),
         }
     }
-    if let Ok(text) = std::fs::read_to_string(scene.path("graph/graph.json")) {
+    if let Ok(text) = std::fs::read_to_string(scene.path(GRAPH_JSON)) {
         if let Ok(graph) = serde_json::from_str::<GraphArtifact>(&text) {
             facts.has_graph = true;
             let nodes = graph.nodes.len() as u64;
@@ -178,7 +185,7 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
             }
         }
     }
-    if let Ok(text) = std::fs::read_to_string(scene.path("qa/check.json")) {
+    if let Ok(text) = std::fs::read_to_string(scene.path(CHECK)) {
         match check_facts(&text) {
             Some((before, after, tried)) => {
                 facts.check_before = Some(before);
@@ -227,7 +234,7 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
             )),
         }
     }
-    if let Ok(text) = std::fs::read_to_string(scene.path("tasks/tasks.jsonl")) {
+    if let Ok(text) = std::fs::read_to_string(scene.path(TASKS)) {
         facts.tasks = text.lines().filter(|l| !l.trim().is_empty()).count() as u64;
     }
     for stage in stages {
@@ -254,10 +261,10 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
         }
     }
     let links = [
-        ("photo", "input/image.png"),
-        ("graph", "graph/graph.txt"),
-        ("check", "qa/check.json"),
-        ("tasks", "tasks/tasks.jsonl"),
+        ("photo", IMAGE),
+        ("graph", GRAPH_TXT),
+        ("check", CHECK),
+        ("tasks", TASKS),
         ("back", "render/back.png"),
         ("left", "render/left.png"),
         ("right", "render/right.png"),
@@ -315,7 +322,7 @@ fn check_facts(text: &str) -> Option<(CheckFacts, Option<CheckFacts>, bool)> {
             let layout = s
                 .get("layout")
                 .and_then(Value::as_str)
-                .unwrap_or("qa/layout.json");
+                .unwrap_or(SETTLED_LAYOUT);
             findings(s.get("after")?, layout)
         });
     Some((before, after, settle.is_some()))
@@ -344,24 +351,45 @@ fn remove_stale_thumbnails(dir: &Path, keep: &BTreeSet<PathBuf>) {
     }
 }
 
-/// Writes the report of a dataset (see the module documentation).
-pub fn write_report(
-    dataset: &Path,
-    _config: &Config,
-    jobs: usize,
-) -> anyhow::Result<ReportSummary> {
+/// `mesa report`.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// The dataset and its run flags.
+    #[command(flatten)]
+    pub common: DatasetArgs,
+}
+
+/// Runs `mesa report`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    args.common.resolve(global)?.run_dataset(&ReportStage)
+}
+
+/// The `report` stage: statistics, plots and the page, once over the dataset.
+#[derive(Debug, Default)]
+pub struct ReportStage;
+
+impl DatasetStage for ReportStage {
+    fn name(&self) -> &'static str {
+        "report"
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
+        let summary = write_report(ctx.dataset, exec)?;
+        Ok(DatasetReport {
+            success: true,
+            text: format_report_summary(&summary),
+            record: serde_json::to_value(&summary)?,
+        })
+    }
+}
+
+/// Writes the report of a dataset (see the module documentation), a scene a unit of `exec`.
+pub fn write_report(dataset: &Path, exec: &Executor<'_>) -> anyhow::Result<ReportSummary> {
     let started = Instant::now();
-    let scenes = discover_scenes(dataset).map_err(|e| crate::app::UsageError(e.to_string()))?;
+    let scenes = discover_scenes(dataset).map_err(RunError::into_anyhow)?;
     let stages = marker_stages(dataset);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(jobs)
-        .build()
-        .context("cannot start the worker threads")?;
-    let gathered: Vec<(SceneFacts, Option<Vec<u8>>)> = pool.install(|| {
-        scenes
-            .par_iter()
-            .map(|scene| scene_facts(dataset, scene, &stages))
-            .collect()
+    let gathered: Vec<(SceneFacts, Option<Vec<u8>>)> = exec.map("scenes", &scenes, |scene| {
+        scene_facts(dataset, scene, &stages)
     });
     let dir = dataset.join(REPORT_DIR);
     let mut kept = BTreeSet::new();

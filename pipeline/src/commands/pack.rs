@@ -2,6 +2,9 @@
 //! library and the photo and masks → `pack/` (the scene GLB, `reference.png`, snapshots,
 //! `index.json`, `README.txt`, optionally a zip).
 
+use mesa_stages::paths::scene::{
+    refined_glb, COARSE_LAYOUT, IMAGE, INSTANCES, LIFT, MASKS_DIR, MASKS_PNG, PACK_INDEX,
+};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -13,25 +16,20 @@ use mesa_stages::lift::inputs::{read_instances, read_masks, read_png};
 use mesa_stages::pack::snapshot::Photo;
 use mesa_stages::pack::{pack_scene, AssetSource, PackRequest};
 
-use super::assets::INDEX;
-use super::dataset_cache::DatasetCache;
-use super::retrieve::read_json;
+use crate::cli::{Global, SceneArgs};
+use crate::dataset_cache::DatasetCache;
+use crate::fsio::read_json;
 use crate::fsio::sha256_hex;
 use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
+use mesa_stages::paths::dataset::INDEX;
+use std::process::ExitCode;
 
-/// The layout a pack is made from, relative to the scene folder.
-pub const PACK_LAYOUT: &str = "coarse/layout.json";
-/// The pack's index, relative to the scene folder.
-pub const PACK_INDEX: &str = "pack/index.json";
+/// `mesa pack`: the runner flags.
+pub type Args = SceneArgs;
 
-/// The pack GLB of a scene, relative to the scene folder.
-pub fn pack_glb(scene: &Scene) -> String {
-    format!("pack/{}.glb", scene.scene_id)
-}
-
-/// The annotator's edited GLB of a scene, relative to the scene folder.
-pub fn refined_glb(scene: &Scene) -> String {
-    format!("refined/{}.glb", scene.scene_id)
+/// Runs `mesa pack`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    args.resolve(global)?.run(&PackStage::new())
 }
 
 /// The `pack` stage.
@@ -54,7 +52,7 @@ impl PackStage {
 }
 
 fn read_layout(scene: &Scene) -> anyhow::Result<(DatasetLayout, Vec<u8>)> {
-    let path = scene.path(PACK_LAYOUT);
+    let path = scene.path(COARSE_LAYOUT);
     let bytes = std::fs::read(&path)
         .with_context(|| format!("{}: cannot read (run `mesa place`)", path.display()))?;
     let layout = serde_json::from_slice(&bytes).map_err(|e| {
@@ -69,17 +67,17 @@ fn read_layout(scene: &Scene) -> anyhow::Result<(DatasetLayout, Vec<u8>)> {
 /// The mask files of a scene that exist, relative to the scene folder.
 fn mask_files(scene: &Scene) -> Vec<String> {
     let mut out = Vec::new();
-    if scene.path("input/masks.png").is_file() {
-        out.push("input/masks.png".to_owned());
+    if scene.path(MASKS_PNG).is_file() {
+        out.push(MASKS_PNG.to_owned());
     }
-    if let Ok(entries) = std::fs::read_dir(scene.path("input/masks")) {
+    if let Ok(entries) = std::fs::read_dir(scene.path(MASKS_DIR)) {
         let mut names: Vec<String> = entries
             .filter_map(|e| e.ok())
             .map(|e| e.file_name().to_string_lossy().into_owned())
             .filter(|n| n.ends_with(".png"))
             .collect();
         names.sort();
-        out.extend(names.into_iter().map(|n| format!("input/masks/{n}")));
+        out.extend(names.into_iter().map(|n| format!("{MASKS_DIR}/{n}")));
     }
     out
 }
@@ -90,7 +88,7 @@ impl SceneStage for PackStage {
     }
 
     fn inputs(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
-        let mut inputs = vec![scene.rel(PACK_LAYOUT), INDEX.to_owned()];
+        let mut inputs = vec![scene.rel(COARSE_LAYOUT), INDEX.to_owned()];
         // The assets the layout places (a missing layout is reported by the runner).
         if let Ok((layout, _)) = read_layout(scene) {
             let index = self.index(ctx)?;
@@ -106,17 +104,13 @@ impl SceneStage for PackStage {
                     anyhow!(
                         "{}: asset {uid} is not in {INDEX} (rerun `mesa assets`, then `mesa \
                          retrieve` and `mesa place`)",
-                        scene.path(PACK_LAYOUT).display()
+                        scene.path(COARSE_LAYOUT).display()
                     )
                 })?;
                 inputs.push(record.file.clone());
             }
         }
-        for rel in [
-            "input/image.png",
-            "input/instances.json",
-            "coarse/lift.json",
-        ] {
+        for rel in [IMAGE, INSTANCES, LIFT] {
             if scene.path(rel).is_file() {
                 inputs.push(scene.rel(rel));
             }
@@ -132,14 +126,14 @@ impl SceneStage for PackStage {
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
         let (layout, layout_bytes) = read_layout(scene)?;
         // An annotator's file made from an earlier pack must not be paired with a new one.
-        let refined = scene.path(&refined_glb(scene));
+        let refined = scene.path(&refined_glb(&scene.scene_id));
         let index_path = scene.path(PACK_INDEX);
         if refined.is_file() && index_path.is_file() {
             let previous: PackIndexArtifact =
                 read_json(&index_path, "the pack's index; delete pack/ to re-pack")?;
             if previous.layout_sha256 != sha256_hex(&layout_bytes) {
                 bail!(
-                    "{}: the annotator's file was made from the pack of an earlier {PACK_LAYOUT}; \
+                    "{}: the annotator's file was made from the pack of an earlier {COARSE_LAYOUT}; \
                      re-packing now would pair it with a scene it was not made from (move {} \
                      away to re-pack and send the new pack, or restore the earlier layout)",
                     refined.display(),
@@ -204,7 +198,7 @@ impl SceneStage for PackStage {
                 Err(e) => out.warn(format!("no snapshots: {e:#}")),
             }
         }
-        let layout_rel = PACK_LAYOUT;
+        let layout_rel = COARSE_LAYOUT;
         let packed = pack_scene(
             &PackRequest {
                 scene_id: &scene.scene_id,
@@ -239,7 +233,7 @@ fn instance_masks(
     let input = scene.path("input");
     let instances = read_instances(&input.join("instances.json"))?;
     let masks = read_masks(&input, &instances, width, height)?;
-    let lift: Option<LiftArtifact> = read_json(&scene.path("coarse/lift.json"), "mesa lift").ok();
+    let lift: Option<LiftArtifact> = read_json(&scene.path(LIFT), "mesa lift").ok();
     let mut out = BTreeMap::new();
     for object in &layout.objects {
         let from_lift = lift.as_ref().and_then(|l| {

@@ -1,16 +1,27 @@
 //! `mesa place`: the runner adapter of [`mesa_stages::place`]: `coarse/lift.json`,
 //! `coarse/retrieval.json` and the asset index → `coarse/layout.json`.
 
+use mesa_stages::paths::scene::{COARSE_LAYOUT, LIFT, RETRIEVAL};
 use std::sync::Arc;
 
 use mesa_schemas::artifacts::{AssetIndexArtifact, LiftArtifact, RetrievalArtifact};
 use mesa_stages::annotations::Annotations;
 use mesa_stages::place::place_scene;
 
-use super::assets::{ANNOTATIONS, INDEX};
-use super::dataset_cache::{read_annotations, DatasetCache};
-use super::retrieve::read_json;
+use crate::cli::{Global, SceneArgs};
+use crate::dataset_cache::{read_annotations, DatasetCache};
+use crate::fsio::read_json;
 use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
+use mesa_stages::paths::dataset::{ANNOTATIONS, INDEX};
+use std::process::ExitCode;
+
+/// `mesa place`: the runner flags.
+pub type Args = SceneArgs;
+
+/// Runs `mesa place`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    args.resolve(global)?.run(&PlaceStage::new())
+}
 
 /// What placement reads once per dataset and run.
 struct Library {
@@ -45,11 +56,7 @@ impl SceneStage for PlaceStage {
     }
 
     fn inputs(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
-        let mut inputs = vec![
-            scene.rel("coarse/lift.json"),
-            scene.rel("coarse/retrieval.json"),
-            INDEX.to_owned(),
-        ];
+        let mut inputs = vec![scene.rel(LIFT), scene.rel(RETRIEVAL), INDEX.to_owned()];
         if ctx.dataset.join(ANNOTATIONS).exists() {
             inputs.push(ANNOTATIONS.to_owned());
         }
@@ -61,14 +68,9 @@ impl SceneStage for PlaceStage {
     }
 
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
-        let lift: LiftArtifact = read_json(
-            &scene.path("coarse/lift.json"),
-            "run `mesa lift` to write it",
-        )?;
-        let retrieval: RetrievalArtifact = read_json(
-            &scene.path("coarse/retrieval.json"),
-            "run `mesa retrieve` to write it",
-        )?;
+        let lift: LiftArtifact = read_json(&scene.path(LIFT), "run `mesa lift` to write it")?;
+        let retrieval: RetrievalArtifact =
+            read_json(&scene.path(RETRIEVAL), "run `mesa retrieve` to write it")?;
         let library = self.library(ctx)?;
         let placed = place_scene(
             &lift,
@@ -78,7 +80,7 @@ impl SceneStage for PlaceStage {
             &ctx.config.place,
         )?;
         let mut out = SceneOutput::new();
-        out.add_json("coarse/layout.json", &placed.layout)?;
+        out.add_json(COARSE_LAYOUT, &placed.layout)?;
         for warning in placed.warnings {
             out.warn(warning);
         }

@@ -11,13 +11,17 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
+use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use anyhow::{anyhow, Context as _};
+use anyhow::anyhow;
+use clap::Args as ClapArgs;
 use mesa_schemas::artifacts::AssetIndexArtifact;
 use mesa_schemas::json::to_sorted_pretty;
 use mesa_schemas::DatasetLayout;
+use mesa_stages::paths::dataset::{asset_glb, ASSET_RENDERS, INDEX, LIBRARY};
+use mesa_stages::paths::scene::RENDER_DIR;
 use mesa_stages::render::{
     asset_view_name, load_render_asset, place_layout, render_asset_view, LayoutChoice, LayoutScene,
     RenderAsset, RenderConfig, SceneView, ASSET_VIEWS,
@@ -25,17 +29,47 @@ use mesa_stages::render::{
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::assets::{INDEX, LIBRARY};
-use super::dataset_cache::DatasetCache;
-use super::retrieve::read_json;
-use crate::config::{Config, ProgressMode};
-use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic};
-use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
+use crate::cli::{Global, LayoutArg, SceneArgs};
+use crate::config::Config;
+use crate::dataset_cache::DatasetCache;
+use crate::exit::UsageError;
+use crate::fsio::{read_json, sha256_hex, sweep_tmp_for, write_atomic};
+use crate::layouts::read_dataset_layout;
+use crate::progress::Tick;
+use crate::runner::{
+    digest_of, DatasetReport, DatasetStage, Executor, Scene, SceneOutput, SceneStage, StageContext,
+};
 
-/// The folder of a scene's renders.
-pub const RENDER_DIR: &str = "render";
-/// The folder of asset views, relative to the dataset.
-pub const ASSET_RENDERS: &str = "assets/renders";
+/// `mesa render`.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// The runner flags.
+    #[command(flatten)]
+    pub stage: SceneArgs,
+    /// The layout drawn (default: [render] layout of mesa.toml, "refined"). Never falls back
+    /// to another: a scene without it fails.
+    #[arg(long, value_enum)]
+    pub layout: Option<LayoutArg>,
+    /// Render the eight views around z of every library asset (assets/renders/<uid>/
+    /// view_<azimuth>.png, for annotating assets and checking their front) instead of scenes.
+    #[arg(long, conflicts_with_all = ["scenes", "shard", "layout"])]
+    pub assets: bool,
+    /// With --assets: only assets whose uid matches this glob.
+    #[arg(long, value_name = "GLOB", requires = "assets")]
+    pub uids: Option<String>,
+}
+
+/// Runs `mesa render`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    let mut resolved = args.stage.resolve(global)?;
+    if let Some(layout) = args.layout {
+        resolved.config.render.layout = layout.into();
+    }
+    if args.assets {
+        return resolved.run_dataset(&AssetViewsStage { uids: args.uids });
+    }
+    resolved.run(&RenderStage::new())
+}
 
 /// The files of a scene's render of `view`, relative to the scene folder: (picture, camera).
 pub fn view_files(view: SceneView) -> (String, String) {
@@ -70,11 +104,6 @@ pub fn no_layout(scene: &Scene, choice: LayoutChoice) -> anyhow::Error {
         scene.dir.display(),
         choice.candidates().join(" or ")
     )
-}
-
-/// Reads a dataset layout to draw, with the SHA-256 of its bytes.
-pub fn read_dataset_layout(path: &Path) -> anyhow::Result<(DatasetLayout, String)> {
-    crate::stages::scene_docs::read_dataset_layout(path, "draw")
 }
 
 /// Loaded assets shared by the scenes of a run, bounded by `[render] asset_cache_mb`.
@@ -221,7 +250,7 @@ impl RenderStage {
         let budget =
             usize::try_from(config.asset_cache_mb.saturating_mul(1 << 20)).unwrap_or(usize::MAX);
         self.cache.get(uid, budget, || {
-            let path = dataset.join(LIBRARY).join(format!("{uid}.glb"));
+            let path = dataset.join(asset_glb(uid));
             let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
             if sha256_hex(&bytes) != record.glb_sha256 {
                 return Err(format!(
@@ -286,7 +315,7 @@ impl SceneStage for RenderStage {
         };
         let mut inputs: Vec<String> = layouts.iter().map(|rel| scene.rel(rel)).collect();
         inputs.push(INDEX.to_owned());
-        let (layout, _) = read_dataset_layout(&scene.path(first))?;
+        let (layout, _) = read_dataset_layout(&scene.path(first), "draw")?;
         let uids: std::collections::BTreeSet<&str> = layout
             .objects
             .iter()
@@ -297,7 +326,7 @@ impl SceneStage for RenderStage {
         // runs again next time, so the file is picked up once it is there).
         inputs.extend(
             uids.iter()
-                .map(|uid| format!("{LIBRARY}/{uid}.glb"))
+                .map(|uid| asset_glb(uid))
                 .filter(|rel| ctx.dataset.join(rel).is_file()),
         );
         Ok(inputs)
@@ -311,8 +340,7 @@ impl SceneStage for RenderStage {
         // Reported as waiting by the runner, as graph and tasks report it (the run fallback
         // above stays for callers that run the stage without the runner).
         self.waits(ctx.config.render.layout, scene).then(|| {
-            crate::stages::scene_docs::awaiting_annotation(scene)
-                .unwrap_or_else(|| WAITING.to_owned())
+            crate::scene_docs::awaiting_annotation(scene).unwrap_or_else(|| WAITING.to_owned())
         })
     }
 
@@ -327,7 +355,7 @@ impl SceneStage for RenderStage {
             .first()
             .ok_or_else(|| no_layout(scene, config.layout))?;
         let path = scene.path(rel);
-        let (layout, sha) = read_dataset_layout(&path)?;
+        let (layout, sha) = read_dataset_layout(&path, "draw")?;
         let (views, warnings) = self
             .render_layout(ctx.dataset, config, &layout)
             .map_err(|e| anyhow!("{}: {e:#}", path.display()))?;
@@ -385,23 +413,8 @@ pub struct AssetViewsRecord {
     pub views: Vec<String>,
 }
 
-/// How `mesa render --assets` is asked to run.
-#[derive(Debug, Clone)]
-pub struct AssetViewsOptions {
-    /// Only uids matching this glob.
-    pub uids: Option<String>,
-    /// Worker threads (0 = one per core).
-    pub jobs: usize,
-    /// Redo assets whose views are current.
-    pub force: bool,
-    /// Progress display.
-    pub progress: ProgressMode,
-    /// Seconds between progress lines.
-    pub progress_interval: Duration,
-}
-
 /// What a run of `mesa render --assets` did.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Serialize)]
 pub struct AssetViewsSummary {
     /// Assets selected.
     pub assets: usize,
@@ -417,20 +430,44 @@ pub struct AssetViewsSummary {
     pub elapsed_s: f64,
 }
 
+/// `mesa render --assets`: the eight views around z of every library asset, an asset a unit.
+#[derive(Debug, Default)]
+pub struct AssetViewsStage {
+    /// Only uids matching this glob.
+    pub uids: Option<String>,
+}
+
+impl DatasetStage for AssetViewsStage {
+    fn name(&self) -> &'static str {
+        "render"
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
+        let summary = render_asset_views(ctx.dataset, ctx.config, self.uids.as_deref(), exec)?;
+        Ok(DatasetReport {
+            success: summary.failed.is_empty(),
+            text: format_asset_views_summary(&summary),
+            record: serde_json::to_value(&summary)?,
+        })
+    }
+}
+
 /// Renders the eight views around z of the library's assets.
 pub fn render_asset_views(
     dataset: &Path,
     config: &Config,
-    options: &AssetViewsOptions,
+    uids: Option<&str>,
+    exec: &Executor<'_>,
 ) -> anyhow::Result<AssetViewsSummary> {
     let started = Instant::now();
+    let force = exec.options().force;
     let stage = RenderStage::new();
     let library = stage.library(dataset)?;
-    let matcher = match &options.uids {
+    let matcher = match uids {
         Some(glob) => Some(
             globset::Glob::new(glob)
                 .map_err(|e| {
-                    crate::app::UsageError(format!(
+                    UsageError(format!(
                         "--uids \"{glob}\": {} (expected a glob like \"a3*\")",
                         e.kind()
                     ))
@@ -451,35 +488,16 @@ pub fn render_asset_views(
         .partition(|uid| library.index.assets[*uid].valid);
     let render = &config.render;
     let digest = fingerprint(render);
-    let progress = crate::progress::Progress::new(
-        "render",
+    let outcomes: Vec<Result<bool, String>> = exec.map_ticked(
         "assets",
-        uids.len(),
-        options.progress,
-        options.progress_interval,
+        &uids,
+        |uid| render_one_asset(dataset, &stage, &library, render, &digest, uid, force),
+        |outcome| match outcome {
+            Ok(true) => Tick::Done,
+            Ok(false) => Tick::Skipped,
+            Err(_) => Tick::Failed,
+        },
     );
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(options.jobs)
-        .build()
-        .context("cannot start the worker threads")?;
-    let outcomes: Vec<Result<bool, String>> = pool.install(|| {
-        uids.par_iter()
-            .map(|uid| {
-                let outcome = render_one_asset(
-                    dataset,
-                    &stage,
-                    &library,
-                    render,
-                    &digest,
-                    uid,
-                    options.force,
-                );
-                progress.advance(1);
-                outcome
-            })
-            .collect()
-    });
-    progress.finish();
     let mut summary = AssetViewsSummary {
         assets: uids.len(),
         invalid: invalid.len(),

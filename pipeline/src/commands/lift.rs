@@ -1,9 +1,23 @@
 //! `mesa lift`: the runner adapter of [`mesa_stages::lift`].
 
+use std::process::ExitCode;
+
 use anyhow::Context as _;
 use mesa_stages::lift::lift_scene;
+use mesa_stages::paths::scene::{
+    points, CAMERA, DEPTH_NPY, DEPTH_PNG, IMAGE, INPUT, INSTANCES, LIFT, MASKS_DIR, MASKS_PNG,
+};
 
+use crate::cli::{Global, SceneArgs};
 use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
+
+/// `mesa lift`: the runner flags.
+pub type Args = SceneArgs;
+
+/// Runs `mesa lift`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    args.resolve(global)?.run(&Lift)
+}
 
 /// Depth + masks → `coarse/lift.json` and `coarse/points/<instance>.ply`.
 pub struct Lift;
@@ -14,24 +28,21 @@ impl SceneStage for Lift {
     }
 
     fn inputs(&self, _: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
-        let mut inputs = vec![
-            scene.rel("input/camera.json"),
-            scene.rel("input/instances.json"),
-        ];
-        let depth_png = scene.path("input/depth.png");
-        let depth_npy = scene.path("input/depth.npy");
+        let mut inputs = vec![scene.rel(CAMERA), scene.rel(INSTANCES)];
+        let depth_png = scene.path(DEPTH_PNG);
+        let depth_npy = scene.path(DEPTH_NPY);
         if depth_npy.exists() {
-            inputs.push(scene.rel("input/depth.npy"));
+            inputs.push(scene.rel(DEPTH_NPY));
         }
         if depth_png.exists() || !depth_npy.exists() {
-            inputs.push(scene.rel("input/depth.png"));
+            inputs.push(scene.rel(DEPTH_PNG));
         }
-        for optional in ["input/masks.png", "input/image.png"] {
+        for optional in [MASKS_PNG, IMAGE] {
             if scene.path(optional).exists() {
                 inputs.push(scene.rel(optional));
             }
         }
-        let folder = scene.path("input/masks");
+        let folder = scene.path(MASKS_DIR);
         if folder.is_dir() {
             let mut files: Vec<String> = std::fs::read_dir(&folder)
                 .with_context(|| format!("{}: cannot list", folder.display()))?
@@ -40,7 +51,7 @@ impl SceneStage for Lift {
                 .filter(|n| n.ends_with(".png"))
                 .collect();
             files.sort();
-            inputs.extend(files.iter().map(|n| scene.rel(&format!("input/masks/{n}"))));
+            inputs.extend(files.iter().map(|n| scene.rel(&format!("{MASKS_DIR}/{n}"))));
         }
         Ok(inputs)
     }
@@ -51,15 +62,15 @@ impl SceneStage for Lift {
 
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
         let lifted = lift_scene(
-            &scene.path("input"),
+            &scene.path(INPUT),
             &scene.scene_id,
             ctx.config.run.seed,
             &ctx.config.lift,
         )?;
         let mut out = SceneOutput::new();
-        out.add_json("coarse/lift.json", &lifted.artifact)?;
+        out.add_json(LIFT, &lifted.artifact)?;
         for (instance, bytes) in lifted.clouds {
-            out.add_file(format!("coarse/points/{instance}.ply"), bytes);
+            out.add_file(points(&instance), bytes);
         }
         for warning in lifted.warnings {
             out.warn(warning);

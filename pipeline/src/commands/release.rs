@@ -14,6 +14,7 @@
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context as _};
@@ -21,14 +22,71 @@ use mesa_schemas::json::parse_lenient;
 use mesa_schemas::render::RenderCameraArtifact;
 use mesa_schemas::Kind;
 use mesa_stages::release::{release_annotations, release_layout};
-use rayon::prelude::*;
 
-use super::assets::ANNOTATIONS;
-use super::render::{no_layout, present_layouts, read_dataset_layout, RENDER_DIR};
-use crate::app::UsageError;
+use clap::Args as ClapArgs;
+use mesa_stages::paths::dataset::{ANNOTATIONS, SCENES};
+use mesa_stages::paths::scene::RENDER_DIR;
+use serde::Serialize;
+
+use super::render::{no_layout, present_layouts};
+use crate::cli::{DatasetArgs, Global, LayoutArg};
 use crate::config::Config;
+use crate::exit::UsageError;
 use crate::fsio::{sweep_tmp_for, write_atomic};
-use crate::runner::{discover_scenes, select_scenes, Scene, Shard};
+use crate::layouts::read_dataset_layout;
+use crate::runner::{
+    discover_scenes, select_scenes, DatasetReport, DatasetStage, Executor, RunError, Scene, Shard,
+    StageContext,
+};
+
+/// `mesa release`.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// The dataset and its run flags.
+    #[command(flatten)]
+    pub common: DatasetArgs,
+    /// The folder to write the tree into (new or empty, or an earlier release of this dataset,
+    /// which is replaced).
+    pub out: PathBuf,
+    /// The layout released (default: "refined": qa/layout.json, else refined/layout.json).
+    #[arg(long, value_enum)]
+    pub layout: Option<LayoutArg>,
+    /// Only scenes whose "<table_type>/<scene_id>" or "<scene_id>" matches this glob.
+    #[arg(long, value_name = "GLOB")]
+    pub scenes: Option<String>,
+}
+
+/// Runs `mesa release`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    let mut resolved = args.common.resolve(global)?;
+    resolved.options.scenes = args.scenes;
+    if let Some(layout) = args.layout {
+        resolved.config.render.layout = layout.into();
+    }
+    resolved.run_dataset(&ReleaseStage { out: args.out })
+}
+
+/// The `release` stage: the MesaTask-10K tree into `out`.
+#[derive(Debug)]
+pub struct ReleaseStage {
+    /// The folder written.
+    pub out: PathBuf,
+}
+
+impl DatasetStage for ReleaseStage {
+    fn name(&self) -> &'static str {
+        "release"
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
+        let summary = write_release(ctx.dataset, &self.out, ctx.config, exec)?;
+        Ok(DatasetReport {
+            success: summary.failed.is_empty(),
+            text: format_release_summary(&summary),
+            record: serde_json::to_value(&summary)?,
+        })
+    }
+}
 
 /// The folder of layouts in a release.
 pub const LAYOUT_INFO: &str = "Layout_info";
@@ -36,7 +94,7 @@ pub const LAYOUT_INFO: &str = "Layout_info";
 pub const ASSET_ANNOTATION: &str = "Asset_annotation.json";
 
 /// What a release run wrote.
-#[derive(Debug)]
+#[derive(Debug, Serialize)]
 pub struct ReleaseSummary {
     /// The release folder.
     pub out: PathBuf,
@@ -123,7 +181,7 @@ fn release_scene(config: &Config, scene: &Scene, out: &Path) -> anyhow::Result<B
         .first()
         .ok_or_else(|| no_layout(scene, choice))?;
     let path = scene.path(rel);
-    let (layout, sha) = read_dataset_layout(&path)?;
+    let (layout, sha) = read_dataset_layout(&path, "draw")?;
     let bytes = release_layout(&layout).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let camera_path = scene.path(&format!("{RENDER_DIR}/front_camera.json"));
     let png_path = scene.path(&format!("{RENDER_DIR}/front.png"));
@@ -175,16 +233,15 @@ pub fn write_release(
     dataset: &Path,
     out: &Path,
     config: &Config,
-    scenes_glob: Option<&str>,
-    jobs: usize,
+    exec: &Executor<'_>,
 ) -> anyhow::Result<ReleaseSummary> {
     let started = Instant::now();
     let scenes = select_scenes(
-        discover_scenes(dataset).map_err(|e| UsageError(e.to_string()))?,
-        scenes_glob,
+        discover_scenes(dataset).map_err(RunError::into_anyhow)?,
+        exec.options().scenes.as_deref(),
         Shard::default(),
     )
-    .map_err(|e| UsageError(e.to_string()))?;
+    .map_err(RunError::into_anyhow)?;
     let annotations_path = dataset.join(ANNOTATIONS);
     let annotations = std::fs::read_to_string(&annotations_path)
         .map_err(|e| {
@@ -197,7 +254,7 @@ pub fn write_release(
             parse_lenient(&t)
                 .map_err(|e| UsageError(format!("{}: {e}", annotations_path.display())))
         })?;
-    if out.starts_with(dataset.join("scenes")) {
+    if out.starts_with(dataset.join(SCENES)) {
         return Err(UsageError(format!(
             "{}: inside the dataset's scenes/ (give a folder outside it)",
             out.display()
@@ -205,16 +262,8 @@ pub fn write_release(
         .into());
     }
     prepare_out(out)?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(jobs)
-        .build()
-        .context("cannot start the worker threads")?;
-    let outcomes: Vec<anyhow::Result<BTreeSet<String>>> = pool.install(|| {
-        scenes
-            .par_iter()
-            .map(|scene| release_scene(config, scene, out))
-            .collect()
-    });
+    let outcomes: Vec<anyhow::Result<BTreeSet<String>>> =
+        exec.map("scenes", &scenes, |scene| release_scene(config, scene, out));
     let mut summary = ReleaseSummary {
         out: out.to_owned(),
         scenes: scenes.len(),

@@ -6,29 +6,75 @@
 //! settling.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
+use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 
-use anyhow::{anyhow, bail, Context as _};
+use anyhow::Context as _;
+use clap::{Args as ClapArgs, ValueEnum};
 use mesa_schemas::artifacts::{
     AssetIndexArtifact, CheckArtifact, CheckFindings, CheckSummaryArtifact, RateSummary,
     SettleStatus, SettleSummary, ShapesArtifact, CHECK_SUMMARY_SCHEMA,
 };
-use mesa_schemas::{DatasetLayout, LayoutObject};
+use mesa_schemas::LayoutObject;
 use mesa_stages::annotations::Annotations;
 use mesa_stages::check::{check_layout, AssetShape, CheckedLayout, LayoutSource, SETTLED_LAYOUT};
 use mesa_stages::graph::{annotated_containers, GraphOptions, GraphScene};
 use serde::Serialize;
 
-use super::assets::{ANNOTATIONS, INDEX};
-use super::retrieve::read_json;
-use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic};
+use mesa_stages::paths::dataset::{ANNOTATIONS, CHECK_SUMMARY, INDEX};
+use mesa_stages::paths::scene::CHECK;
+
+use crate::cli::{Global, SceneArgs};
+use crate::dataset_cache::DatasetCache;
+use crate::fsio::{read_json, sha256_hex, sweep_tmp_for, write_atomic};
+use crate::layouts::read_dataset_layout;
 use crate::runner::{digest_of, discover_scenes, Scene, SceneOutput, SceneStage, StageContext};
 
-/// The scene's check report, relative to the scene folder.
-pub const CHECK_FILE: &str = "qa/check.json";
-/// The dataset's check summary, relative to the dataset.
-pub const SUMMARY_FILE: &str = "qa/summary.json";
+/// `--layout` of `mesa check`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CheckLayoutArg {
+    /// refined/layout.json (written by `mesa ingest` from the annotator's GLB).
+    Refined,
+    /// coarse/layout.json (written by `mesa place`).
+    Coarse,
+}
+
+impl From<CheckLayoutArg> for LayoutSource {
+    fn from(value: CheckLayoutArg) -> Self {
+        match value {
+            CheckLayoutArg::Refined => Self::Refined,
+            CheckLayoutArg::Coarse => Self::Coarse,
+        }
+    }
+}
+
+/// `mesa check`.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// The runner flags.
+    #[command(flatten)]
+    pub stage: SceneArgs,
+    /// The layout to check (default: [check] layout of mesa.toml, "refined").
+    #[arg(long, value_enum)]
+    pub layout: Option<CheckLayoutArg>,
+    /// Also settle each scene: the least motion that removes collisions and floating, keeping
+    /// what holds what; writes qa/layout.json (default: [check] settle of mesa.toml).
+    #[arg(long)]
+    pub settle: bool,
+}
+
+/// Runs `mesa check`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    let mut resolved = args.stage.resolve(global)?;
+    if let Some(layout) = args.layout {
+        resolved.config.check.layout = layout.into();
+    }
+    if args.settle {
+        resolved.config.check.settle = true;
+    }
+    resolved.run(&CheckStage::new())
+}
 
 /// What the check reads once per dataset and run: the asset index, the annotations, and the
 /// shapes of the assets used so far (also what `mesa records` verifies collisions with).
@@ -108,38 +154,20 @@ impl ShapeLibrary {
 }
 
 /// The `check` stage.
+#[derive(Default)]
 pub struct CheckStage {
-    libraries: Mutex<BTreeMap<PathBuf, Result<Arc<ShapeLibrary>, String>>>,
-}
-
-impl Default for CheckStage {
-    fn default() -> Self {
-        Self::new()
-    }
+    libraries: DatasetCache<ShapeLibrary>,
 }
 
 impl CheckStage {
     /// A stage with nothing loaded yet.
     pub fn new() -> Self {
-        Self {
-            libraries: Mutex::new(BTreeMap::new()),
-        }
+        Self::default()
     }
 
     fn library(&self, dataset: &Path) -> anyhow::Result<Arc<ShapeLibrary>> {
-        let mut cache = self
-            .libraries
-            .lock()
-            .map_err(|_| anyhow!("internal error: the library cache is poisoned"))?;
-        let entry = cache.entry(dataset.to_owned()).or_insert_with(|| {
-            ShapeLibrary::load(dataset)
-                .map(Arc::new)
-                .map_err(|e| format!("{e:#}"))
-        });
-        match entry {
-            Ok(library) => Ok(Arc::clone(library)),
-            Err(message) => bail!("{message}"),
-        }
+        self.libraries
+            .get_or_load(dataset, || ShapeLibrary::load(dataset))
     }
 }
 
@@ -149,11 +177,6 @@ struct Fingerprint<'a> {
     check: &'a mesa_stages::check::CheckConfig,
     graph: &'a mesa_stages::graph::GraphConfig,
     version: &'a str,
-}
-
-/// Reads a dataset layout file to check, with the SHA-256 of its bytes.
-pub fn read_dataset_layout(path: &Path) -> anyhow::Result<(DatasetLayout, String)> {
-    crate::stages::scene_docs::read_dataset_layout(path, "check")
 }
 
 impl SceneStage for CheckStage {
@@ -190,10 +213,21 @@ impl SceneStage for CheckStage {
     fn waiting(&self, ctx: &StageContext<'_>, scene: &Scene) -> Option<String> {
         let layout = ctx.config.check.layout;
         if layout == LayoutSource::Refined && !scene.path(layout.file()).is_file() {
-            crate::stages::scene_docs::awaiting_annotation(scene)
+            crate::scene_docs::awaiting_annotation(scene)
         } else {
             None
         }
+    }
+
+    /// Loads the asset index, the annotations and the shapes cache once per run (a failure
+    /// fails each scene with its reason).
+    fn prepare(&self, ctx: &StageContext<'_>) {
+        let _ = self.library(ctx.dataset);
+    }
+
+    /// The dataset summary `qa/summary.json` over every scene's `qa/check.json`.
+    fn finish(&self, ctx: &StageContext<'_>) -> anyhow::Result<Option<String>> {
+        write_summary(ctx.dataset)
     }
 
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
@@ -208,7 +242,7 @@ impl SceneStage for CheckStage {
             ));
             return Ok(out);
         }
-        let (layout, sha256) = read_dataset_layout(&path)?;
+        let (layout, sha256) = read_dataset_layout(&path, "check")?;
         let library = self.library(ctx.dataset)?;
         let options = GraphOptions::from(&ctx.config.graph);
         let uids: Vec<String> = layout
@@ -246,7 +280,7 @@ impl SceneStage for CheckStage {
                 ));
             }
         }
-        out.add_json(CHECK_FILE, &checked.artifact)?;
+        out.add_json(CHECK, &checked.artifact)?;
         if let Some(settled) = &checked.settled {
             out.add_json(SETTLED_LAYOUT, settled)?;
         }
@@ -309,7 +343,7 @@ fn findings_of(check: &CheckArtifact) -> CheckFindings {
 pub fn summarize(dataset: &Path) -> anyhow::Result<CheckSummaryArtifact> {
     let mut checks = Vec::new();
     for scene in discover_scenes(dataset)? {
-        let path = scene.path(CHECK_FILE);
+        let path = scene.path(CHECK);
         if path.is_file() {
             let check: CheckArtifact = read_json(&path, "rerun `mesa check`")?;
             checks.push(check);
@@ -378,9 +412,9 @@ pub fn summarize(dataset: &Path) -> anyhow::Result<CheckSummaryArtifact> {
 /// been checked).
 pub fn write_summary(dataset: &Path) -> anyhow::Result<Option<String>> {
     let summary = summarize(dataset)?;
-    let path = dataset.join(SUMMARY_FILE);
+    let path = dataset.join(CHECK_SUMMARY);
     let bytes = mesa_schemas::json::to_sorted_pretty(&summary)
-        .with_context(|| format!("serialising {SUMMARY_FILE}"))?;
+        .with_context(|| format!("serialising {CHECK_SUMMARY}"))?;
     sweep_tmp_for(&path).with_context(|| format!("{}: sweeping", path.display()))?;
     write_atomic(&path, &bytes).with_context(|| format!("{}: cannot write", path.display()))?;
     Ok((summary.scenes > 0).then(|| format_summary(&summary, &path)))

@@ -3,23 +3,17 @@
 //! (`graph/graph.txt` and `graph/graph.json`), checked to belong together; and whether a scene
 //! still awaits its annotator.
 
-use std::path::Path;
-
 use anyhow::{anyhow, bail, Context as _};
 use mesa_schemas::artifacts::GraphArtifact;
 use mesa_schemas::convert::llm_from_dataset;
+use mesa_schemas::layout_file::AnyLayout;
 use mesa_schemas::LlmLayout;
+use mesa_stages::paths::scene::{
+    pack_glb, refined_glb, COARSE_LAYOUT, GRAPH_JSON, GRAPH_TXT, LAYOUT_CANDIDATES,
+};
 
-use crate::fsio::sha256_hex;
+use crate::layouts::{chosen_layout, read_layout_file};
 use crate::runner::Scene;
-use crate::stages::graph::LAYOUT_CANDIDATES;
-use mesa_schemas::layout_file::{read_layout_text, AnyLayout, ReadLayout};
-use mesa_schemas::DatasetLayout;
-
-/// The scene graph files, relative to the scene folder.
-pub const GRAPH_TXT: &str = "graph/graph.txt";
-/// The scene graph with its numbers and node flags.
-pub const GRAPH_JSON: &str = "graph/graph.json";
 
 /// A scene's layout and scene graph.
 #[derive(Debug, Clone, PartialEq)]
@@ -42,12 +36,12 @@ pub struct SceneDocs {
 /// annotator has not returned the edited scene, or it was not ingested yet. `None` when it has
 /// one, or when it is not that far (no coarse layout: the stages before fail instead).
 pub fn awaiting_annotation(scene: &Scene) -> Option<String> {
-    if chosen_layout(scene).is_some() || !scene.path("coarse/layout.json").is_file() {
+    if chosen_layout(scene).is_some() || !scene.path(COARSE_LAYOUT).is_file() {
         return None;
     }
     let id = &scene.scene_id;
-    let refined = format!("refined/{id}.glb");
-    let pack = format!("pack/{id}.glb");
+    let refined = refined_glb(id);
+    let pack = pack_glb(id);
     Some(if scene.path(&refined).is_file() {
         format!("{refined} is in but not ingested yet (run `mesa ingest`)")
     } else if scene.path(&pack).is_file() {
@@ -60,21 +54,6 @@ pub fn awaiting_annotation(scene: &Scene) -> Option<String> {
     } else {
         "awaiting annotation: no pack yet (run `mesa pack`)".to_owned()
     })
-}
-
-/// The layout file a scene's stages read: the first present of [`LAYOUT_CANDIDATES`].
-pub fn chosen_layout(scene: &Scene) -> Option<&'static str> {
-    LAYOUT_CANDIDATES
-        .into_iter()
-        .find(|rel| scene.path(rel).is_file())
-}
-
-/// Every layout file present (a new `qa/layout.json` makes what was built on `refined/` stale).
-pub fn present_layouts(scene: &Scene) -> Vec<&'static str> {
-    LAYOUT_CANDIDATES
-        .into_iter()
-        .filter(|rel| scene.path(rel).is_file())
-        .collect()
 }
 
 /// The triplet lines `graph.json` stands for, in `graph.txt`'s order.
@@ -100,50 +79,6 @@ fn lines_of(graph: &GraphArtifact) -> Vec<String> {
     lines
 }
 
-/// Reads a layout file in either form (dataset or LLM) with the SHA-256 of its bytes. An error
-/// names the file and lists every problem on its own line.
-pub fn read_any_layout(path: &Path) -> anyhow::Result<(ReadLayout, String)> {
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let sha = sha256_hex(&bytes);
-    let text = String::from_utf8(bytes).map_err(|_| {
-        anyhow!(
-            "{}: not UTF-8 text (expected a layout JSON)",
-            path.display()
-        )
-    })?;
-    let read = read_layout_text(&text).map_err(|problems| {
-        let lines: Vec<String> = problems
-            .iter()
-            .map(|p| format!("{}: {p}", path.display()))
-            .collect();
-        anyhow!(
-            "{} is not a valid layout:\n{}",
-            path.display(),
-            lines.join("\n")
-        )
-    })?;
-    Ok((read, sha))
-}
-
-/// Reads a dataset layout file (asset uids and scale factors per object) with the SHA-256 of
-/// its bytes. An LLM layout names no assets: an error that says what `needs_assets_to` (like
-/// "check", "draw") cannot do without them.
-pub fn read_dataset_layout(
-    path: &Path,
-    needs_assets_to: &str,
-) -> anyhow::Result<(DatasetLayout, String)> {
-    let (read, sha) = read_any_layout(path)?;
-    match read.layout {
-        AnyLayout::Dataset(layout) => Ok((layout, sha)),
-        AnyLayout::Llm(_) => bail!(
-            "{}: an LLM layout has no assets to {needs_assets_to} (no retrieved_uid or \
-             scale_factor per object): expected a dataset layout (`mesa place` writes one; \
-             `mesa convert --to dataset` gives one without assets)",
-            path.display()
-        ),
-    }
-}
-
 /// Reads a scene's layout and scene graph; an error says which file is missing or stale and
 /// which stage to rerun.
 pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
@@ -155,7 +90,7 @@ pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
         )
     })?;
     let path = scene.path(layout_rel);
-    let (read, layout_sha256) = read_any_layout(&path)?;
+    let (read, layout_sha256) = read_layout_file(&path)?;
     let mut warnings = Vec::new();
     let layout = match read.layout {
         AnyLayout::Dataset(dataset) => {

@@ -15,46 +15,91 @@
 //! makes them exit with code 1.
 
 use std::collections::BTreeMap;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::process::ExitCode;
+use std::time::Instant;
 
 use anyhow::{anyhow, Context as _};
+use clap::Args as ClapArgs;
 use mesa_schemas::artifacts::{AssetIndexArtifact, AssetRecord, ShapesRef, ASSET_INDEX_SCHEMA};
 use mesa_schemas::json::{parse_lenient, to_sorted_pretty};
 use mesa_stages::annotations::Annotations;
 use mesa_stages::assets::{build_text_index, index_asset, INDEX_VERSION};
-use rayon::prelude::*;
+use mesa_stages::paths::dataset::{
+    asset_glb, shapes as shapes_rel, ANNOTATIONS, INDEX, LIBRARY, SHAPES_DIR, TEXT_INDEX,
+};
 use serde::Serialize;
 
-use crate::config::{Config, ProgressMode};
+use crate::cli::{DatasetArgs, Global};
+use crate::config::Config;
+use crate::exit::UsageError;
 use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic};
-use crate::runner::{digest_of, RUN_DIR};
+use crate::runner::{digest_of, DatasetReport, DatasetStage, Executor, Shard, StageContext};
 
-/// The asset library, relative to the dataset.
-pub const LIBRARY: &str = "assets/library";
-/// The asset annotations, relative to the dataset.
-pub const ANNOTATIONS: &str = "assets/annotations.json";
-/// The asset index, relative to the dataset.
-pub const INDEX: &str = "assets/index/assets.json";
-/// The lexical text index, relative to the dataset.
-pub const TEXT_INDEX: &str = "assets/index/text.json";
-/// The folder of collision shapes, relative to the dataset.
-pub const SHAPES_DIR: &str = "assets/index/shapes";
-
-/// How `mesa assets` is asked to run.
-#[derive(Debug, Clone)]
-pub struct AssetsOptions {
-    /// Worker threads (0 = one per core).
-    pub jobs: usize,
-    /// Re-index every asset, even unchanged ones.
+/// `mesa assets`.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// The dataset and its run flags.
+    #[command(flatten)]
+    pub common: DatasetArgs,
+    /// Re-index every asset, even those whose GLB, annotation and configuration are unchanged.
+    #[arg(long)]
     pub force: bool,
-    /// Progress display.
-    pub progress: ProgressMode,
-    /// Seconds between progress lines.
-    pub progress_interval: Duration,
+    /// Exit with code 1 when some asset is invalid (by default invalid assets are listed, and
+    /// retrieval never chooses them).
+    #[arg(long)]
+    pub strict: bool,
+}
+
+/// Runs `mesa assets`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    let mut resolved = args.common.resolve(global)?;
+    resolved.options.force = args.force;
+    // Under a Slurm array, one task indexes the library; the others have nothing to do.
+    if let Some(shard) = Shard::from_slurm_env().map_err(UsageError)? {
+        if shard.index != 0 {
+            eprintln!(
+                "assets: the library is indexed by array task 0 (this is task {shard}): nothing \
+                 to do here"
+            );
+            return Ok(ExitCode::SUCCESS);
+        }
+    }
+    resolved.run_dataset(&AssetsStage {
+        strict: args.strict,
+    })
+}
+
+/// The `assets` stage: the asset index, once over the library.
+#[derive(Debug, Default)]
+pub struct AssetsStage {
+    /// Invalid assets fail the run (exit code 1).
+    pub strict: bool,
+}
+
+impl DatasetStage for AssetsStage {
+    fn name(&self) -> &'static str {
+        "assets"
+    }
+
+    fn skipped_by_run(&self, ctx: &StageContext<'_>) -> Option<String> {
+        let library = ctx.dataset.join(LIBRARY);
+        (!library.is_dir()).then(|| {
+            format!(
+                "{} does not exist: no asset index (retrieve and place need one)",
+                library.display()
+            )
+        })
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
+        let summary = index_library(ctx.dataset, ctx.config, exec)?;
+        Ok(DatasetReport {
+            success: !(self.strict && !summary.invalid.is_empty()),
+            text: format_summary(&summary),
+            record: serde_json::to_value(&summary)?,
+        })
+    }
 }
 
 /// What a run of `mesa assets` did.
@@ -135,71 +180,11 @@ fn read_previous(dataset: &Path) -> Option<AssetIndexArtifact> {
     serde_json::from_str(&text).ok()
 }
 
-struct Progress {
-    total: usize,
-    done: AtomicUsize,
-    bar: Option<indicatif::ProgressBar>,
-    interval: Option<Duration>,
-    last: Mutex<Instant>,
-}
-
-impl Progress {
-    fn new(total: usize, mode: ProgressMode, interval: Duration) -> Self {
-        let terminal = std::io::stderr().is_terminal();
-        let (bar, lines) = match mode {
-            ProgressMode::Off => (false, false),
-            ProgressMode::Bar => (true, false),
-            ProgressMode::Lines => (false, true),
-            ProgressMode::Auto => (terminal, !terminal),
-        };
-        let bar = bar.then(|| {
-            let bar = indicatif::ProgressBar::new(total as u64);
-            if let Ok(style) = indicatif::ProgressStyle::with_template(
-                "  assets [{bar:40}] {pos}/{len} assets {per_sec} eta {eta}",
-            ) {
-                bar.set_style(style.progress_chars("=> "));
-            }
-            bar
-        });
-        Self {
-            total,
-            done: AtomicUsize::new(0),
-            bar,
-            interval: lines.then_some(interval),
-            last: Mutex::new(Instant::now()),
-        }
-    }
-
-    fn tick(&self) {
-        let done = self.done.fetch_add(1, Ordering::Relaxed) + 1;
-        if let Some(bar) = &self.bar {
-            bar.inc(1);
-        }
-        if let Some(interval) = self.interval {
-            let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
-            if last.elapsed() >= interval || done == self.total {
-                *last = Instant::now();
-                eprintln!("assets: {done}/{} assets", self.total);
-            }
-        }
-    }
-
-    fn finish(&self) {
-        if let Some(bar) = &self.bar {
-            bar.finish_and_clear();
-        }
-    }
-}
-
 /// One asset: its record and, when it was (re)indexed, its shapes file bytes.
 struct Outcome {
     uid: String,
     record: AssetRecord,
     reused: bool,
-}
-
-fn shapes_rel(uid: &str) -> String {
-    format!("{SHAPES_DIR}/{uid}.json")
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -213,7 +198,7 @@ fn index_one(
     config_digest: &str,
     force: bool,
 ) -> anyhow::Result<Outcome> {
-    let file = format!("{LIBRARY}/{uid}.glb");
+    let file = asset_glb(uid);
     let path = dataset.join(&file);
     let bytes = match std::fs::read(&path) {
         Ok(bytes) => bytes,
@@ -327,12 +312,13 @@ fn index_one(
     })
 }
 
-/// Indexes the asset library of a dataset.
+/// Indexes the asset library of a dataset, an asset a unit of `exec`.
 pub fn index_library(
     dataset: &Path,
     config: &Config,
-    options: &AssetsOptions,
+    exec: &Executor<'_>,
 ) -> anyhow::Result<AssetsSummary> {
+    let force = exec.options().force;
     let started = Instant::now();
     let (uids, ignored) = list_library(dataset)?;
     let annotations_path = dataset.join(ANNOTATIONS);
@@ -342,37 +328,20 @@ pub fn index_library(
         Annotations::default()
     };
     let raw = raw_annotations(&annotations_path)?;
-    let previous = if options.force {
-        None
-    } else {
-        read_previous(dataset)
-    };
+    let previous = if force { None } else { read_previous(dataset) };
     let config_digest = digest_of(&config.assets);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(options.jobs)
-        .thread_name(|i| format!("mesa-assets-{i}"))
-        .build()
-        .map_err(|e| anyhow!("cannot start {} worker threads: {e}", options.jobs))?;
-    let progress = Progress::new(uids.len(), options.progress, options.progress_interval);
-    let outcomes: Vec<anyhow::Result<Outcome>> = pool.install(|| {
-        uids.par_iter()
-            .map(|uid| {
-                let outcome = index_one(
-                    dataset,
-                    uid,
-                    &annotations,
-                    &raw,
-                    previous.as_ref(),
-                    config,
-                    &config_digest,
-                    options.force,
-                );
-                progress.tick();
-                outcome
-            })
-            .collect()
+    let outcomes: Vec<anyhow::Result<Outcome>> = exec.map("assets", &uids, |uid| {
+        index_one(
+            dataset,
+            uid,
+            &annotations,
+            &raw,
+            previous.as_ref(),
+            config,
+            &config_digest,
+            force,
+        )
     });
-    progress.finish();
     let mut summary = AssetsSummary {
         assets: uids.len(),
         ignored_files: ignored,
@@ -425,13 +394,6 @@ pub fn index_library(
     };
     write_json(dataset, INDEX, &index)?;
     summary.elapsed_s = started.elapsed().as_secs_f64();
-    let record = dataset.join(RUN_DIR).join("runs/assets/summary.json");
-    if let Ok(bytes) = to_sorted_pretty(&summary) {
-        // The run record is informational; failing to write it must not fail the run.
-        if let Err(e) = write_atomic(&record, &bytes) {
-            tracing::warn!("{}: cannot write run record: {e}", record.display());
-        }
-    }
     Ok(summary)
 }
 

@@ -1,34 +1,32 @@
 //! `mesa retrieve`: the runner adapter of [`mesa_stages::retrieve`]: `coarse/lift.json` and the
 //! asset index → `coarse/retrieval.json`.
 
-use std::path::Path;
+use mesa_stages::paths::scene::{INSTANCES, LIFT, RETRIEVAL};
 use std::sync::Arc;
 
-use anyhow::{anyhow, bail, Context as _};
+use anyhow::bail;
 use mesa_schemas::artifacts::{AssetIndexArtifact, LiftArtifact, TextIndexArtifact};
 use mesa_stages::retrieve::features::FeatureMatrix;
 use mesa_stages::retrieve::lexical::LexicalIndex;
 use mesa_stages::retrieve::{
     query_embeddings, query_text, retrieve_scene, Catalog, Encoder, Query, TextScorer,
 };
-use serde::de::DeserializeOwned;
 
-use super::assets::{ANNOTATIONS, INDEX, TEXT_INDEX};
-use super::dataset_cache::{read_annotations, DatasetCache};
+use mesa_stages::paths::dataset::{ANNOTATIONS, INDEX, TEXT_FEATURES, TEXT_INDEX, TEXT_UIDS};
+use mesa_stages::paths::scene::QUERY_FEATURES;
+
+use crate::cli::{Global, SceneArgs};
+use crate::dataset_cache::{read_annotations, DatasetCache};
+use crate::fsio::read_json;
 use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
+use std::process::ExitCode;
 
-/// The asset embeddings of the `features` encoder, relative to the dataset.
-pub const TEXT_FEATURES: &str = "assets/text_features.npy";
-/// The uid of each row of [`TEXT_FEATURES`], relative to the dataset.
-pub const TEXT_UIDS: &str = "assets/text_uids.json";
-/// Query embeddings of a scene's instances (optional), relative to the scene.
-pub const QUERY_FEATURES: &str = "input/query_features.npy";
+/// `mesa retrieve`: the runner flags.
+pub type Args = SceneArgs;
 
-/// Reads a JSON artifact, naming the file in every error.
-pub fn read_json<T: DeserializeOwned>(path: &Path, hint: &str) -> anyhow::Result<T> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read ({hint})", path.display()))?;
-    serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e} ({hint})", path.display()))
+/// Runs `mesa retrieve`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    args.resolve(global)?.run(&RetrieveStage::new())
 }
 
 /// The asset side of retrieval, loaded once per dataset and run.
@@ -90,7 +88,7 @@ impl SceneStage for RetrieveStage {
     }
 
     fn inputs(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
-        let mut inputs = vec![scene.rel("coarse/lift.json"), INDEX.to_owned()];
+        let mut inputs = vec![scene.rel(LIFT), INDEX.to_owned()];
         if ctx.dataset.join(ANNOTATIONS).exists() {
             inputs.push(ANNOTATIONS.to_owned());
         }
@@ -99,7 +97,7 @@ impl SceneStage for RetrieveStage {
             Encoder::Features => {
                 inputs.push(TEXT_FEATURES.to_owned());
                 inputs.push(TEXT_UIDS.to_owned());
-                inputs.push(scene.rel("input/instances.json"));
+                inputs.push(scene.rel(INSTANCES));
                 if scene.path(QUERY_FEATURES).exists() {
                     inputs.push(scene.rel(QUERY_FEATURES));
                 }
@@ -113,10 +111,7 @@ impl SceneStage for RetrieveStage {
     }
 
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
-        let lift: LiftArtifact = read_json(
-            &scene.path("coarse/lift.json"),
-            "run `mesa lift` to write it",
-        )?;
+        let lift: LiftArtifact = read_json(&scene.path(LIFT), "run `mesa lift` to write it")?;
         let library = self.library(ctx)?;
         let config = &ctx.config.retrieve;
         let queries: Vec<Query> = match config.encoder {
@@ -128,7 +123,7 @@ impl SceneStage for RetrieveStage {
             Encoder::Features => {
                 let sidecar = scene.path(QUERY_FEATURES);
                 query_embeddings(
-                    &scene.path("input/instances.json"),
+                    &scene.path(INSTANCES),
                     sidecar.exists().then_some(sidecar.as_path()),
                     &lift,
                 )?
@@ -139,7 +134,7 @@ impl SceneStage for RetrieveStage {
         };
         let retrieved = retrieve_scene(&lift, &queries, &library.scorer, &library.catalog, config)?;
         let mut out = SceneOutput::new();
-        out.add_json("coarse/retrieval.json", &retrieved.artifact)?;
+        out.add_json(RETRIEVAL, &retrieved.artifact)?;
         for warning in retrieved.warnings {
             out.warn(warning);
         }

@@ -5,6 +5,7 @@
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use std::process::ExitCode;
 use std::sync::{Arc, OnceLock};
 
 use anyhow::{anyhow, bail, Context as _};
@@ -15,22 +16,201 @@ use mesa_stages::tasks::scene::NoChat;
 use mesa_stages::tasks::{write_scene_tasks, Backend, SceneInput, SceneTasks, TasksError, View};
 use serde::Serialize;
 
+use clap::{Args as ClapArgs, ValueEnum};
+use mesa_stages::paths::scene::{GRAPH_JSON, GRAPH_TXT, REJECTS, TASKS};
+
+use crate::cli::{Global, Resolved, SceneArgs};
+use crate::exit::{usage, UsageError, EXIT_FAILED, EXIT_OK};
 use crate::fsio::DigestCache;
+use crate::layouts::present_layouts;
 use crate::runner::{
-    digest_of, scene_state, Scene, SceneOutput, SceneStage, SceneState, StageContext,
+    digest_of, discover_scenes, scene_state, select_scenes, RunError, Scene, SceneOutput,
+    SceneStage, SceneState, StageContext,
 };
-use crate::stages::scene_docs::{present_layouts, read_scene_docs, GRAPH_JSON, GRAPH_TXT};
+use crate::scene_docs::read_scene_docs;
 use rayon::prelude::*;
 
-/// The tasks of a scene, relative to the scene folder.
-pub const TASKS_FILE: &str = "tasks/tasks.jsonl";
-/// The rejected replies of a scene.
-pub const REJECTS_FILE: &str = "tasks/rejects.jsonl";
 /// The rendered views sent with the description call when they exist: (name, file).
 pub const VIEWS: [(&str, &str); 2] = [
     ("front", "render/front.png"),
     ("perspective", "render/perspective.png"),
 ];
+
+/// `--backend`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    /// The built-in deterministic writer (offline; records say "generator": "template").
+    Template,
+    /// The chat endpoint of [tasks.llm] (its API key from the variable api_key_env names).
+    Llm,
+}
+
+impl From<BackendArg> for mesa_stages::tasks::Backend {
+    fn from(value: BackendArg) -> Self {
+        match value {
+            BackendArg::Template => Self::Template,
+            BackendArg::Llm => Self::Llm,
+        }
+    }
+}
+
+/// `mesa tasks`.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// The runner flags.
+    #[command(flatten)]
+    pub stage: SceneArgs,
+    /// The backend (default: [tasks] backend of mesa.toml). With llm and no --jobs, the
+    /// scenes run [tasks.llm] max_concurrency at a time.
+    #[arg(long, value_enum)]
+    pub backend: Option<BackendArg>,
+    /// Offline batches: write the requests still unanswered to FILE as OpenAI Batch JSONL
+    /// (one call per scene and round: description, then tasks, then reasoning; implies
+    /// --backend llm). Scenes whose replies are all in get their tasks written.
+    #[arg(long, value_name = "FILE")]
+    pub batch_out: Option<PathBuf>,
+    /// Offline batches: read a provider's batch output JSONL (repeatable); replies are joined
+    /// to requests by custom_id and stored in the reply cache, failed lines are reported and
+    /// their requests go into the next --batch-out (implies --backend llm).
+    #[arg(long, value_name = "FILE")]
+    pub batch_in: Vec<PathBuf>,
+}
+
+/// Runs `mesa tasks`.
+pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
+    use crate::chat::{ChatClient, Mode};
+
+    let mut resolved = args.stage.resolve(global)?;
+    let batch = args.batch_out.is_some() || !args.batch_in.is_empty();
+    if batch && args.backend == Some(BackendArg::Template) {
+        return Err(usage(
+            "--batch-out and --batch-in are for the llm backend (not --backend template)",
+        ));
+    }
+    if let Some(backend) = args.backend {
+        resolved.config.tasks.backend = backend.into();
+    }
+    if batch {
+        resolved.config.tasks.backend = Backend::Llm;
+        let problems = resolved.config.tasks.problems();
+        if !problems.is_empty() {
+            return Err(usage(problems.join("\n")));
+        }
+        load_prompts(&resolved.dataset, &resolved.config.tasks.prompts_dir).map_err(UsageError)?;
+        return batch_tasks(&args, resolved);
+    }
+    if resolved.config.tasks.backend == Backend::Template {
+        return resolved.run(&TasksStage::new());
+    }
+    preflight(&resolved.dataset, &resolved.config).map_err(UsageError)?;
+    let llm = &resolved.config.tasks.llm;
+    let client = Arc::new(ChatClient::new(&resolved.dataset, llm, Mode::Live).map_err(UsageError)?);
+    if args.stage.common.jobs.is_none() {
+        // Scenes wait on the network, not the CPU: run as many as may be in flight.
+        resolved.options.jobs = llm.max_concurrency;
+    }
+    let code = resolved.run(&TasksStage::with_chat(client.clone()))?;
+    eprintln!("tasks: {}: {}", llm.model, client.stats.summary());
+    for warning in client.warnings() {
+        eprintln!("tasks: warning: {warning}");
+    }
+    Ok(code)
+}
+
+fn batch_tasks(args: &Args, mut resolved: Resolved) -> anyhow::Result<ExitCode> {
+    use crate::chat::{custom_id, import_batch, request_digest, write_batch, ChatClient, Mode};
+
+    let client = Arc::new(
+        ChatClient::new(
+            &resolved.dataset,
+            &resolved.config.tasks.llm,
+            Mode::CacheOnly,
+        )
+        .map_err(UsageError)?,
+    );
+    let stage = TasksStage::with_chat(client.clone());
+    let ctx_plan = |resolved: &Resolved| -> anyhow::Result<BatchPlan> {
+        let scenes = select_scenes(
+            discover_scenes(&resolved.dataset).map_err(RunError::into_anyhow)?,
+            resolved.options.scenes.as_deref(),
+            resolved.options.shard,
+        )
+        .map_err(RunError::into_anyhow)?;
+        Ok(stage.plan_batch(&resolved.ctx(), &scenes, resolved.options.force))
+    };
+    let mut failed_lines = 0usize;
+    if !args.batch_in.is_empty() {
+        let BatchPlan { pending, .. } = ctx_plan(&resolved)?;
+        let by_id: std::collections::BTreeMap<String, String> = pending
+            .iter()
+            .map(|(_, request)| {
+                let digest = request_digest(request);
+                (custom_id(&digest), digest)
+            })
+            .collect();
+        for file in &args.batch_in {
+            let text = std::fs::read_to_string(file).map_err(|e| {
+                UsageError(format!(
+                    "{}: cannot read the batch output: {e}",
+                    file.display()
+                ))
+            })?;
+            let report = import_batch(file, &text, &by_id, client.cache());
+            eprintln!(
+                "tasks: {}: {} replies stored, {} already cached, {} lines failed",
+                file.display(),
+                report.stored,
+                report.already_cached,
+                report.failed.len()
+            );
+            for failure in &report.failed {
+                eprintln!("  failed {failure}");
+            }
+            failed_lines += report.failed.len();
+        }
+    }
+    let BatchPlan { complete, pending } = ctx_plan(&resolved)?;
+    let waiting: std::collections::BTreeSet<&str> =
+        pending.iter().map(|(k, _)| k.as_str()).collect();
+    match &args.batch_out {
+        Some(path) if !pending.is_empty() => {
+            let requests: Vec<_> = pending.iter().map(|(_, r)| r.clone()).collect();
+            let lines = write_batch(path, &requests)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+            eprintln!(
+                "tasks: {lines} requests for {} scenes written to {} (OpenAI Batch JSONL; read \
+                 the provider's output with --batch-in)",
+                waiting.len(),
+                path.display()
+            );
+        }
+        Some(path) => eprintln!(
+            "tasks: no request is pending, so {} was not written",
+            path.display()
+        ),
+        None if !pending.is_empty() => eprintln!(
+            "tasks: {} scenes still wait for replies (write the next batch with --batch-out FILE)",
+            waiting.len()
+        ),
+        None => {}
+    }
+    let code = if complete.is_empty() {
+        if waiting.is_empty() {
+            eprintln!("tasks: every selected scene is done (--force redoes them)");
+        } else {
+            eprintln!("tasks: no scene has all its replies yet");
+        }
+        ExitCode::from(EXIT_OK)
+    } else {
+        resolved.options.only = Some(complete);
+        resolved.run(&stage)?
+    };
+    Ok(if failed_lines > 0 {
+        ExitCode::from(EXIT_FAILED)
+    } else {
+        code
+    })
+}
 
 /// The prompts of a dataset: its `[tasks] prompts_dir`, else the built-in ones.
 pub fn load_prompts(dataset: &Path, prompts_dir: &str) -> Result<Prompts, String> {
@@ -273,8 +453,17 @@ impl SceneStage for TasksStage {
         Ok(inputs)
     }
 
+    /// The configuration, the prompts, and for the live `llm` backend the API key (a stage
+    /// given its chat backend by its caller has had its key checked there).
+    fn preflight(&self, ctx: &StageContext<'_>) -> Result<(), UsageError> {
+        if self.chat.is_some() {
+            return Ok(());
+        }
+        preflight(ctx.dataset, ctx.config).map_err(UsageError)
+    }
+
     fn waiting(&self, _ctx: &StageContext<'_>, scene: &Scene) -> Option<String> {
-        crate::stages::scene_docs::awaiting_annotation(scene)
+        crate::scene_docs::awaiting_annotation(scene)
     }
 
     fn config_digest(&self, ctx: &StageContext<'_>) -> String {
@@ -326,16 +515,16 @@ impl SceneStage for TasksStage {
             lines.push_str(&to_sorted_line(record)?);
             lines.push('\n');
         }
-        output.add_file(TASKS_FILE, lines.into_bytes());
+        output.add_file(TASKS, lines.into_bytes());
         if !tasks.rejects.is_empty() {
             let mut lines = String::new();
             for reject in &tasks.rejects {
                 lines.push_str(&to_sorted_line(reject)?);
                 lines.push('\n');
             }
-            output.add_file(REJECTS_FILE, lines.into_bytes());
+            output.add_file(REJECTS, lines.into_bytes());
             output.warn(format!(
-                "{} model replies rejected (kept with their reasons in {REJECTS_FILE})",
+                "{} model replies rejected (kept with their reasons in {REJECTS})",
                 tasks.rejects.len()
             ));
         }

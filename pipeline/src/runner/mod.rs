@@ -12,14 +12,21 @@
 //!   scene succeeded, each through a temporary file and a rename, and the done marker last
 //!   (datatrove's rule: a relaunch trusts only completed markers);
 //! - a failing (or panicking) scene gets a failed marker with the error chain and leaves no
-//!   output; the other scenes go on.
+//!   output; the other scenes go on;
+//! - the stage lifecycle: [`SceneStage::preflight`] before any work (bad settings fail in the
+//!   first second), [`SceneStage::prepare`] once before the scenes, [`SceneStage::finish`]
+//!   once after the last (a dataset summary);
+//! - one thread pool and one progress display per stage run, for per-scene stages and for the
+//!   dataset-level stages of [`dataset`] alike.
+//!
+//! The datatrove executor is the model: a stage says what one unit of work is; the runner owns
+//! pools, progress, summaries, markers and skip-done.
+
+pub mod dataset;
 
 use std::collections::BTreeMap;
-use std::io::IsTerminal;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Component, Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
@@ -29,10 +36,13 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::config::{Config, ProgressMode};
+use crate::exit::UsageError;
 use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic, DigestCache};
+use crate::progress::{Progress, Tick};
 
+pub use self::dataset::{run_dataset_stage, DatasetReport, DatasetStage, Executor};
 /// The folder of run records inside a dataset.
-pub const RUN_DIR: &str = ".mesa";
+pub use mesa_stages::paths::dataset::RUN_DIR;
 
 /// One scene of a dataset.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
@@ -132,6 +142,22 @@ pub trait SceneStage: Sync {
     /// its earlier outputs and marker are left as they are.
     fn waiting(&self, _ctx: &StageContext<'_>, _scene: &Scene) -> Option<String> {
         None
+    }
+
+    /// Checks the settings before any work (`mesa run` asks every stage before the first
+    /// one runs): a setting that cannot work is a usage error, exit code 2.
+    fn preflight(&self, _ctx: &StageContext<'_>) -> Result<(), UsageError> {
+        Ok(())
+    }
+
+    /// Called once before the scenes of a run (load what every scene shares). What fails
+    /// here is remembered by the stage and fails each scene that needs it, with its reason.
+    fn prepare(&self, _ctx: &StageContext<'_>) {}
+
+    /// Called once after the last scene of a run: a dataset-level step over the scenes'
+    /// outputs (check's `qa/summary.json`). Returns lines for the terminal.
+    fn finish(&self, _ctx: &StageContext<'_>) -> anyhow::Result<Option<String>> {
+        Ok(None)
     }
 }
 
@@ -239,6 +265,9 @@ pub struct RunOptions {
     pub progress: ProgressMode,
     /// Seconds between progress lines.
     pub progress_interval: Duration,
+    /// Only errors and the summary (`--quiet`): no progress, no closing lines of
+    /// [`SceneStage::finish`].
+    pub quiet: bool,
     /// When set, only these scenes (`<table_type>/<scene_id>`) of the selection run; the
     /// others are left alone (`mesa tasks` with offline batches runs the scenes whose replies
     /// are all in).
@@ -255,6 +284,7 @@ impl RunOptions {
             force: false,
             progress: config.run.progress,
             progress_interval: Duration::from_secs_f64(config.run.progress_interval_s.max(0.1)),
+            quiet: false,
             only: None,
         }
     }
@@ -292,9 +322,20 @@ pub enum RunError {
     },
 }
 
+impl RunError {
+    /// As an error of a command: a folder that is no dataset and a bad glob are usage errors
+    /// (exit code 2); threads and I/O are not.
+    pub fn into_anyhow(self) -> anyhow::Error {
+        match self {
+            Self::NotADataset(_) | Self::BadGlob { .. } => UsageError(self.to_string()).into(),
+            Self::Threads { .. } | Self::Io { .. } => self.into(),
+        }
+    }
+}
+
 /// Lists the scenes of a dataset, sorted by table type then scene id.
 pub fn discover_scenes(dataset: &Path) -> Result<Vec<Scene>, RunError> {
-    let root = dataset.join("scenes");
+    let root = dataset.join(mesa_stages::paths::dataset::SCENES);
     if !root.is_dir() {
         return Err(RunError::NotADataset(dataset.to_owned()));
     }
@@ -402,6 +443,9 @@ pub struct StageSummary {
     pub waiting: Vec<(String, String)>,
     /// Wall time in seconds.
     pub elapsed_s: f64,
+    /// The lines of [`SceneStage::finish`] for the terminal.
+    #[serde(skip)]
+    pub closing: Option<String>,
 }
 
 impl StageSummary {
@@ -705,129 +749,63 @@ fn write_marker(path: &Path, marker: &RunMarker) -> std::io::Result<()> {
     write_atomic(path, &bytes)
 }
 
-struct Progress {
-    stage: &'static str,
-    total: usize,
-    bar: Option<indicatif::ProgressBar>,
-    interval: Option<Duration>,
-    last_line: Mutex<Instant>,
-    started: Instant,
-    finished: AtomicUsize,
-    skipped: AtomicUsize,
-    failed: AtomicUsize,
+/// The worker threads of a stage run: every stage, per-scene or dataset-level, runs on one of
+/// these (named `mesa-worker-<i>`: a panic there is caught and reported with its scene or
+/// asset, not printed with a backtrace).
+pub fn thread_pool(jobs: usize) -> Result<rayon::ThreadPool, RunError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs)
+        .thread_name(|i| format!("mesa-worker-{i}"))
+        .build()
+        .map_err(|e| RunError::Threads {
+            jobs,
+            message: e.to_string(),
+        })
 }
 
-impl Progress {
-    fn new(stage: &'static str, total: usize, mode: ProgressMode, interval: Duration) -> Self {
-        let terminal = std::io::stderr().is_terminal();
-        let (bar, lines) = match mode {
-            ProgressMode::Off => (false, false),
-            ProgressMode::Bar => (true, false),
-            ProgressMode::Lines => (false, true),
-            ProgressMode::Auto => (terminal, !terminal),
-        };
-        let bar = bar.then(|| {
-            let bar = indicatif::ProgressBar::new(total as u64);
-            let style = indicatif::ProgressStyle::with_template(
-                "{prefix:>8} [{bar:40}] {pos}/{len} scenes {per_sec} eta {eta} {msg}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> ");
-            bar.set_style(style);
-            bar.set_prefix(stage);
-            bar
-        });
-        Self {
-            stage,
-            total,
-            bar,
-            interval: lines.then_some(interval),
-            last_line: Mutex::new(Instant::now()),
-            started: Instant::now(),
-            finished: AtomicUsize::new(0),
-            skipped: AtomicUsize::new(0),
-            failed: AtomicUsize::new(0),
-        }
-    }
-
-    fn record(&self, outcome: &SceneOutcome) {
-        let finished = self.finished.fetch_add(1, Ordering::Relaxed) + 1;
-        match outcome {
-            SceneOutcome::Skipped => {
-                self.skipped.fetch_add(1, Ordering::Relaxed);
-            }
-            SceneOutcome::Failed { .. } => {
-                self.failed.fetch_add(1, Ordering::Relaxed);
-            }
-            SceneOutcome::Done { .. } | SceneOutcome::Waiting { .. } => {}
-        }
-        let failed = self.failed.load(Ordering::Relaxed);
-        if let Some(bar) = &self.bar {
-            bar.inc(1);
-            if failed > 0 {
-                bar.set_message(format!("{failed} failed"));
-            }
-        }
-        if let Some(interval) = self.interval {
-            let mut last = self.last_line.lock().unwrap_or_else(|e| e.into_inner());
-            if last.elapsed() >= interval || finished == self.total {
-                *last = Instant::now();
-                let rate = finished as f64 / self.started.elapsed().as_secs_f64().max(1e-9);
-                eprintln!(
-                    "{}: {finished}/{} scenes ({} skipped, {failed} failed), {rate:.1} scenes/s",
-                    self.stage,
-                    self.total,
-                    self.skipped.load(Ordering::Relaxed),
-                );
-            }
-        }
-    }
-
-    fn finish(&self) {
-        if let Some(bar) = &self.bar {
-            bar.finish_and_clear();
-        }
-    }
+/// The progress display of a stage run with `options`.
+pub fn progress(name: &str, unit: &'static str, total: usize, options: &RunOptions) -> Progress {
+    let mode = if options.quiet {
+        ProgressMode::Off
+    } else {
+        options.progress
+    };
+    Progress::new(name, unit, total, mode, options.progress_interval)
 }
 
-/// Runs a stage over the selected scenes of a dataset.
+/// Runs a stage over the selected scenes of a dataset: `prepare`, every scene, then `finish`
+/// (whose lines land in [`StageSummary::closing`]).
 pub fn run_stage(
     stage: &dyn SceneStage,
     ctx: &StageContext<'_>,
     options: &RunOptions,
-) -> Result<StageSummary, RunError> {
+) -> anyhow::Result<StageSummary> {
     let started = Instant::now();
     let mut scenes = select_scenes(
-        discover_scenes(ctx.dataset)?,
+        discover_scenes(ctx.dataset).map_err(RunError::into_anyhow)?,
         options.scenes.as_deref(),
         options.shard,
-    )?;
+    )
+    .map_err(RunError::into_anyhow)?;
     if let Some(only) = &options.only {
         scenes.retain(|s| only.contains(&s.key()));
     }
     let config_digest = stage.config_digest(ctx);
     let cache = DigestCache::default();
-    let progress = Progress::new(
-        stage.name(),
-        scenes.len(),
-        options.progress,
-        options.progress_interval,
-    );
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(options.jobs)
-        .thread_name(|i| format!("mesa-worker-{i}"))
-        .build()
-        .map_err(|e| RunError::Threads {
-            jobs: options.jobs,
-            message: e.to_string(),
-        })?;
+    let pool = thread_pool(options.jobs)?;
+    let progress = progress(stage.name(), "scenes", scenes.len(), options);
     let outcomes: Vec<SceneOutcome> = pool.install(|| {
+        stage.prepare(ctx);
         scenes
             .par_iter()
             .map(|scene| {
                 let outcome =
                     process_scene(stage, ctx, scene, &config_digest, options.force, &cache);
-                progress.record(&outcome);
+                progress.tick(match outcome {
+                    SceneOutcome::Skipped => Tick::Skipped,
+                    SceneOutcome::Failed { .. } => Tick::Failed,
+                    SceneOutcome::Done { .. } | SceneOutcome::Waiting { .. } => Tick::Done,
+                });
                 outcome
             })
             .collect()
@@ -843,6 +821,7 @@ pub fn run_stage(
         warnings: Vec::new(),
         waiting: Vec::new(),
         elapsed_s: 0.0,
+        closing: None,
     };
     for (scene, outcome) in scenes.iter().zip(outcomes) {
         match outcome {
@@ -867,13 +846,33 @@ pub fn run_stage(
             "shard-{}-of-{}.json",
             options.shard.index, options.shard.count
         ));
-    if let Ok(bytes) = to_sorted_pretty(&summary) {
-        // The run record is informational; failing to write it must not fail the run.
-        if let Err(e) = write_atomic(&record, &bytes) {
-            tracing::warn!("{}: cannot write run record: {e}", record.display());
+    write_run_record(&record, &summary);
+    summary.closing = stage.finish(ctx)?;
+    Ok(summary)
+}
+
+/// Writes a run record (informational: failing to write it must not fail the run).
+pub(crate) fn write_run_record<T: Serialize>(path: &Path, summary: &T) {
+    if let Ok(bytes) = to_sorted_pretty(summary) {
+        if let Err(e) = write_atomic(path, &bytes) {
+            tracing::warn!("{}: cannot write run record: {e}", path.display());
         }
     }
-    Ok(summary)
+}
+
+/// Runs a per-scene stage with resolved options, prints its summary (and its closing lines
+/// unless quiet), and gives the exit code: 1 when a scene failed.
+pub fn run_and_report(
+    stage: &dyn SceneStage,
+    ctx: &StageContext<'_>,
+    options: &RunOptions,
+) -> anyhow::Result<std::process::ExitCode> {
+    let summary = run_stage(stage, ctx, options)?;
+    eprint!("{}", format_summary(&summary));
+    if let (Some(lines), false) = (&summary.closing, options.quiet) {
+        eprint!("{lines}");
+    }
+    Ok(crate::exit::code(summary.success()))
 }
 
 /// The human summary of a stage run, as printed at the end.
