@@ -5,8 +5,9 @@
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use mesa_pipeline::commands::records::run_records;
 use mesa_pipeline::config::{Config, ProgressMode};
-use mesa_pipeline::stages::records::{run_records, RecordsOptions};
+use mesa_pipeline::runner::{Executor, RunOptions, StageContext};
 
 mod synthetic;
 
@@ -16,11 +17,16 @@ fn bench(c: &mut Criterion) {
     let dir = tempfile::tempdir().expect("tempdir");
     synthetic::write_dataset(dir.path(), SCENES, 1).expect("a synthetic dataset");
     let config = Config::default();
-    let options = RecordsOptions {
+    let options = RunOptions {
         jobs: 0,
         force: true,
         progress: ProgressMode::Off,
-        progress_interval: Duration::from_secs(60),
+        ..RunOptions::from_config(&config)
+    };
+    let exec = Executor::new("records", &options).expect("threads");
+    let ctx = StageContext {
+        dataset: dir.path(),
+        config: &config,
     };
     let mut group = c.benchmark_group("records");
     group.throughput(Throughput::Elements(SCENES as u64));
@@ -28,7 +34,7 @@ fn bench(c: &mut Criterion) {
     group.measurement_time(Duration::from_secs(15));
     group.bench_function(format!("{SCENES}_scenes"), |b| {
         b.iter(|| {
-            let summary = run_records(dir.path(), &config, &options).expect("records");
+            let summary = run_records(&ctx, &exec).expect("records");
             assert_eq!(summary.scenes, SCENES);
         })
     });

@@ -1,4 +1,4 @@
-//! The command line's shared parts: the global flags, the flag groups every command over a
+//! The command line's shared parts: the global flags as commands see them, the flag groups every command over a
 //! dataset flattens in ([`DatasetArgs`], [`SceneArgs`]), and how they resolve against
 //! `mesa.toml` and the Slurm environment ([`Resolved`]). Each command's own flags live in its
 //! file under [`crate::commands`]; doc comments are the `--help` text.
@@ -7,30 +7,12 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use clap::{Args, Parser, ValueEnum};
+use clap::{Args, ValueEnum};
 
-use crate::commands::Command;
 use crate::config::{Config, ProgressMode};
 use crate::exit::{usage, UsageError};
 use crate::runner::dataset::run_and_report_dataset;
 use crate::runner::{run_and_report, DatasetStage, RunOptions, SceneStage, Shard, StageContext};
-
-/// mesa builds MesaTask-style tabletop-scene datasets: depth and masks to boxes, asset
-/// retrieval and placement, the annotator round trip, physics QA, scene graphs, and training
-/// records.
-#[derive(Debug, Parser)]
-#[command(name = "mesa", version, about, max_term_width = 100)]
-pub struct Cli {
-    /// More log output (-v: debug, -vv: trace).
-    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
-    pub verbose: u8,
-    /// Only errors and the final summary.
-    #[arg(short, long, global = true)]
-    pub quiet: bool,
-    /// The command.
-    #[command(subcommand)]
-    pub command: Command,
-}
 
 /// The global flags, as every command sees them.
 #[derive(Debug, Clone, Copy)]
@@ -196,16 +178,5 @@ impl SceneArgs {
         };
         resolved.options.force = self.force;
         Ok(resolved)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use clap::CommandFactory;
-
-    #[test]
-    fn the_cli_is_well_formed() {
-        Cli::command().debug_assert();
     }
 }

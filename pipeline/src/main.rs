@@ -3,7 +3,8 @@
 use std::process::ExitCode;
 
 use clap::Parser;
-use mesa_pipeline::cli::{Cli, Global};
+use mesa_pipeline::cli::Global;
+use mesa_pipeline::commands::Cli;
 use mesa_pipeline::exit::code_of;
 
 fn main() -> ExitCode {

@@ -192,8 +192,9 @@ pub fn write_dataset(dir: &Path, scenes: usize, seed: u64) -> anyhow::Result<()>
         ..RunOptions::from_config(&config)
     };
     for stage in [
-        &mesa_pipeline::stages::graph::GraphStage::new() as &dyn mesa_pipeline::runner::SceneStage,
-        &mesa_pipeline::stages::tasks::TasksStage::new(),
+        &mesa_pipeline::commands::graph::GraphStage::new()
+            as &dyn mesa_pipeline::runner::SceneStage,
+        &mesa_pipeline::commands::tasks::TasksStage::new(),
     ] {
         let summary = run_stage(stage, &ctx, &options)?;
         anyhow::ensure!(

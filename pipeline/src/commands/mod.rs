@@ -1,10 +1,10 @@
 //! Every subcommand of `mesa`, one file each: its clap arguments, its configuration overrides,
 //! and what it does (for a stage, also its runner adapter over the pure functions of
-//! `mesa-stages`). This file is the registry: the [`Command`] enum and its dispatch are
-//! generated from one list, and [`pipeline`] says what `mesa run` runs, in order.
+//! `mesa-stages`). This file is the registry: [`Cli`], the [`Command`] enum and its dispatch,
+//! generated from one list; [`pipeline`] says what `mesa run` runs, in order.
 //!
 //! Adding a command: its file here, its `pub mod` line and its line in the `commands!` list
-//! below; a per-scene stage that `mesa run` should run also gets its line in [`pipeline`].
+//! below; a stage that `mesa run` should run also gets its line in [`pipeline::pipeline`].
 //! `docs/ARCHITECTURE.md` ("Adding a stage") lists every edit.
 
 pub mod assets;
@@ -15,6 +15,7 @@ pub mod graph;
 pub mod ingest;
 pub mod lift;
 pub mod pack;
+pub mod pipeline;
 pub mod place;
 pub mod records;
 pub mod release;
@@ -27,10 +28,26 @@ pub mod tasks;
 
 use std::process::ExitCode;
 
+use clap::Parser;
+
 use crate::cli::Global;
-use crate::config::Config;
-use crate::runner::{DatasetStage, SceneStage};
-use mesa_stages::demo::annotator::Annotator;
+
+/// mesa builds MesaTask-style tabletop-scene datasets: depth and masks to boxes, asset
+/// retrieval and placement, the annotator round trip, physics QA, scene graphs, and training
+/// records.
+#[derive(Debug, Parser)]
+#[command(name = "mesa", version, about, max_term_width = 100)]
+pub struct Cli {
+    /// More log output (-v: debug, -vv: trace).
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
+    /// Only errors and the final summary.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    /// The command.
+    #[command(subcommand)]
+    pub command: Command,
+}
 
 /// The registry: `Variant(args type) => run function`, in `mesa --help` order; the doc
 /// comment of each line is its `--help` text.
@@ -116,57 +133,13 @@ commands! {
     Release(release::Args) => release::run,
 }
 
-/// One step of `mesa run`.
-pub enum Step {
-    /// A per-scene stage.
-    Scene(Box<dyn SceneStage>),
-    /// A dataset-level stage (left out by shards: it covers the whole dataset).
-    Dataset(Box<dyn DatasetStage>),
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
 
-impl Step {
-    /// The stage name.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Self::Scene(stage) => stage.name(),
-            Self::Dataset(stage) => stage.name(),
-        }
+    #[test]
+    fn the_cli_is_well_formed() {
+        Cli::command().debug_assert();
     }
-}
-
-/// Every step of `mesa run`, in order: the asset index, the per-scene stages (the simulated
-/// annotator between `pack` and `ingest` only when the configuration names it: `[annotate]
-/// annotator = "simulated"`, as `mesa demo` writes), then `records` and `report` once.
-pub fn pipeline(config: &Config) -> Vec<Step> {
-    let mut steps = vec![
-        Step::Dataset(Box::new(assets::AssetsStage::default())),
-        Step::Scene(Box::new(lift::Lift)),
-        Step::Scene(Box::new(retrieve::RetrieveStage::new())),
-        Step::Scene(Box::new(place::PlaceStage::new())),
-        Step::Scene(Box::new(pack::PackStage::new())),
-    ];
-    if config.annotate.annotator == Annotator::Simulated {
-        steps.push(Step::Scene(Box::new(demo::AnnotateStage)));
-    }
-    steps.extend([
-        Step::Scene(Box::new(ingest::IngestStage::new())),
-        Step::Scene(Box::new(check::CheckStage::new())),
-        Step::Scene(Box::new(graph::GraphStage::new())),
-        Step::Scene(Box::new(render::RenderStage::for_pipeline())),
-        Step::Scene(Box::new(tasks::TasksStage::new())),
-        Step::Dataset(Box::new(records::RecordsStage)),
-        Step::Dataset(Box::new(report::ReportStage)),
-    ]);
-    steps
-}
-
-/// The per-scene stages of `mesa run`, in order (what `mesa status` counts).
-pub fn scene_stages(config: &Config) -> Vec<Box<dyn SceneStage>> {
-    pipeline(config)
-        .into_iter()
-        .filter_map(|step| match step {
-            Step::Scene(stage) => Some(stage),
-            Step::Dataset(_) => None,
-        })
-        .collect()
 }

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clap::Args as ClapArgs;
 
-use super::{pipeline, Step};
+use super::pipeline::{pipeline, Step};
 use crate::cli::{Global, SceneArgs};
 use crate::config::annotated_toml;
 use crate::fsio::write_atomic;

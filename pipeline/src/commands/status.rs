@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use clap::Args as ClapArgs;
 
-use super::scene_stages;
+use super::pipeline::scene_stages;
 use crate::cli::Global;
 use crate::config::Config;
 use crate::exit::UsageError;

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use mesa_schemas::artifacts::RunMarker;
 use rayon::prelude::*;
 
-use super::{progress, thread_pool, write_run_record, RunOptions, StageContext, RUN_DIR};
+use super::core::{progress, thread_pool, write_run_record, RunOptions, StageContext, RUN_DIR};
 use crate::exit::UsageError;
 use crate::progress::Tick;
 
@@ -121,7 +121,7 @@ impl<'a> Executor<'a> {
 
     /// This stage's dataset marker, when one was written and can be read.
     pub fn read_marker(&self, ctx: &StageContext<'_>) -> Option<RunMarker> {
-        super::read_marker(&self.marker_path(ctx))
+        super::core::read_marker(&self.marker_path(ctx))
     }
 }
 

@@ -1,0 +1,604 @@
+//! Per-scene stages: the [`SceneStage`] lifecycle, skip-done markers, atomic outputs, failed
+//! markers, the run over a dataset's scenes and its summary.
+
+use std::collections::BTreeMap;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::{Component, Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context as _;
+use mesa_schemas::artifacts::{MarkerStatus, RunMarker, MARKER_SCHEMA};
+use mesa_schemas::json::to_sorted_pretty;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::core::{
+    discover_scenes, progress, read_marker, select_scenes, thread_pool, write_run_record, RunError,
+    RunOptions, Scene, StageContext, RUN_DIR,
+};
+use crate::exit::UsageError;
+use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic, DigestCache};
+use crate::progress::Tick;
+
+/// The files a stage produced for one scene, written by the runner only if the scene succeeds.
+#[derive(Debug, Default)]
+pub struct SceneOutput {
+    files: BTreeMap<String, Vec<u8>>,
+    warnings: Vec<String>,
+}
+
+impl SceneOutput {
+    /// An empty output.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds a file at `rel` (relative to the scene folder).
+    pub fn add_file(&mut self, rel: impl Into<String>, bytes: Vec<u8>) {
+        self.files.insert(rel.into(), bytes);
+    }
+
+    /// Adds a JSON file with sorted keys.
+    pub fn add_json<T: Serialize + ?Sized>(
+        &mut self,
+        rel: impl Into<String>,
+        value: &T,
+    ) -> anyhow::Result<()> {
+        let rel = rel.into();
+        let bytes = to_sorted_pretty(value).with_context(|| format!("serialising {rel}"))?;
+        self.files.insert(rel, bytes);
+        Ok(())
+    }
+
+    /// Records a warning about this scene (kept in its done marker and counted in the summary).
+    pub fn warn(&mut self, message: impl Into<String>) {
+        self.warnings.push(message.into());
+    }
+
+    /// The files, by path relative to the scene folder.
+    pub fn files(&self) -> &BTreeMap<String, Vec<u8>> {
+        &self.files
+    }
+}
+
+/// A per-scene stage.
+pub trait SceneStage: Sync {
+    /// The stage name (the subcommand), like `graph`.
+    fn name(&self) -> &'static str;
+
+    /// The files this scene's outputs depend on, relative to the dataset folder (use
+    /// [`Scene::rel`] for files in the scene). A missing file fails the scene.
+    fn inputs(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>>;
+
+    /// A digest of every configuration value that changes this stage's outputs.
+    fn config_digest(&self, ctx: &StageContext<'_>) -> String;
+
+    /// Processes one scene.
+    fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput>;
+
+    /// Why the scene cannot run yet although nothing is wrong with it (a scene awaiting its
+    /// annotator), or `None`. A waiting scene is neither run nor failed: it is reported, and
+    /// its earlier outputs and marker are left as they are.
+    fn waiting(&self, _ctx: &StageContext<'_>, _scene: &Scene) -> Option<String> {
+        None
+    }
+
+    /// Checks the settings before any work (`mesa run` asks every stage before the first
+    /// one runs): a setting that cannot work is a usage error, exit code 2.
+    fn preflight(&self, _ctx: &StageContext<'_>) -> Result<(), UsageError> {
+        Ok(())
+    }
+
+    /// Called once before the scenes of a run (load what every scene shares). What fails
+    /// here is remembered by the stage and fails each scene that needs it, with its reason.
+    fn prepare(&self, _ctx: &StageContext<'_>) {}
+
+    /// Called once after the last scene of a run: a dataset-level step over the scenes'
+    /// outputs (check's `qa/summary.json`). Returns lines for the terminal.
+    fn finish(&self, _ctx: &StageContext<'_>) -> anyhow::Result<Option<String>> {
+        Ok(None)
+    }
+}
+
+/// What happened to one scene.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SceneOutcome {
+    /// Processed and written.
+    Done {
+        /// Warnings the stage reported.
+        warnings: Vec<String>,
+    },
+    /// Its done marker still matched.
+    Skipped,
+    /// Failed; nothing of this run was written.
+    Failed {
+        /// The error chain, outermost first.
+        error: Vec<String>,
+    },
+    /// Not run: it waits for something outside mesa (see [`SceneStage::waiting`]).
+    Waiting {
+        /// What it waits for.
+        reason: String,
+    },
+}
+
+/// The result of running a stage over a dataset (one shard of it).
+#[derive(Debug, Clone, Serialize)]
+pub struct StageSummary {
+    /// The stage.
+    pub stage: String,
+    /// The shard.
+    pub shard: String,
+    /// Scenes this run considered.
+    pub scenes: usize,
+    /// Scenes processed.
+    pub done: usize,
+    /// Scenes skipped (still done).
+    pub skipped: usize,
+    /// Scenes that failed, with their error chain.
+    pub failed: Vec<(String, Vec<String>)>,
+    /// Warnings, by scene.
+    pub warnings: Vec<(String, String)>,
+    /// Scenes that wait for something outside mesa (an annotator), with what they wait for.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub waiting: Vec<(String, String)>,
+    /// Wall time in seconds.
+    pub elapsed_s: f64,
+    /// The lines of [`SceneStage::finish`] for the terminal.
+    #[serde(skip)]
+    pub closing: Option<String>,
+}
+
+impl StageSummary {
+    /// Whether every scene is done.
+    pub fn success(&self) -> bool {
+        self.failed.is_empty()
+    }
+}
+
+/// Where a stage's marker for a scene lives.
+pub fn marker_path(dataset: &Path, stage: &str, scene: &Scene) -> PathBuf {
+    dataset
+        .join(RUN_DIR)
+        .join("markers")
+        .join(stage)
+        .join(&scene.table_type)
+        .join(format!("{}.json", scene.scene_id))
+}
+
+/// The state of a scene for a stage, as `mesa status` reports it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SceneState {
+    /// Done, and the marker still matches inputs, config and outputs.
+    Done,
+    /// Done once, but something changed since (the reason).
+    Stale(String),
+    /// Failed (the first line of the error).
+    Failed(String),
+    /// Never run.
+    Pending,
+    /// Cannot run yet (the reason): it waits for something outside mesa.
+    Waiting(String),
+}
+
+struct Prepared {
+    inputs: BTreeMap<String, String>,
+    previous: Option<RunMarker>,
+}
+
+fn prepare(
+    stage: &dyn SceneStage,
+    ctx: &StageContext<'_>,
+    scene: &Scene,
+    cache: &DigestCache,
+) -> anyhow::Result<Prepared> {
+    let previous = read_marker(&marker_path(ctx.dataset, stage.name(), scene));
+    let listed = stage.inputs(ctx, scene)?;
+    let scene_prefix = scene.rel("");
+    let mut inputs = BTreeMap::new();
+    for rel in listed {
+        let path = ctx.dataset.join(&rel);
+        let shared = !rel.starts_with(&scene_prefix);
+        let digest = cache.digest(&path, shared).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                anyhow::anyhow!(
+                    "{}: missing input of `mesa {}` (run the stage that writes it first)",
+                    path.display(),
+                    stage.name()
+                )
+            } else {
+                anyhow::anyhow!("{}: cannot read input: {e}", path.display())
+            }
+        })?;
+        inputs.insert(rel, digest);
+    }
+    Ok(Prepared { inputs, previous })
+}
+
+/// Why a done marker no longer holds, or `None` when it does.
+fn staleness(
+    marker: &RunMarker,
+    inputs: &BTreeMap<String, String>,
+    config_digest: &str,
+    dataset: &Path,
+) -> Option<String> {
+    if marker.status != MarkerStatus::Done {
+        return Some("failed last time".to_owned());
+    }
+    if marker.config_digest != config_digest {
+        return Some("configuration changed".to_owned());
+    }
+    if &marker.inputs != inputs {
+        let changed: Vec<&str> = inputs
+            .iter()
+            .filter(|(k, v)| marker.inputs.get(*k) != Some(v))
+            .map(|(k, _)| k.as_str())
+            .chain(
+                marker
+                    .inputs
+                    .keys()
+                    .filter(|k| !inputs.contains_key(*k))
+                    .map(String::as_str),
+            )
+            .collect();
+        return Some(format!("inputs changed: {}", changed.join(", ")));
+    }
+    if let Some(missing) = marker.outputs.keys().find(|k| !dataset.join(k).exists()) {
+        return Some(format!("output {missing} is missing"));
+    }
+    None
+}
+
+/// The state of one scene for one stage (hashes the scene's inputs).
+pub fn scene_state(
+    stage: &dyn SceneStage,
+    ctx: &StageContext<'_>,
+    scene: &Scene,
+    config_digest: &str,
+    cache: &DigestCache,
+) -> SceneState {
+    if let Some(reason) = stage.waiting(ctx, scene) {
+        return SceneState::Waiting(reason);
+    }
+    let Some(marker) = read_marker(&marker_path(ctx.dataset, stage.name(), scene)) else {
+        return SceneState::Pending;
+    };
+    if marker.status == MarkerStatus::Failed {
+        return SceneState::Failed(marker.error.first().cloned().unwrap_or_default());
+    }
+    match prepare(stage, ctx, scene, cache) {
+        Err(e) => SceneState::Stale(format!("{e:#}")),
+        Ok(prepared) => match staleness(&marker, &prepared.inputs, config_digest, ctx.dataset) {
+            None => SceneState::Done,
+            Some(reason) => SceneState::Stale(reason),
+        },
+    }
+}
+
+fn check_output_path(rel: &str) -> anyhow::Result<()> {
+    let path = Path::new(rel);
+    let ok = !rel.is_empty() && path.components().all(|c| matches!(c, Component::Normal(_)));
+    anyhow::ensure!(
+        ok,
+        "internal error: stage output path \"{rel}\" is not a relative path inside the scene"
+    );
+    Ok(())
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_owned()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic".to_owned()
+    }
+}
+
+fn error_chain(e: &anyhow::Error) -> Vec<String> {
+    e.chain().map(|c| c.to_string()).collect()
+}
+
+/// Processes one scene: skip, run and write, or record the failure.
+pub fn process_scene(
+    stage: &dyn SceneStage,
+    ctx: &StageContext<'_>,
+    scene: &Scene,
+    config_digest: &str,
+    force: bool,
+    cache: &DigestCache,
+) -> SceneOutcome {
+    if let Some(reason) = stage.waiting(ctx, scene) {
+        return SceneOutcome::Waiting { reason };
+    }
+    let marker_file = marker_path(ctx.dataset, stage.name(), scene);
+    let mut base = RunMarker {
+        schema: MARKER_SCHEMA.to_owned(),
+        stage: stage.name().to_owned(),
+        scene: scene.key(),
+        status: MarkerStatus::Failed,
+        mesa_version: env!("CARGO_PKG_VERSION").to_owned(),
+        config_digest: config_digest.to_owned(),
+        inputs: BTreeMap::new(),
+        outputs: BTreeMap::new(),
+        warnings: Vec::new(),
+        error: Vec::new(),
+    };
+    let prepared = match prepare(stage, ctx, scene, cache) {
+        Ok(p) => p,
+        Err(e) => {
+            let previous = read_marker(&marker_file);
+            return fail(ctx, &marker_file, base, previous.as_ref(), error_chain(&e));
+        }
+    };
+    base.inputs = prepared.inputs.clone();
+    if !force {
+        if let Some(previous) = &prepared.previous {
+            if staleness(previous, &prepared.inputs, config_digest, ctx.dataset).is_none() {
+                return SceneOutcome::Skipped;
+            }
+        }
+    }
+    let result = catch_unwind(AssertUnwindSafe(|| stage.run(ctx, scene)));
+    let output = match result {
+        Ok(Ok(output)) => output,
+        Ok(Err(e)) => {
+            return fail(
+                ctx,
+                &marker_file,
+                base,
+                prepared.previous.as_ref(),
+                error_chain(&e),
+            )
+        }
+        Err(payload) => {
+            let error = vec![
+                format!("internal error: {}", panic_message(payload.as_ref())),
+                "this is a bug in mesa: please report it with this scene's inputs".to_owned(),
+            ];
+            return fail(ctx, &marker_file, base, prepared.previous.as_ref(), error);
+        }
+    };
+    match write_outputs(ctx, scene, &output, prepared.previous.as_ref()) {
+        Ok(outputs) => {
+            base.status = MarkerStatus::Done;
+            base.outputs = outputs;
+            base.warnings = output.warnings.clone();
+            match write_marker(&marker_file, &base) {
+                Ok(()) => SceneOutcome::Done {
+                    warnings: output.warnings,
+                },
+                Err(e) => SceneOutcome::Failed {
+                    error: vec![format!(
+                        "{}: cannot write marker: {e}",
+                        marker_file.display()
+                    )],
+                },
+            }
+        }
+        Err(e) => fail(
+            ctx,
+            &marker_file,
+            base,
+            prepared.previous.as_ref(),
+            error_chain(&e),
+        ),
+    }
+}
+
+fn write_outputs(
+    ctx: &StageContext<'_>,
+    scene: &Scene,
+    output: &SceneOutput,
+    previous: Option<&RunMarker>,
+) -> anyhow::Result<BTreeMap<String, String>> {
+    let mut written = BTreeMap::new();
+    for (rel, bytes) in &output.files {
+        check_output_path(rel)?;
+        let path = scene.path(rel);
+        sweep_tmp_for(&path).with_context(|| format!("{}: sweeping", path.display()))?;
+        write_atomic(&path, bytes).with_context(|| format!("{}: cannot write", path.display()))?;
+        written.insert(scene.rel(rel), sha256_hex(bytes));
+    }
+    // Outputs of an earlier run that this run no longer writes would be stale.
+    if let Some(previous) = previous {
+        for rel in previous.outputs.keys() {
+            if !written.contains_key(rel) {
+                let _ = std::fs::remove_file(ctx.dataset.join(rel));
+            }
+        }
+    }
+    Ok(written)
+}
+
+fn fail(
+    ctx: &StageContext<'_>,
+    marker_file: &Path,
+    mut marker: RunMarker,
+    previous: Option<&RunMarker>,
+    error: Vec<String>,
+) -> SceneOutcome {
+    // The outputs of an earlier success no longer match this scene's inputs: remove them so
+    // that nothing downstream reads them as current.
+    if let Some(previous) = previous.filter(|p| p.status == MarkerStatus::Done) {
+        for rel in previous.outputs.keys() {
+            let _ = std::fs::remove_file(ctx.dataset.join(rel));
+        }
+    }
+    marker.status = MarkerStatus::Failed;
+    marker.error = error.clone();
+    if let Err(e) = write_marker(marker_file, &marker) {
+        let mut error = error;
+        error.push(format!(
+            "{}: cannot write marker: {e}",
+            marker_file.display()
+        ));
+        return SceneOutcome::Failed { error };
+    }
+    SceneOutcome::Failed { error }
+}
+
+fn write_marker(path: &Path, marker: &RunMarker) -> std::io::Result<()> {
+    let bytes = to_sorted_pretty(marker).map_err(std::io::Error::other)?;
+    sweep_tmp_for(path)?;
+    write_atomic(path, &bytes)
+}
+
+/// Runs a stage over the selected scenes of a dataset: `prepare`, every scene, then `finish`
+/// (whose lines land in [`StageSummary::closing`]).
+pub fn run_stage(
+    stage: &dyn SceneStage,
+    ctx: &StageContext<'_>,
+    options: &RunOptions,
+) -> anyhow::Result<StageSummary> {
+    let started = Instant::now();
+    let mut scenes = select_scenes(
+        discover_scenes(ctx.dataset).map_err(RunError::into_anyhow)?,
+        options.scenes.as_deref(),
+        options.shard,
+    )
+    .map_err(RunError::into_anyhow)?;
+    if let Some(only) = &options.only {
+        scenes.retain(|s| only.contains(&s.key()));
+    }
+    let config_digest = stage.config_digest(ctx);
+    let cache = DigestCache::default();
+    let pool = thread_pool(options.jobs)?;
+    let progress = progress(stage.name(), "scenes", scenes.len(), options);
+    let outcomes: Vec<SceneOutcome> = pool.install(|| {
+        stage.prepare(ctx);
+        scenes
+            .par_iter()
+            .map(|scene| {
+                let outcome =
+                    process_scene(stage, ctx, scene, &config_digest, options.force, &cache);
+                progress.tick(match outcome {
+                    SceneOutcome::Skipped => Tick::Skipped,
+                    SceneOutcome::Failed { .. } => Tick::Failed,
+                    SceneOutcome::Done { .. } | SceneOutcome::Waiting { .. } => Tick::Done,
+                });
+                outcome
+            })
+            .collect()
+    });
+    progress.finish();
+    let mut summary = StageSummary {
+        stage: stage.name().to_owned(),
+        shard: options.shard.to_string(),
+        scenes: scenes.len(),
+        done: 0,
+        skipped: 0,
+        failed: Vec::new(),
+        warnings: Vec::new(),
+        waiting: Vec::new(),
+        elapsed_s: 0.0,
+        closing: None,
+    };
+    for (scene, outcome) in scenes.iter().zip(outcomes) {
+        match outcome {
+            SceneOutcome::Done { warnings } => {
+                summary.done += 1;
+                summary
+                    .warnings
+                    .extend(warnings.into_iter().map(|w| (scene.key(), w)));
+            }
+            SceneOutcome::Skipped => summary.skipped += 1,
+            SceneOutcome::Failed { error } => summary.failed.push((scene.key(), error)),
+            SceneOutcome::Waiting { reason } => summary.waiting.push((scene.key(), reason)),
+        }
+    }
+    summary.elapsed_s = started.elapsed().as_secs_f64();
+    let record = ctx
+        .dataset
+        .join(RUN_DIR)
+        .join("runs")
+        .join(stage.name())
+        .join(format!(
+            "shard-{}-of-{}.json",
+            options.shard.index, options.shard.count
+        ));
+    write_run_record(&record, &summary);
+    summary.closing = stage.finish(ctx)?;
+    Ok(summary)
+}
+
+/// Runs a per-scene stage with resolved options, prints its summary (and its closing lines
+/// unless quiet), and gives the exit code: 1 when a scene failed.
+pub fn run_and_report(
+    stage: &dyn SceneStage,
+    ctx: &StageContext<'_>,
+    options: &RunOptions,
+) -> anyhow::Result<std::process::ExitCode> {
+    let summary = run_stage(stage, ctx, options)?;
+    eprint!("{}", format_summary(&summary));
+    if let (Some(lines), false) = (&summary.closing, options.quiet) {
+        eprint!("{lines}");
+    }
+    Ok(crate::exit::code(summary.success()))
+}
+
+/// The human summary of a stage run, as printed at the end.
+pub fn format_summary(summary: &StageSummary) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let shard = if summary.shard == "0/1" {
+        String::new()
+    } else {
+        format!(" (shard {})", summary.shard)
+    };
+    let waiting = if summary.waiting.is_empty() {
+        String::new()
+    } else {
+        format!(", {} waiting", summary.waiting.len())
+    };
+    let _ = writeln!(
+        out,
+        "{}{shard}: {} scenes: {} done, {} skipped, {} failed{waiting}, {} warnings in {:.2} s",
+        summary.stage,
+        summary.scenes,
+        summary.done,
+        summary.skipped,
+        summary.failed.len(),
+        summary.warnings.len(),
+        summary.elapsed_s
+    );
+    for (scene, error) in &summary.failed {
+        let _ = writeln!(out, "  failed {scene}: {}", error.join(": "));
+    }
+    const SHOWN: usize = 10;
+    for (scene, reason) in summary.waiting.iter().take(SHOWN) {
+        let _ = writeln!(out, "  waiting {scene}: {reason}");
+    }
+    if summary.waiting.len() > SHOWN {
+        let _ = writeln!(
+            out,
+            "  ... and {} more waiting (`mesa status` lists them)",
+            summary.waiting.len() - SHOWN
+        );
+    }
+    for (scene, warning) in summary.warnings.iter().take(SHOWN) {
+        let _ = writeln!(out, "  warning {scene}: {warning}");
+    }
+    if summary.warnings.len() > SHOWN {
+        let _ = writeln!(
+            out,
+            "  ... and {} more warnings (in the done markers under .mesa/markers/{}/)",
+            summary.warnings.len() - SHOWN,
+            summary.stage
+        );
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn output_paths_must_stay_inside_the_scene() {
+        assert!(check_output_path("graph/graph.json").is_ok());
+        assert!(check_output_path("../x").is_err());
+        assert!(check_output_path("/etc/passwd").is_err());
+        assert!(check_output_path("").is_err());
+    }
+}
