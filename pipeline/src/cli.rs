@@ -56,6 +56,27 @@ pub struct SceneArgs {
     pub force: bool,
 }
 
+/// Flags of a dataset-level stage that keeps what is current (`mesa assets`, `mesa records`).
+#[derive(Debug, Args, Clone)]
+pub struct DatasetStageArgs {
+    /// The dataset and its run flags.
+    #[command(flatten)]
+    pub common: DatasetArgs,
+    /// Redo the work even when nothing it reads has changed (every asset is re-indexed, the
+    /// records rebuilt).
+    #[arg(long)]
+    pub force: bool,
+}
+
+impl DatasetStageArgs {
+    /// Resolves the flags against `mesa.toml`, with `--force`.
+    pub fn resolve(&self, global: Global) -> anyhow::Result<Resolved> {
+        let mut resolved = self.common.resolve(global)?;
+        resolved.options.force = self.force;
+        Ok(resolved)
+    }
+}
+
 /// `--progress`.
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum ProgressArg {

@@ -45,3 +45,18 @@ pub fn code_of(error: &anyhow::Error) -> ExitCode {
         ExitCode::from(EXIT_FAILED)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_usage_errors_exit_with_2() {
+        assert_eq!(code_of(&usage("bad flag")), ExitCode::from(EXIT_USAGE));
+        let io = anyhow::Error::from(std::io::Error::other("disk full")).context("writing x");
+        assert_eq!(code_of(&io), ExitCode::from(EXIT_FAILED));
+        // Context on top of a usage error keeps it a usage error.
+        let wrapped = usage("bad flag").context("resolving");
+        assert_eq!(code_of(&wrapped), ExitCode::from(EXIT_USAGE));
+    }
+}

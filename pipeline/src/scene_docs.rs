@@ -39,12 +39,21 @@ pub fn awaiting_annotation(scene: &Scene) -> Option<String> {
     if chosen_layout(scene).is_some() || !scene.path(COARSE_LAYOUT).is_file() {
         return None;
     }
-    let id = &scene.scene_id;
-    let refined = refined_glb(id);
-    let pack = pack_glb(id);
-    Some(if scene.path(&refined).is_file() {
-        format!("{refined} is in but not ingested yet (run `mesa ingest`)")
-    } else if scene.path(&pack).is_file() {
+    let refined = refined_glb(&scene.scene_id);
+    if scene.path(&refined).is_file() {
+        return Some(format!(
+            "{refined} is in but not ingested yet (run `mesa ingest`)"
+        ));
+    }
+    Some(awaiting_edit(scene))
+}
+
+/// What a scene without the annotator's edited GLB waits for: the pack to send and where the
+/// edit goes, or the pack itself.
+pub fn awaiting_edit(scene: &Scene) -> String {
+    let refined = refined_glb(&scene.scene_id);
+    let pack = pack_glb(&scene.scene_id);
+    if scene.path(&pack).is_file() {
         format!(
             "awaiting annotation: send {} (the pack/ folder) to an annotator; put the edited \
              scene at {}",
@@ -52,8 +61,11 @@ pub fn awaiting_annotation(scene: &Scene) -> Option<String> {
             scene.rel(&refined)
         )
     } else {
-        "awaiting annotation: no pack yet (run `mesa pack`)".to_owned()
-    })
+        format!(
+            "awaiting annotation: no pack yet (run `mesa pack`), then the annotator's {}",
+            scene.rel(&refined)
+        )
+    }
 }
 
 /// The triplet lines `graph.json` stands for, in `graph.txt`'s order.

@@ -98,3 +98,70 @@ fn a_slurm_array_writes_the_bytes_of_one_run() {
     assert_eq!(done_count(&again), 0, "{again}");
     assert!(again.contains("5 skipped"), "{again}");
 }
+
+/// A message line with a run of spaces inside it (a lost line continuation), if any.
+fn spaced_line(text: &str) -> Option<&str> {
+    text.lines().find(|l| l.trim_start().contains("  "))
+}
+
+#[test]
+fn array_tasks_other_than_0_leave_the_library_to_task_0_saying_so_in_one_clean_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::create_dir_all(dir.path().join("assets/library")).expect("mkdir");
+    let assets = |id: usize| {
+        Command::cargo_bin("mesa")
+            .expect("mesa")
+            .args(["assets", "--progress", "off"])
+            .arg(dir.path())
+            .env("SLURM_ARRAY_TASK_ID", id.to_string())
+            .env("SLURM_ARRAY_TASK_COUNT", "3")
+            .env("SLURM_ARRAY_TASK_MIN", "0")
+            .output()
+            .expect("run")
+    };
+    let index = dir.path().join("assets/index/assets.json");
+    let out = assets(2);
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("indexed by array task 0 (this is task 2/3): nothing to do here"),
+        "{stderr}"
+    );
+    assert_eq!(spaced_line(&stderr), None, "{stderr}");
+    assert!(!index.exists(), "task 2 must not index the library");
+    // The control: task 0 indexes it.
+    let out = assets(0);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(index.is_file(), "task 0 indexes the library");
+}
+
+#[test]
+fn a_sharded_run_names_the_dataset_stages_it_leaves_out_in_clean_lines() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    dataset(dir.path());
+    std::fs::create_dir_all(dir.path().join("assets/library")).expect("mkdir");
+    let out = Command::cargo_bin("mesa")
+        .expect("mesa")
+        .args(["run", "--progress", "off", "--shard", "0/2"])
+        .arg(dir.path())
+        .output()
+        .expect("run");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    for stage in ["assets", "records", "report"] {
+        assert!(
+            stderr.contains(&format!("{stage}: not run by a shard")),
+            "{stage}: {stderr}"
+        );
+    }
+    assert!(stderr.contains("once before the shards"), "{stderr}");
+    assert!(stderr.contains("once every shard is done"), "{stderr}");
+    let leftover = stderr
+        .lines()
+        .filter(|l| l.contains("not run by a shard"))
+        .find(|l| l.contains("  "));
+    assert_eq!(leftover, None, "{stderr}");
+}

@@ -30,7 +30,7 @@ use mesa_stages::paths::dataset::{
 };
 use serde::Serialize;
 
-use crate::cli::{DatasetArgs, Global};
+use crate::cli::{DatasetStageArgs, Global};
 use crate::config::Config;
 use crate::exit::UsageError;
 use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic};
@@ -39,12 +39,9 @@ use crate::runner::{digest_of, DatasetReport, DatasetStage, Executor, Shard, Sta
 /// `mesa assets`.
 #[derive(Debug, ClapArgs)]
 pub struct Args {
-    /// The dataset and its run flags.
+    /// The dataset, its run flags and --force.
     #[command(flatten)]
-    pub common: DatasetArgs,
-    /// Re-index every asset, even those whose GLB, annotation and configuration are unchanged.
-    #[arg(long)]
-    pub force: bool,
+    pub stage: DatasetStageArgs,
     /// Exit with code 1 when some asset is invalid (by default invalid assets are listed, and
     /// retrieval never chooses them).
     #[arg(long)]
@@ -53,8 +50,7 @@ pub struct Args {
 
 /// Runs `mesa assets`.
 pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
-    let mut resolved = args.common.resolve(global)?;
-    resolved.options.force = args.force;
+    let resolved = args.stage.resolve(global)?;
     // Under a Slurm array, one task indexes the library; the others have nothing to do.
     if let Some(shard) = Shard::from_slurm_env().map_err(UsageError)? {
         if shard.index != 0 {

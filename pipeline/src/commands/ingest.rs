@@ -64,20 +64,7 @@ impl SceneStage for IngestStage {
         if scene.path(&refined).is_file() {
             return None;
         }
-        let pack = pack_glb(&scene.scene_id);
-        Some(if scene.path(&pack).is_file() {
-            format!(
-                "awaiting annotation: send {} (the pack/ folder) to an annotator; put the edited \
-                 scene at {}",
-                scene.rel(&pack),
-                scene.rel(&refined)
-            )
-        } else {
-            format!(
-                "awaiting annotation: no pack yet (run `mesa pack`), then the annotator's {}",
-                scene.rel(&refined)
-            )
-        })
+        Some(crate::scene_docs::awaiting_edit(scene))
     }
 
     fn inputs(&self, _ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {

@@ -19,7 +19,6 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context as _};
-use clap::Args as ClapArgs;
 use mesa_schemas::artifacts::{
     MarkerStatus, RunMarker, SplitArtifact, TaskRecord, MARKER_SCHEMA, SPLIT_SCHEMA,
 };
@@ -41,7 +40,7 @@ use mesa_stages::paths::dataset::INDEX;
 use mesa_stages::paths::scene::{GRAPH_JSON, GRAPH_TXT, TASKS as TASKS_FILE};
 use mesa_stages::records::collide::Collider;
 
-use crate::cli::{DatasetArgs, Global};
+use crate::cli::{DatasetStageArgs, Global};
 use crate::commands::check::ShapeLibrary;
 use crate::config::Config;
 use crate::exit::UsageError;
@@ -53,22 +52,12 @@ use crate::runner::{
 };
 use crate::scene_docs::read_scene_docs;
 
-/// `mesa records`.
-#[derive(Debug, ClapArgs)]
-pub struct Args {
-    /// The dataset and its run flags.
-    #[command(flatten)]
-    pub common: DatasetArgs,
-    /// Rebuild the records even when nothing they read has changed.
-    #[arg(long)]
-    pub force: bool,
-}
+/// `mesa records`: the dataset, its run flags and --force.
+pub type Args = DatasetStageArgs;
 
 /// Runs `mesa records`.
 pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
-    let mut resolved = args.common.resolve(global)?;
-    resolved.options.force = args.force;
-    resolved.run_dataset(&RecordsStage)
+    args.resolve(global)?.run_dataset(&RecordsStage)
 }
 
 /// The `records` stage: the training records, once over the dataset.

@@ -375,4 +375,22 @@ mod tests {
         );
         assert!(Shard::from_vars(vars(&[("SLURM_ARRAY_TASK_ID", "2")])).is_err());
     }
+
+    #[test]
+    fn run_errors_are_usage_errors_only_for_usage() {
+        use crate::exit::{code_of, EXIT_FAILED, EXIT_USAGE};
+        use std::process::ExitCode;
+        let usage = RunError::NotADataset(PathBuf::from("x")).into_anyhow();
+        assert_eq!(code_of(&usage), ExitCode::from(EXIT_USAGE));
+        let io = RunError::Io {
+            path: PathBuf::from("x"),
+            source: std::io::Error::other("disk full"),
+        }
+        .into_anyhow();
+        assert_eq!(code_of(&io), ExitCode::from(EXIT_FAILED));
+        assert!(
+            io.to_string().contains("disk full"),
+            "the cause is kept: {io}"
+        );
+    }
 }
