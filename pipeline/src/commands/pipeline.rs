@@ -4,10 +4,6 @@ use crate::config::Config;
 use crate::runner::{DatasetStage, SceneStage};
 use mesa_stages::demo::annotator::Annotator;
 
-use super::{
-    assets, check, demo, graph, ingest, lift, pack, place, records, render, report, retrieve, tasks,
-};
-
 /// One step of `mesa run`.
 pub enum Step {
     /// A per-scene stage.
@@ -31,23 +27,23 @@ impl Step {
 /// annotator = "simulated"`, as `mesa demo` writes), then `records` and `report` once.
 pub fn pipeline(config: &Config) -> Vec<Step> {
     let mut steps = vec![
-        Step::Dataset(Box::new(assets::AssetsStage::default())),
-        Step::Scene(Box::new(lift::Lift)),
-        Step::Scene(Box::new(retrieve::RetrieveStage::new())),
-        Step::Scene(Box::new(place::PlaceStage::new())),
-        Step::Scene(Box::new(pack::PackStage::new())),
+        Step::Dataset(Box::new(super::assets::AssetsStage::default())),
+        Step::Scene(Box::new(super::lift::Lift)),
+        Step::Scene(Box::new(super::retrieve::RetrieveStage::new())),
+        Step::Scene(Box::new(super::place::PlaceStage::new())),
+        Step::Scene(Box::new(super::pack::PackStage::new())),
     ];
     if config.annotate.annotator == Annotator::Simulated {
-        steps.push(Step::Scene(Box::new(demo::AnnotateStage)));
+        steps.push(Step::Scene(Box::new(super::demo::AnnotateStage)));
     }
     steps.extend([
-        Step::Scene(Box::new(ingest::IngestStage::new())),
-        Step::Scene(Box::new(check::CheckStage::new())),
-        Step::Scene(Box::new(graph::GraphStage::new())),
-        Step::Scene(Box::new(render::RenderStage::for_pipeline())),
-        Step::Scene(Box::new(tasks::TasksStage::new())),
-        Step::Dataset(Box::new(records::RecordsStage)),
-        Step::Dataset(Box::new(report::ReportStage)),
+        Step::Scene(Box::new(super::ingest::IngestStage::new())),
+        Step::Scene(Box::new(super::check::CheckStage::new())),
+        Step::Scene(Box::new(super::graph::GraphStage::new())),
+        Step::Scene(Box::new(super::render::RenderStage::for_pipeline())),
+        Step::Scene(Box::new(super::tasks::TasksStage::new())),
+        Step::Dataset(Box::new(super::records::RecordsStage)),
+        Step::Dataset(Box::new(super::report::ReportStage)),
     ]);
     steps
 }
