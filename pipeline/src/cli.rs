@@ -44,6 +44,14 @@ pub struct SceneArgs {
     /// The dataset and its run flags.
     #[command(flatten)]
     pub common: DatasetArgs,
+    /// Which scenes, and whether to redo them.
+    #[command(flatten)]
+    pub select: SceneSelection,
+}
+
+/// Which scenes a per-scene stage runs.
+#[derive(Debug, Args, Clone)]
+pub struct SceneSelection {
     /// Only scenes whose "<table_type>/<scene_id>" or "<scene_id>" matches this glob.
     #[arg(long, value_name = "GLOB")]
     pub scenes: Option<String>,
@@ -190,14 +198,15 @@ impl SceneArgs {
     /// Resolves the flags against `mesa.toml` and the Slurm environment.
     pub fn resolve(&self, global: Global) -> anyhow::Result<Resolved> {
         let mut resolved = self.common.resolve(global)?;
-        resolved.options.scenes = self.scenes.clone();
-        resolved.options.shard = match self.shard {
+        let select = &self.select;
+        resolved.options.scenes = select.scenes.clone();
+        resolved.options.shard = match select.shard {
             Some(shard) => shard,
             None => Shard::from_slurm_env()
                 .map_err(UsageError)?
                 .unwrap_or_default(),
         };
-        resolved.options.force = self.force;
+        resolved.options.force = select.force;
         Ok(resolved)
     }
 }

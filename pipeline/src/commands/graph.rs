@@ -13,7 +13,7 @@ use mesa_stages::graph::{annotated_containers, extract_graph, GraphOptions};
 use mesa_stages::paths::dataset::ANNOTATIONS;
 use mesa_stages::paths::scene::{GRAPH_JSON, GRAPH_TXT, LAYOUT_CANDIDATES};
 
-use crate::cli::{Global, SceneArgs};
+use crate::cli::{DatasetArgs, Global, SceneArgs, SceneSelection};
 use crate::dataset_cache::DatasetCache;
 use crate::exit::usage;
 use crate::layouts::{present_layouts, read_graph_layout};
@@ -23,9 +23,12 @@ use crate::runner::{digest_of, Scene, SceneOutput, SceneStage, StageContext};
 #[derive(Debug, ClapArgs)]
 #[command(group = clap::ArgGroup::new("source").required(true).args(["dataset", "layout"]))]
 pub struct Args {
-    /// The runner flags (a DATASET, or --layout FILE instead).
+    /// The dataset and its run flags (a DATASET, or --layout FILE instead).
     #[command(flatten)]
-    pub stage: Option<SceneArgs>,
+    pub common: Option<DatasetArgs>,
+    /// Which scenes, and whether to redo them.
+    #[command(flatten)]
+    pub select: SceneSelection,
     /// Print the triplet lines of one layout file instead: a dataset layout, an LLM layout, or
     /// a published MesaTask record (its scene_layout_json), recognised by shape.
     #[arg(long, value_name = "FILE", conflicts_with_all = ["scenes", "jobs", "shard", "force", "config", "progress"])]
@@ -50,10 +53,14 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
             args.equally_spaced,
         );
     }
-    let Some(stage_args) = &args.stage else {
+    let Some(common) = args.common else {
         return Err(usage("give a DATASET, or --layout FILE"));
     };
-    let mut resolved = stage_args.resolve(global)?;
+    let mut resolved = SceneArgs {
+        common,
+        select: args.select,
+    }
+    .resolve(global)?;
     if args.equally_spaced {
         resolved.config.graph.equally_spaced = true;
     }
