@@ -529,7 +529,7 @@ pub fn read_masks(
                 LiftError::input(
                     &instances_path,
                     &format!("instances[{i}].rle"),
-                    e,
+                    e.to_string(),
                     "COCO RLE: {\"size\": [h, w], \"counts\": [...] or \"...\"}",
                 )
             })?;
