@@ -277,7 +277,7 @@ pub fn write_scene_tasks(
         });
         let description = check.map_err(|reasons| TasksError::Template {
             call: "description",
-            reasons: reasons.join("; "),
+            reasons: reasons.to_string(),
         })?;
         let drafts = template.tasks(count, min_objects, seed);
         if drafts.len() < count {
@@ -357,7 +357,7 @@ pub fn write_scene_tasks(
         &images,
         false,
         None,
-        |_, reply, _| check_description(reply),
+        |_, reply, _| check_description(reply).map_err(Vec::from),
     )?;
 
     // Call 2: the tasks.
