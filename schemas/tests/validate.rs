@@ -177,6 +177,14 @@ fn asset_views_and_cached_chat_replies_validate() {
     broken["tokens"] = Value::from(12);
     let found = lines(&broken.to_string(), None);
     assert_eq!(found.len(), 2, "{found:?}");
-    assert!(found.iter().any(|l| l.starts_with("$.content: missing required key")), "{found:?}");
-    assert!(found.iter().any(|l| l.starts_with("$.tokens:")), "{found:?}");
+    assert!(
+        found
+            .iter()
+            .any(|l| l.starts_with("$.content: missing required key")),
+        "{found:?}"
+    );
+    assert!(
+        found.iter().any(|l| l.starts_with("$.tokens:")),
+        "{found:?}"
+    );
 }

@@ -41,7 +41,9 @@ pub struct AssetShape {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ShapeError {
     /// The file describes another asset.
-    #[error("the shapes file is of asset \"{found}\", not \"{uid}\" (rerun `mesa assets --force`)")]
+    #[error(
+        "the shapes file is of asset \"{found}\", not \"{uid}\" (rerun `mesa assets --force`)"
+    )]
     OtherAsset {
         /// The uid in the file.
         found: String,

@@ -271,7 +271,10 @@ mod tests {
         let text = "o".repeat(12) + "0";
         let e = decode(&serde_json::json!({"size": [4, 4], "counts": text})).expect_err("error");
         assert_eq!(e, RleError::RunOutOfRange { index: 0 });
-        assert!(e.to_string().starts_with("counts: run 0 is out of range"), "{e}");
+        assert!(
+            e.to_string().starts_with("counts: run 0 is out of range"),
+            "{e}"
+        );
         // A run of 2^59 - 1 repeated: the delta rule's running sum leaves i64.
         let big = compress(&[0, 1, (1 << 59) - 1]);
         let mut text = big.clone();
@@ -281,8 +284,8 @@ mod tests {
         let e = decode(&serde_json::json!({"size": [4, 4], "counts": text})).expect_err("error");
         assert!(matches!(e, RleError::RunOutOfRange { .. }), "{e}");
         // A size whose product overflows.
-        let e = decode(&serde_json::json!({"size": [u64::MAX, 3], "counts": [0]}))
-            .expect_err("error");
+        let e =
+            decode(&serde_json::json!({"size": [u64::MAX, 3], "counts": [0]})).expect_err("error");
         assert!(matches!(e, RleError::SizeTooLarge { .. }), "{e}");
     }
 

@@ -265,11 +265,11 @@ pub fn corrupt(
         Corruption::MissingObject => missing_object(input, task, &config.missing_object, &mut rng)?,
     };
     let reasoning = reasoning.unwrap_or_else(|| task.reasoning.clone());
-    let text = compose_model_output(&reasoning, &lines, &layout).map_err(|e| CorruptError::Compose(e.to_string()))?;
+    let text = compose_model_output(&reasoning, &lines, &layout)
+        .map_err(|e| CorruptError::Compose(e.to_string()))?;
     // The rejected output must read back as what was meant: a success of the parser, with the
     // corrupted layout and lines.
-    let parsed =
-        parse_model_output(&text).map_err(|e| CorruptError::Unparsable(e.to_string()))?;
+    let parsed = parse_model_output(&text).map_err(|e| CorruptError::Unparsable(e.to_string()))?;
     if parsed.layout != layout || parsed.graph_lines != lines {
         return Err(CorruptError::NotRoundTrip);
     }
@@ -486,8 +486,8 @@ fn missing_object(
             None => by_type.push((key, 1)),
         }
     }
-    let reasoning = rewrite_counts(&task.reasoning, &types, &by_type)
-        .ok_or(CorruptError::NoReasoningLists)?;
+    let reasoning =
+        rewrite_counts(&task.reasoning, &types, &by_type).ok_or(CorruptError::NoReasoningLists)?;
     Ok((
         corrupted,
         lines,

@@ -108,12 +108,7 @@ fn columns(
 }
 
 /// A horizontal bar chart (one row per label), for long lists.
-fn rows(
-    title: &str,
-    x_desc: &str,
-    labels: &[String],
-    values: &[f64],
-) -> Result<String, PlotError> {
+fn rows(title: &str, x_desc: &str, labels: &[String], values: &[f64]) -> Result<String, PlotError> {
     let n = labels.len().max(1) as u32;
     let row_px = if n <= 20 { 26 } else { 16 };
     let size = (760, 90 + row_px * n);
