@@ -26,9 +26,10 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Condvar, Mutex};
 use std::time::Duration;
 
+// The cached reply is a mesa-schemas artifact, so `mesa validate` knows it.
+use mesa_schemas::artifacts::{CachedChatReply as CachedReply, CHAT_REPLY_SCHEMA as CACHE_SCHEMA};
 use mesa_stages::tasks::chat::{Chat, ChatError, ChatReply, ChatRequest};
 use mesa_stages::tasks::LlmConfig;
-use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::fsio::{sha256_hex, write_atomic};
@@ -87,26 +88,6 @@ pub fn request_digest(request: &ChatRequest) -> String {
     // body always gives the same bytes.
     sha256_hex(&serde_json::to_vec(&request.body).unwrap_or_default())
 }
-
-/// A cached reply (`.mesa/cache/chat/<aa>/<digest>.json`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct CachedReply {
-    /// `mesa.chat-reply/1`.
-    schema: String,
-    /// The digest of the request it answers.
-    request_sha256: String,
-    /// The model the server said answered.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    model: Option<String>,
-    /// The reply text.
-    content: String,
-    /// The finish reason.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    finish_reason: Option<String>,
-}
-
-const CACHE_SCHEMA: &str = "mesa.chat-reply/1";
 
 /// The content-addressed reply cache of a dataset.
 #[derive(Debug, Clone)]

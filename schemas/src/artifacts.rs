@@ -1214,3 +1214,46 @@ pub struct TruthInstance {
     /// Pixels where it is the visible surface.
     pub visible_px: u64,
 }
+
+/// Schema id of `assets/renders/<uid>/views.json`.
+pub const ASSET_VIEWS_SCHEMA: &str = "mesa.asset-views/1";
+
+/// `assets/renders/<uid>/views.json`: what an asset's views were made from (written last).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AssetViewsRecord {
+    /// `mesa.asset-views/1`.
+    pub schema: String,
+    /// The asset.
+    pub uid: String,
+    /// SHA-256 of its GLB.
+    pub glb_sha256: String,
+    /// Its front alignment yaw, degrees.
+    pub front_yaw_deg: f64,
+    /// Digest of the `[render]` settings.
+    pub config_digest: String,
+    /// The views written (`view_000`, ...).
+    pub views: Vec<String>,
+}
+
+/// Schema id of a cached model reply (`.mesa/cache/chat/<aa>/<digest>.json`).
+pub const CHAT_REPLY_SCHEMA: &str = "mesa.chat-reply/1";
+
+/// A cached model reply (`.mesa/cache/chat/<aa>/<digest>.json`), keyed by the digest of the
+/// request it answers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CachedChatReply {
+    /// `mesa.chat-reply/1`.
+    pub schema: String,
+    /// The digest of the request it answers.
+    pub request_sha256: String,
+    /// The model the server said answered.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
+    /// The reply text.
+    pub content: String,
+    /// The finish reason.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub finish_reason: Option<String>,
+}

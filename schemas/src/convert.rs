@@ -7,6 +7,8 @@ use std::collections::BTreeMap;
 
 use crate::layout::{DatasetLayout, LayoutObject, Provenance, LAYOUT_SCHEMA};
 use crate::llm::{LlmLayout, LlmObject};
+// Kept here for the public path; it lives below both layout forms so llm needs nothing here.
+pub use crate::order::sort_by_footprint;
 use crate::rotation::{
     normalize_deg, quat_xyzw_from_yaw_deg, tilt_deg_from_quat_xyzw, yaw_deg_from_quat_xyzw,
 };
@@ -133,23 +135,6 @@ pub fn dataset_from_llm(layout: &LlmLayout) -> Converted<DatasetLayout> {
         },
         warnings,
     }
-}
-
-/// Orders objects by descending footprint w·d, ties by instance name (the order mesa writes
-/// and the published records mostly have). Returns whether the order changed.
-pub fn sort_by_footprint<T>(objects: &mut [T], key: impl Fn(&T) -> (&str, [f64; 3])) -> bool {
-    let before: Vec<String> = objects.iter().map(|o| key(o).0.to_owned()).collect();
-    objects.sort_by(|a, b| {
-        let (name_a, size_a) = key(a);
-        let (name_b, size_b) = key(b);
-        let fa = size_a[0] * size_a[1];
-        let fb = size_b[0] * size_b[1];
-        fb.total_cmp(&fa).then_with(|| name_a.cmp(name_b))
-    });
-    objects
-        .iter()
-        .map(|o| key(o).0)
-        .ne(before.iter().map(String::as_str))
 }
 
 impl DatasetLayout {

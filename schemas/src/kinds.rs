@@ -314,6 +314,22 @@ pub fn kinds() -> &'static [Kind] {
                 semantic: |v| typed(v, annotation_problems),
             },
             Kind {
+                name: "asset-views",
+                schema_id: Some(ASSET_VIEWS_SCHEMA),
+                form: FileForm::Json,
+                summary: "assets/renders/<uid>/views.json (what an asset's views were made from)",
+                generate: schema_of::<AssetViewsRecord>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "chat-reply",
+                schema_id: Some(CHAT_REPLY_SCHEMA),
+                form: FileForm::Json,
+                summary: ".mesa/cache/chat/<aa>/<digest>.json (a cached model reply)",
+                generate: schema_of::<CachedChatReply>,
+                semantic: no_semantics,
+            },
+            Kind {
                 name: "truth-instances",
                 schema_id: Some(TRUTH_INSTANCES_SCHEMA),
                 form: FileForm::Json,

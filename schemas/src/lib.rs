@@ -3,6 +3,7 @@
 //! - [`layout`]: the dataset layout (`layout.json`, MesaTask-10K compatible).
 //! - [`llm`]: the LLM layout, task info and the published MesaTask records.
 //! - [`convert`]: dataset layout ↔ LLM layout.
+//! - [`order`]: the object order both layout forms are written in.
 //! - [`output`]: the model output text and its parser (the paper's success rule).
 //! - [`annotation`]: the annotator round trip (the pack index, the ingest diff).
 //! - [`artifacts`]: inputs and per-stage artifacts (lift, retrieval, check, graph, tasks,
@@ -23,6 +24,7 @@ pub mod kinds;
 pub mod layout;
 pub mod layout_file;
 pub mod llm;
+pub mod order;
 pub mod output;
 pub mod render;
 pub mod rotation;

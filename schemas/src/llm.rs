@@ -44,7 +44,7 @@ impl LlmLayout {
     /// Sorts objects by descending footprint w·d, ties by instance name (the published order);
     /// whether the order changed.
     pub fn sort_objects(&mut self) -> bool {
-        crate::convert::sort_by_footprint(&mut self.objects, |o| (&o.instance, o.size_cm.0))
+        crate::order::sort_by_footprint(&mut self.objects, |o| (&o.instance, o.size_cm.0))
     }
 
     /// Checks what the JSON Schema cannot say: unique instances and ordered zones.

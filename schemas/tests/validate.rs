@@ -123,3 +123,68 @@ fn json_lines_report_the_line_of_each_problem() {
         .to_string()
         .contains("missing required key \"content\""));
 }
+
+/// The two artifacts the pipeline writes besides the stages' own: `mesa validate` knows them
+/// by their `schema` field, accepts what mesa writes and names what is broken.
+#[test]
+fn asset_views_and_cached_chat_replies_validate() {
+    use mesa_schemas::artifacts::{
+        AssetViewsRecord, CachedChatReply, ASSET_VIEWS_SCHEMA, CHAT_REPLY_SCHEMA,
+    };
+    let views = AssetViewsRecord {
+        schema: ASSET_VIEWS_SCHEMA.to_owned(),
+        uid: "0a1b2c".to_owned(),
+        glb_sha256: "ab".repeat(32),
+        front_yaw_deg: 90.0,
+        config_digest: "cd".repeat(32),
+        views: (0..8).map(|k| format!("view_{k:03}")).collect(),
+    };
+    let reply = CachedChatReply {
+        schema: CHAT_REPLY_SCHEMA.to_owned(),
+        request_sha256: "ef".repeat(32),
+        model: Some("gpt-4o-2024-08-06".to_owned()),
+        content: "A desk with a lamp and two mugs.".to_owned(),
+        finish_reason: Some("stop".to_owned()),
+    };
+    let views_text = String::from_utf8(to_sorted_pretty(&views).expect("ser")).expect("utf8");
+    let reply_text = String::from_utf8(to_sorted_pretty(&reply).expect("ser")).expect("utf8");
+    assert_eq!(lines(&views_text, None), Vec::<String>::new());
+    assert_eq!(lines(&reply_text, None), Vec::<String>::new());
+    // The optional fields of a reply may be absent (a server that names no model).
+    let bare = CachedChatReply {
+        model: None,
+        finish_reason: None,
+        ..reply.clone()
+    };
+    let bare_text = String::from_utf8(to_sorted_pretty(&bare).expect("ser")).expect("utf8");
+    assert!(!bare_text.contains("model"), "{bare_text}");
+    assert_eq!(lines(&bare_text, None), Vec::<String>::new());
+
+    let mut broken: Value = serde_json::from_str(&views_text).expect("json");
+    broken.as_object_mut().expect("obj").remove("glb_sha256");
+    broken["front_yaw_deg"] = Value::from("east");
+    let found = lines(&broken.to_string(), None);
+    assert_eq!(
+        found,
+        [
+            "$.glb_sha256: missing required key \"glb_sha256\" (expected a string: SHA-256 of its GLB)",
+            "$.front_yaw_deg: is a string \"east\" (expected a number: its front alignment yaw, degrees)",
+        ]
+    );
+
+    let mut broken: Value = serde_json::from_str(&reply_text).expect("json");
+    broken.as_object_mut().expect("obj").remove("content");
+    broken["tokens"] = Value::from(12);
+    let found = lines(&broken.to_string(), None);
+    assert_eq!(found.len(), 2, "{found:?}");
+    assert!(
+        found
+            .iter()
+            .any(|l| l.starts_with("$.content: missing required key")),
+        "{found:?}"
+    );
+    assert!(
+        found.iter().any(|l| l.starts_with("$.tokens:")),
+        "{found:?}"
+    );
+}

@@ -27,7 +27,6 @@ use mesa_stages::render::{
     RenderAsset, RenderConfig, SceneView, ASSET_VIEWS,
 };
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
 use crate::cli::{Global, LayoutArg, SceneArgs};
 use crate::config::Config;
@@ -392,26 +391,8 @@ impl SceneStage for RenderStage {
 // ---------------------------------------------------------------------------------------------
 // Asset views
 
-/// Schema id of `assets/renders/<uid>/views.json`.
-pub const ASSET_VIEWS_SCHEMA: &str = "mesa.asset-views/1";
-
-/// `assets/renders/<uid>/views.json`: what an asset's views were made from (written last).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct AssetViewsRecord {
-    /// `mesa.asset-views/1`.
-    pub schema: String,
-    /// The asset.
-    pub uid: String,
-    /// SHA-256 of its GLB.
-    pub glb_sha256: String,
-    /// Its front alignment yaw, degrees.
-    pub front_yaw_deg: f64,
-    /// Digest of the `[render]` settings.
-    pub config_digest: String,
-    /// The views written (`view_000`, ...).
-    pub views: Vec<String>,
-}
+// The record is a mesa-schemas artifact so `mesa validate` knows it.
+pub use mesa_schemas::artifacts::{AssetViewsRecord, ASSET_VIEWS_SCHEMA};
 
 /// What a run of `mesa render --assets` did.
 #[derive(Debug, Default, Serialize)]

@@ -36,6 +36,37 @@ pub struct AssetShape {
     pub size_m: [f64; 3],
 }
 
+/// Why a shapes file does not give an asset's shape (the caller names the file); each says to
+/// rerun `mesa assets --force`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ShapeError {
+    /// The file describes another asset.
+    #[error(
+        "the shapes file is of asset \"{found}\", not \"{uid}\" (rerun `mesa assets --force`)"
+    )]
+    OtherAsset {
+        /// The uid in the file.
+        found: String,
+        /// The uid asked for.
+        uid: String,
+    },
+    /// The file has no part.
+    #[error("the shapes file has no convex part (rerun `mesa assets --force`)")]
+    NoPart,
+    /// A part has no point.
+    #[error("part {part} has no point (rerun `mesa assets --force`)")]
+    EmptyPart {
+        /// The part's index.
+        part: usize,
+    },
+    /// A part has a NaN or infinite coordinate.
+    #[error("part {part} has a non-finite coordinate (rerun `mesa assets --force`)")]
+    NonFinite {
+        /// The part's index.
+        part: usize,
+    },
+}
+
 impl AssetShape {
     /// The shape of an asset from its shapes file and its geometry record (both written by
     /// `mesa assets`, in the same table-aligned frame). An error says what is wrong.
@@ -43,29 +74,25 @@ impl AssetShape {
         uid: &str,
         shapes: &ShapesArtifact,
         geometry: &AssetGeometry,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, ShapeError> {
         if shapes.uid != uid {
-            return Err(format!(
-                "the shapes file is of asset \"{}\", not \"{uid}\" (rerun `mesa assets --force`)",
-                shapes.uid
-            ));
+            return Err(ShapeError::OtherAsset {
+                found: shapes.uid.clone(),
+                uid: uid.to_owned(),
+            });
         }
         if shapes.parts.is_empty() {
-            return Err("the shapes file has no convex part (rerun `mesa assets --force`)".into());
+            return Err(ShapeError::NoPart);
         }
         let c: [f64; 3] =
             std::array::from_fn(|k| 0.5 * (geometry.bounds_min_m[k] + geometry.bounds_max_m[k]));
         let mut parts = Vec::with_capacity(shapes.parts.len());
         for (i, part) in shapes.parts.iter().enumerate() {
             if part.points_m.is_empty() {
-                return Err(format!(
-                    "part {i} has no point (rerun `mesa assets --force`)"
-                ));
+                return Err(ShapeError::EmptyPart { part: i });
             }
             if part.points_m.iter().flatten().any(|v| !v.is_finite()) {
-                return Err(format!(
-                    "part {i} has a non-finite coordinate (rerun `mesa assets --force`)"
-                ));
+                return Err(ShapeError::NonFinite { part: i });
             }
             let centred: Vec<[f64; 3]> = part
                 .points_m

@@ -398,7 +398,7 @@ pub fn ingest_scene(
         safe_instance_name(name).map_err(|problem| IngestError::BadName {
             node: i,
             name: name.to_owned(),
-            problem,
+            problem: problem.to_string(),
         })?;
         if let Some(first) = by_name.insert(name, i) {
             return Err(IngestError::SameName {

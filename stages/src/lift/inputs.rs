@@ -182,9 +182,80 @@ fn apply_calibration(value: f32, c: DepthCalibration) -> f32 {
     }
 }
 
+/// How many bytes more than its file holds a depth map's header may ask for before the file is
+/// refused unread: ndarray-npy allocates the header's shape before it reads any data, so a
+/// damaged header could ask for terabytes. Smaller truncated files still get ndarray-npy's own
+/// message.
+const NPY_SHORTFALL_LIMIT: u64 = 64 << 20;
+
+/// The shape in an `.npy` header, parsed as ndarray-npy parses it (`None` when it cannot be,
+/// and ndarray-npy will say why).
+fn npy_header_shape(file: &mut std::fs::File, file_len: u64) -> Option<(Vec<usize>, u64)> {
+    use std::io::Read as _;
+    let mut start = [0u8; 12];
+    file.read_exact(&mut start[..10]).ok()?;
+    if &start[..6] != b"\x93NUMPY" {
+        return None;
+    }
+    let (header_len, data_start) = match start[6] {
+        1 => (u64::from(u16::from_le_bytes([start[8], start[9]])), 10),
+        2 | 3 => {
+            file.read_exact(&mut start[10..]).ok()?;
+            let len = u32::from_le_bytes([start[8], start[9], start[10], start[11]]);
+            (u64::from(len), 12)
+        }
+        _ => return None,
+    };
+    let data_start = data_start + header_len;
+    if data_start > file_len {
+        return None;
+    }
+    let mut header = vec![0u8; header_len as usize];
+    file.read_exact(&mut header).ok()?;
+    let text = std::str::from_utf8(header.strip_suffix(b"\n")?).ok()?;
+    let py_literal::Value::Dict(entries) = text.parse::<py_literal::Value>().ok()? else {
+        return None;
+    };
+    let shape = entries.iter().find_map(|(key, value)| match (key, value) {
+        (py_literal::Value::String(k), py_literal::Value::Tuple(dims)) if k == "shape" => dims
+            .iter()
+            .map(|d| match d {
+                py_literal::Value::Integer(n) => usize::try_from(n).ok(),
+                _ => None,
+            })
+            .collect::<Option<Vec<usize>>>(),
+        _ => None,
+    })?;
+    Some((shape, file_len - data_start))
+}
+
 fn read_npy_depth(path: &Path) -> Result<(usize, usize, Vec<f32>), LiftError> {
     use ndarray::ArrayD;
-    let file = std::fs::File::open(path)
+    use std::io::Seek as _;
+    let mut file = std::fs::File::open(path)
+        .map_err(|e| LiftError::input(path, "$", format!("cannot open: {e}"), "check the path"))?;
+    let file_len = file.metadata().map(|m| m.len()).unwrap_or(u64::MAX);
+    if let Some((shape, data_len)) = npy_header_shape(&mut file, file_len) {
+        // float32, the smaller of the two types read; a length that overflows is ndarray-npy's
+        // own error (it allocates nothing then).
+        let needed = shape
+            .iter()
+            .try_fold(4u64, |n, d| n.checked_mul(*d as u64))
+            .filter(|n| *n <= isize::MAX as u64);
+        if let Some(needed) = needed.filter(|n| *n > data_len.saturating_add(NPY_SHORTFALL_LIMIT)) {
+            return Err(LiftError::input(
+                path,
+                "shape",
+                format!(
+                    "has shape {shape:?}, {needed} bytes of float32 at least, but the file holds \
+                     {data_len} bytes of data"
+                ),
+                "an H×W array of metres saved whole by numpy.save (the file is truncated or its \
+                 header damaged)",
+            ));
+        }
+    }
+    file.rewind()
         .map_err(|e| LiftError::input(path, "$", format!("cannot open: {e}"), "check the path"))?;
     let array: ArrayD<f32> = match ndarray_npy::ReadNpyExt::read_npy(&file) {
         Ok(a) => a,
@@ -529,7 +600,7 @@ pub fn read_masks(
                 LiftError::input(
                     &instances_path,
                     &format!("instances[{i}].rle"),
-                    e,
+                    e.to_string(),
                     "COCO RLE: {\"size\": [h, w], \"counts\": [...] or \"...\"}",
                 )
             })?;
@@ -628,4 +699,52 @@ pub fn read_photo(
     )?;
     let rgb = image.into_rgb8();
     Ok(Some(rgb.pixels().map(|p| p.0).collect()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A depth.npy of `shape` with the given data bytes after numpy's own header.
+    fn npy(shape: &str, data: &[u8]) -> Vec<u8> {
+        let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
+        while (10 + header.len() + 1) % 64 != 0 {
+            header.push(' ');
+        }
+        header.push('\n');
+        let mut out = b"\x93NUMPY\x01\x00".to_vec();
+        out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+        out.extend_from_slice(header.as_bytes());
+        out.extend_from_slice(data);
+        out
+    }
+
+    #[test]
+    fn a_depth_header_asking_for_terabytes_is_refused_unread() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("depth.npy");
+        // 10^12 float32 values: ndarray-npy would allocate 4 TB before reading the 16 bytes.
+        std::fs::write(&path, npy("(1000000, 1000000)", &[0; 16])).expect("write");
+        let e = read_npy_depth(&path).expect_err("refused").to_string();
+        assert!(
+            e.contains("depth.npy: shape: has shape [1000000, 1000000], 4000000000000 bytes"),
+            "{e}"
+        );
+        assert!(e.contains("the file holds 16 bytes of data"), "{e}");
+    }
+
+    #[test]
+    fn a_slightly_truncated_depth_keeps_ndarray_npys_message() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("depth.npy");
+        std::fs::write(&path, npy("(2, 3)", &[0; 20])).expect("write");
+        let e = read_npy_depth(&path).expect_err("refused").to_string();
+        assert!(
+            e.contains("is not a float32/float64 .npy array: reached EOF before reading all data"),
+            "{e}"
+        );
+        std::fs::write(&path, npy("(2, 3)", &1f32.to_le_bytes().repeat(6))).expect("write");
+        let (w, h, values) = read_npy_depth(&path).expect("reads");
+        assert_eq!((w, h, values), (3, 2, vec![1.0; 6]));
+    }
 }

@@ -24,27 +24,54 @@ pub fn write_ply(points: &[ColoredPoint], comment: &str) -> Vec<u8> {
     out
 }
 
+/// Why bytes are not a PLY as [`write_ply`] writes it.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PlyError {
+    /// No `end_header` line.
+    #[error("no end_header")]
+    NoEndHeader,
+    /// The header is not UTF-8.
+    #[error("{0}")]
+    HeaderText(String),
+    /// No `element vertex N` line.
+    #[error("no vertex element")]
+    NoVertexElement,
+    /// The vertex count is not a number.
+    #[error("vertex count: {0}")]
+    VertexCount(String),
+    /// The data is not 15 bytes per vertex.
+    #[error("{bytes} bytes of vertex data for {count} vertices")]
+    Length {
+        /// Bytes after the header.
+        bytes: usize,
+        /// The header's vertex count.
+        count: usize,
+    },
+}
+
 /// Reads back what [`write_ply`] writes (for tests and tools).
-pub fn read_ply(bytes: &[u8]) -> Result<Vec<ColoredPoint>, String> {
+pub fn read_ply(bytes: &[u8]) -> Result<Vec<ColoredPoint>, PlyError> {
     let end = b"end_header\n";
     let at = bytes
         .windows(end.len())
         .position(|w| w == end)
-        .ok_or("no end_header")?;
-    let header = std::str::from_utf8(&bytes[..at]).map_err(|e| e.to_string())?;
+        .ok_or(PlyError::NoEndHeader)?;
+    let header =
+        std::str::from_utf8(&bytes[..at]).map_err(|e| PlyError::HeaderText(e.to_string()))?;
     let count: usize = header
         .lines()
         .find_map(|l| l.strip_prefix("element vertex "))
-        .ok_or("no vertex element")?
+        .ok_or(PlyError::NoVertexElement)?
         .trim()
         .parse()
-        .map_err(|e| format!("vertex count: {e}"))?;
+        .map_err(|e: std::num::ParseIntError| PlyError::VertexCount(e.to_string()))?;
     let body = &bytes[at + end.len()..];
-    if body.len() != count * 15 {
-        return Err(format!(
-            "{} bytes of vertex data for {count} vertices",
-            body.len()
-        ));
+    // A count whose byte length overflows is as wrong as any other mismatch.
+    if count.checked_mul(15) != Some(body.len()) {
+        return Err(PlyError::Length {
+            bytes: body.len(),
+            count,
+        });
     }
     Ok(body
         .chunks_exact(15)

@@ -187,22 +187,46 @@ fn linear_srgb(c: [f32; 3]) -> [f32; 3] {
     })
 }
 
+/// Why an instance name cannot name a Blender object and a snapshot file (the text completes
+/// "the instance name ...").
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum UnsafeName {
+    /// The name is empty.
+    #[error("is empty")]
+    Empty,
+    /// The name has a `/` or `\\`.
+    #[error("contains a path separator")]
+    PathSeparator,
+    /// The name starts with `.` (or is `.` or `..`).
+    #[error("starts with a dot")]
+    LeadingDot,
+    /// The name has a control character.
+    #[error("contains a control character")]
+    ControlCharacter,
+    /// The name is longer than 200 bytes.
+    #[error("is {bytes} bytes long (at most 200)")]
+    TooLong {
+        /// Its length in bytes.
+        bytes: usize,
+    },
+}
+
 /// Whether an instance name is safe as a node name and a file name (`snapshots/<name>.png`).
-pub fn safe_instance_name(name: &str) -> Result<(), String> {
+pub fn safe_instance_name(name: &str) -> Result<(), UnsafeName> {
     if name.is_empty() {
-        return Err("is empty".to_owned());
+        return Err(UnsafeName::Empty);
     }
     if name.contains(['/', '\\']) {
-        return Err("contains a path separator".to_owned());
+        return Err(UnsafeName::PathSeparator);
     }
     if name == "." || name == ".." || name.starts_with('.') {
-        return Err("starts with a dot".to_owned());
+        return Err(UnsafeName::LeadingDot);
     }
     if name.chars().any(|c| c.is_control()) {
-        return Err("contains a control character".to_owned());
+        return Err(UnsafeName::ControlCharacter);
     }
     if name.len() > 200 {
-        return Err(format!("is {} bytes long (at most 200)", name.len()));
+        return Err(UnsafeName::TooLong { bytes: name.len() });
     }
     Ok(())
 }
@@ -552,7 +576,7 @@ pub fn pack_scene(request: &PackRequest<'_>, config: &PackConfig) -> Result<Pack
     files.insert("README.txt".to_owned(), readme.into_bytes());
 
     if config.zip {
-        let zip = zip_files(scene_id, &files).map_err(PackError::Io)?;
+        let zip = zip_files(scene_id, &files).map_err(|e| PackError::Io(e.to_string()))?;
         files.insert(format!("{scene_id}.zip"), zip);
     }
     Ok(PackOutput {
@@ -566,9 +590,25 @@ fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
+/// Why the zip of a pack cannot be written.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ZipError {
+    /// A file cannot be added.
+    #[error("zip: {name}: {message}")]
+    Entry {
+        /// The file's name inside the scene folder.
+        name: String,
+        /// The zip library's error.
+        message: String,
+    },
+    /// The archive cannot be closed.
+    #[error("zip: {0}")]
+    Finish(String),
+}
+
 /// A zip of `files` under the folder `<scene_id>/`, deterministic: sorted names, the DOS
 /// epoch as every time stamp, fixed permissions.
-pub fn zip_files(scene_id: &str, files: &BTreeMap<String, Vec<u8>>) -> Result<Vec<u8>, String> {
+pub fn zip_files(scene_id: &str, files: &BTreeMap<String, Vec<u8>>) -> Result<Vec<u8>, ZipError> {
     let mut out = std::io::Cursor::new(Vec::new());
     {
         let mut zip = zip::ZipWriter::new(&mut out);
@@ -577,12 +617,15 @@ pub fn zip_files(scene_id: &str, files: &BTreeMap<String, Vec<u8>>) -> Result<Ve
             .last_modified_time(zip::DateTime::default())
             .unix_permissions(0o644);
         for (name, bytes) in files {
+            let entry = |e: &dyn std::fmt::Display| ZipError::Entry {
+                name: name.clone(),
+                message: e.to_string(),
+            };
             zip.start_file(format!("{scene_id}/{name}"), options)
-                .map_err(|e| format!("zip: {name}: {e}"))?;
-            zip.write_all(bytes)
-                .map_err(|e| format!("zip: {name}: {e}"))?;
+                .map_err(|e| entry(&e))?;
+            zip.write_all(bytes).map_err(|e| entry(&e))?;
         }
-        zip.finish().map_err(|e| format!("zip: {e}"))?;
+        zip.finish().map_err(|e| ZipError::Finish(e.to_string()))?;
     }
     Ok(out.into_inner())
 }

@@ -211,6 +211,44 @@ pub fn order(
     order
 }
 
+/// Why a corruption cannot be applied to a task (recorded as a note, the pair skipped).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CorruptError {
+    /// A collision needs two objects.
+    #[error("a collision needs two objects")]
+    TooFewObjects,
+    /// The perturbed layout has no scene graph.
+    #[error("the perturbed layout has no scene graph: {0}")]
+    NoGraph(String),
+    /// No perturbation made a new collision.
+    #[error("no new colliding pair in {attempts} perturbations")]
+    NoCollision {
+        /// The perturbations tried.
+        attempts: u32,
+    },
+    /// The graph has no relation edge to flip.
+    #[error("the scene graph has no relation edge")]
+    NoRelation,
+    /// No object of the task's types.
+    #[error("no object of the task's types is in the layout")]
+    NoTaskObject,
+    /// Deleting would empty the layout.
+    #[error("deleting a task object would leave the layout empty")]
+    WouldEmptyLayout,
+    /// The reasoning's object counts cannot be updated.
+    #[error("the reasoning has no readable object lists to update")]
+    NoReasoningLists,
+    /// The model output cannot be composed.
+    #[error("{0}")]
+    Compose(String),
+    /// The composed text does not parse.
+    #[error("the corrupted text does not parse: {0}")]
+    Unparsable(String),
+    /// The composed text parses to something else.
+    #[error("the corrupted text does not give back its layout and lines")]
+    NotRoundTrip,
+}
+
 /// Applies a corruption to a task's chosen output; the reason when it is not possible.
 pub fn corrupt(
     corruption: Corruption,
@@ -219,7 +257,7 @@ pub fn corrupt(
     config: &RecordsConfig,
     graph: &GraphOptions,
     seed: u64,
-) -> Result<Corrupted, String> {
+) -> Result<Corrupted, CorruptError> {
     let mut rng = rng(seed, corruption.name(), &input.scene_id, task.task_index);
     let (layout, lines, reasoning, detail) = match corruption {
         Corruption::Collision => collision(input, config, graph, &mut rng)?,
@@ -227,13 +265,13 @@ pub fn corrupt(
         Corruption::MissingObject => missing_object(input, task, &config.missing_object, &mut rng)?,
     };
     let reasoning = reasoning.unwrap_or_else(|| task.reasoning.clone());
-    let text = compose_model_output(&reasoning, &lines, &layout).map_err(|e| e.to_string())?;
+    let text = compose_model_output(&reasoning, &lines, &layout)
+        .map_err(|e| CorruptError::Compose(e.to_string()))?;
     // The rejected output must read back as what was meant: a success of the parser, with the
     // corrupted layout and lines.
-    let parsed =
-        parse_model_output(&text).map_err(|e| format!("the corrupted text does not parse: {e}"))?;
+    let parsed = parse_model_output(&text).map_err(|e| CorruptError::Unparsable(e.to_string()))?;
     if parsed.layout != layout || parsed.graph_lines != lines {
-        return Err("the corrupted text does not give back its layout and lines".to_owned());
+        return Err(CorruptError::NotRoundTrip);
     }
     Ok(Corrupted { text, detail })
 }
@@ -261,12 +299,12 @@ fn collision(
     config: &RecordsConfig,
     graph: &GraphOptions,
     rng: &mut ChaCha8Rng,
-) -> Result<Parts, String> {
+) -> Result<Parts, CorruptError> {
     let cfg = &config.collision;
     let layout = &input.layout;
     let n = layout.objects.len();
     if n < 2 {
-        return Err("a collision needs two objects".to_owned());
+        return Err(CorruptError::TooFewObjects);
     }
     let tolerance_cm = cfg.tolerance_mm / 10.0;
     let before: BTreeSet<(String, String)> = input
@@ -324,16 +362,15 @@ fn collision(
         }
         let scene = GraphScene::from_llm(&perturbed);
         let lines = extract_graph(&scene, &input.containers, graph)
-            .map_err(|e| format!("the perturbed layout has no scene graph: {e}"))?
+            .map_err(|e| CorruptError::NoGraph(e.to_string()))?
             .triplet_lines();
         let pairs: Vec<String> = new.iter().map(|(a, b)| format!("{a} × {b}")).collect();
         let detail = format!("{}; new collision {}", changes.join(", "), pairs.join(", "));
         return Ok((perturbed, lines, None, detail));
     }
-    Err(format!(
-        "no new colliding pair in {} perturbations",
-        cfg.attempts
-    ))
+    Err(CorruptError::NoCollision {
+        attempts: cfg.attempts,
+    })
 }
 
 /// Moves an object's centre so its turned footprint lies inside the zone (centred where the
@@ -355,7 +392,7 @@ fn relation(
     input: &SceneRecordsInput,
     cfg: &RelationConfig,
     rng: &mut ChaCha8Rng,
-) -> Result<Parts, String> {
+) -> Result<Parts, CorruptError> {
     let edges: Vec<usize> = input
         .graph_lines
         .iter()
@@ -367,7 +404,7 @@ fn relation(
         .map(|(i, _)| i)
         .collect();
     if edges.is_empty() {
-        return Err("the scene graph has no relation edge".to_owned());
+        return Err(CorruptError::NoRelation);
     }
     let m = edges.len();
     let share = rng.random_range(cfg.min_fraction..=cfg.max_fraction);
@@ -401,7 +438,7 @@ fn missing_object(
     task: &TaskRecord,
     cfg: &MissingObjectConfig,
     rng: &mut ChaCha8Rng,
-) -> Result<Parts, String> {
+) -> Result<Parts, CorruptError> {
     let layout = &input.layout;
     let types = SceneTypes::of_layout(layout);
     let core = core_types(&types, &task.task_info.objects_cluster);
@@ -410,13 +447,13 @@ fn missing_object(
         .flat_map(|t| t.instances.iter().map(String::as_str))
         .collect();
     if candidates.is_empty() {
-        return Err("no object of the task's types is in the layout".to_owned());
+        return Err(CorruptError::NoTaskObject);
     }
     let most = (cfg.max_removed as usize)
         .min(candidates.len())
         .min(layout.objects.len() - 1);
     if most == 0 {
-        return Err("deleting a task object would leave the layout empty".to_owned());
+        return Err(CorruptError::WouldEmptyLayout);
     }
     let k = rng.random_range(1..=most);
     let mut removed: Vec<&str> = sample(rng, candidates.len(), k)
@@ -449,8 +486,8 @@ fn missing_object(
             None => by_type.push((key, 1)),
         }
     }
-    let reasoning = rewrite_counts(&task.reasoning, &types, &by_type)
-        .ok_or("the reasoning has no readable object lists to update")?;
+    let reasoning =
+        rewrite_counts(&task.reasoning, &types, &by_type).ok_or(CorruptError::NoReasoningLists)?;
     Ok((
         corrupted,
         lines,

@@ -14,7 +14,7 @@ use mesa_schemas::render::{
 };
 
 pub use page::html;
-pub use plots::plots;
+pub use plots::{plots, PlotError};
 
 /// How many categories the statistics list.
 pub const TOP_CATEGORIES: usize = 100;

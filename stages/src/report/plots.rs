@@ -18,7 +18,7 @@ fn columns(
     labels: &[String],
     series: &[(&str, RGBColor, Vec<f64>)],
     size: (u32, u32),
-) -> Result<String, String> {
+) -> Result<String, PlotError> {
     let mut svg = String::new();
     let draw = |svg: &mut String| -> DrawResult {
         let root = SVGBackend::with_string(svg, size).into_drawing_area();
@@ -100,12 +100,15 @@ fn columns(
         root.present()?;
         Ok(())
     };
-    draw(&mut svg).map_err(|e| format!("{title}: {e}"))?;
+    draw(&mut svg).map_err(|e| PlotError {
+        title: title.to_owned(),
+        message: e.to_string(),
+    })?;
     Ok(svg)
 }
 
 /// A horizontal bar chart (one row per label), for long lists.
-fn rows(title: &str, x_desc: &str, labels: &[String], values: &[f64]) -> Result<String, String> {
+fn rows(title: &str, x_desc: &str, labels: &[String], values: &[f64]) -> Result<String, PlotError> {
     let n = labels.len().max(1) as u32;
     let row_px = if n <= 20 { 26 } else { 16 };
     let size = (760, 90 + row_px * n);
@@ -155,7 +158,10 @@ fn rows(title: &str, x_desc: &str, labels: &[String], values: &[f64]) -> Result<
         root.present()?;
         Ok(())
     };
-    draw(&mut svg).map_err(|e| format!("{title}: {e}"))?;
+    draw(&mut svg).map_err(|e| PlotError {
+        title: title.to_owned(),
+        message: e.to_string(),
+    })?;
     Ok(svg)
 }
 
@@ -181,8 +187,18 @@ fn notice(title: &str, text: &str) -> String {
     svg
 }
 
+/// A plot that plotters could not draw.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{title}: {message}")]
+pub struct PlotError {
+    /// The plot's title.
+    pub title: String,
+    /// plotters' error.
+    pub message: String,
+}
+
 /// The plots of a report, as (file name, SVG).
-pub fn plots(stats: &ReportStats) -> Result<Vec<(String, String)>, String> {
+pub fn plots(stats: &ReportStats) -> Result<Vec<(String, String)>, PlotError> {
     let mut out = Vec::new();
     // Objects per scene: every count from the smallest to the largest.
     let hist = &stats.objects_per_scene.histogram;

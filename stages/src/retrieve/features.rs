@@ -118,25 +118,63 @@ fn dot_f64(a: &[f32], b: &[f32]) -> f64 {
         .sum()
 }
 
+/// Why a feature matrix and its uids do not make a [`FeatureMatrix`] (the caller names the
+/// files).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FeaturesError {
+    /// The matrix has a different number of rows than there are uids.
+    #[error("{rows} rows of features for {uids} uids (expected one uid per row)")]
+    RowCount {
+        /// Rows of the matrix.
+        rows: usize,
+        /// Number of uids.
+        uids: usize,
+    },
+    /// The matrix has no columns.
+    #[error("the features have 0 columns")]
+    NoColumns,
+    /// A uid names two rows.
+    #[error("uid \"{uid}\" is listed twice (rows {first} and {second})")]
+    DuplicateUid {
+        /// The uid.
+        uid: String,
+        /// Its first row.
+        first: usize,
+        /// Its second row.
+        second: usize,
+    },
+    /// A row is zero, NaN or infinite.
+    #[error("row {row} (uid \"{uid}\") has norm {norm} (expected a non-zero finite embedding)")]
+    Norm {
+        /// The row.
+        row: usize,
+        /// Its uid.
+        uid: String,
+        /// Its Euclidean norm.
+        norm: f64,
+    },
+}
+
 impl FeatureMatrix {
     /// Embeddings from a matrix and the uid of each row.
-    pub fn new(matrix: Matrix, uids: Vec<String>) -> Result<Self, String> {
+    pub fn new(matrix: Matrix, uids: Vec<String>) -> Result<Self, FeaturesError> {
         if matrix.rows != uids.len() {
-            return Err(format!(
-                "{} rows of features for {} uids (expected one uid per row)",
-                matrix.rows,
-                uids.len()
-            ));
+            return Err(FeaturesError::RowCount {
+                rows: matrix.rows,
+                uids: uids.len(),
+            });
         }
         if matrix.cols == 0 {
-            return Err("the features have 0 columns".to_owned());
+            return Err(FeaturesError::NoColumns);
         }
         let mut seen = std::collections::HashMap::new();
         for (i, uid) in uids.iter().enumerate() {
             if let Some(first) = seen.insert(uid.as_str(), i) {
-                return Err(format!(
-                    "uid \"{uid}\" is listed twice (rows {first} and {i})"
-                ));
+                return Err(FeaturesError::DuplicateUid {
+                    uid: uid.clone(),
+                    first,
+                    second: i,
+                });
             }
         }
         let dim = matrix.cols;
@@ -154,10 +192,11 @@ impl FeatureMatrix {
         for (i, row) in matrix.data.chunks_exact(dim).enumerate() {
             let norm = norm_f64(row);
             if !(norm.is_finite() && norm > 0.0) {
-                return Err(format!(
-                    "row {i} (uid \"{}\") has norm {norm} (expected a non-zero finite embedding)",
-                    uids[i]
-                ));
+                return Err(FeaturesError::Norm {
+                    row: i,
+                    uid: uids[i].clone(),
+                    norm,
+                });
             }
             norms.push(norm);
             let (ints, scale, int_norm, residual) = quantise(row, levels);
@@ -178,7 +217,8 @@ impl FeatureMatrix {
     /// Reads `text_features.npy` and `text_uids.json` (a JSON list of uids, or objathor's
     /// `{"uids": [...]}`).
     pub fn read(npy: &Path, uids: &Path) -> Result<Self, RetrieveError> {
-        let matrix = read_matrix(npy).map_err(|problem| RetrieveError::file(npy, problem))?;
+        let matrix =
+            read_matrix(npy).map_err(|problem| RetrieveError::file(npy, problem.to_string()))?;
         let text = std::fs::read_to_string(uids)
             .map_err(|e| RetrieveError::file(uids, format!("cannot read: {e}")))?;
         let value: serde_json::Value = serde_json::from_str(&text)
@@ -357,14 +397,16 @@ mod tests {
             cols: 2,
             data: vec![1.0, 0.0, 0.0, 0.0],
         };
-        let e = FeatureMatrix::new(m.clone(), vec!["a".into(), "b".into()]).expect_err("zero row");
+        let e = FeatureMatrix::new(m.clone(), vec!["a".into(), "b".into()])
+            .expect_err("zero row")
+            .to_string();
         assert!(e.starts_with("row 1 (uid \"b\") has norm 0"), "{e}");
         let e = FeatureMatrix::new(m.clone(), vec!["a".into()]).expect_err("count");
         assert_eq!(
-            e,
+            e.to_string(),
             "2 rows of features for 1 uids (expected one uid per row)"
         );
         let e = FeatureMatrix::new(m, vec!["a".into(), "a".into()]).expect_err("dup");
-        assert_eq!(e, "uid \"a\" is listed twice (rows 0 and 1)");
+        assert_eq!(e.to_string(), "uid \"a\" is listed twice (rows 0 and 1)");
     }
 }

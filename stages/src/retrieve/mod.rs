@@ -87,22 +87,43 @@ impl Default for RetrieveConfig {
 
 impl RetrieveConfig {
     /// Checks the values; the message names the key.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), RetrieveConfigError> {
         if self.text_top_k == 0 || self.final_top_k == 0 {
-            return Err("[retrieve] text_top_k and final_top_k must be at least 1".to_owned());
+            return Err(RetrieveConfigError::TopKZero);
         }
         if self.final_top_k > self.text_top_k {
-            return Err(format!(
-                "[retrieve] final_top_k {} exceeds text_top_k {} (expected final_top_k <= \
-                 text_top_k)",
-                self.final_top_k, self.text_top_k
-            ));
+            return Err(RetrieveConfigError::FinalTopKExceedsText {
+                final_top_k: self.final_top_k,
+                text_top_k: self.text_top_k,
+            });
         }
         if !(self.text_weight.is_finite() && self.size_weight.is_finite()) {
-            return Err("[retrieve] text_weight and size_weight must be finite".to_owned());
+            return Err(RetrieveConfigError::WeightsNotFinite);
         }
         Ok(())
     }
+}
+
+/// An unusable `[retrieve]` section; the text names the keys.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RetrieveConfigError {
+    /// `text_top_k` or `final_top_k` is 0.
+    #[error("[retrieve] text_top_k and final_top_k must be at least 1")]
+    TopKZero,
+    /// `final_top_k` > `text_top_k`.
+    #[error(
+        "[retrieve] final_top_k {final_top_k} exceeds text_top_k {text_top_k} (expected \
+         final_top_k <= text_top_k)"
+    )]
+    FinalTopKExceedsText {
+        /// `final_top_k`.
+        final_top_k: u32,
+        /// `text_top_k`.
+        text_top_k: u32,
+    },
+    /// A weight is NaN or infinite.
+    #[error("[retrieve] text_weight and size_weight must be finite")]
+    WeightsNotFinite,
 }
 
 /// Why a scene cannot be retrieved.
@@ -339,7 +360,7 @@ pub fn query_embeddings(
                     ),
                 ));
             }
-            let m = npy::read_matrix(path).map_err(|p| RetrieveError::file(path, p))?;
+            let m = npy::read_matrix(path).map_err(|p| RetrieveError::file(path, p.to_string()))?;
             if m.rows != instances.instances.len() {
                 return Err(RetrieveError::file(
                     path,
@@ -444,7 +465,9 @@ pub fn retrieve_scene(
     catalog: &Catalog,
     config: &RetrieveConfig,
 ) -> Result<RetrievalOutput, RetrieveError> {
-    config.check().map_err(RetrieveError::Config)?;
+    config
+        .check()
+        .map_err(|e| RetrieveError::Config(e.to_string()))?;
     let uids = scorer.uids();
     if uids.is_empty() {
         return Err(RetrieveError::NoAssets(

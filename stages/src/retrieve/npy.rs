@@ -1,7 +1,17 @@
 //! NumPy `.npy` files of 2-D float16 / float32 arrays (what `numpy.save` writes for SBERT
 //! embeddings), read into f32 (float16 converts exactly).
+//!
+//! Parsed by hand although the workspace depends on `ndarray-npy` (which reads depth maps in
+//! [`crate::lift::inputs`]): ndarray-npy 0.9 has no float16 element type (its readable
+//! elements are the integers, `f32`, `f64`, `bool` and complex numbers), and float16 is how
+//! large feature matrices are shipped (12,000 × 768 features are 18 MB instead of 37 MB).
+//! Parsing the bytes here also compares the header's shape with the length of the data before
+//! allocating, where ndarray-npy allocates what the header asks for first.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// What every error says is expected.
+const EXPECTED: &str = "a .npy file of a 2-D float16 or float32 array, as numpy.save writes";
 
 /// A 2-D float array, row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -14,18 +24,92 @@ pub struct Matrix {
     pub data: Vec<f32>,
 }
 
+/// Why a `.npy` file cannot be read; the text says what is wrong and what is expected (the
+/// caller names the file).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NpyError {
+    /// The file cannot be read.
+    #[error("cannot read: {message}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        message: String,
+    },
+    /// The magic string is missing.
+    #[error("not a .npy file (expected {EXPECTED})")]
+    NotNpy,
+    /// A format version other than 1, 2 or 3.
+    #[error("unsupported .npy version {0} (expected {EXPECTED})")]
+    Version(u8),
+    /// The header is cut or not text.
+    #[error("truncated or non-text header (expected {EXPECTED})")]
+    Header,
+    /// The header dictionary lacks a key.
+    #[error("the header has no '{0}' (expected {EXPECTED})")]
+    MissingKey(String),
+    /// `descr` is not a quoted string.
+    #[error("unreadable descr (expected {EXPECTED})")]
+    Descr,
+    /// A dtype other than little-endian float16 or float32.
+    #[error(
+        "dtype {0} (expected float16 '<f2' or float32 '<f4', little-endian; convert with \
+         array.astype('float32'))"
+    )]
+    Dtype(String),
+    /// The array is stored column-major.
+    #[error("fortran_order is True (expected C order: save numpy.ascontiguousarray(array))")]
+    FortranOrder,
+    /// `shape` is not a parenthesised tuple.
+    #[error("unreadable shape (expected {EXPECTED})")]
+    Shape,
+    /// `shape` holds something other than integers.
+    #[error("unreadable shape ({0}) (expected {EXPECTED})")]
+    ShapeText(String),
+    /// Not a 1-D or 2-D array.
+    #[error("the array has {0} dimensions (expected 2: one row per item)")]
+    Dimensions(usize),
+    /// The shape's size overflows.
+    #[error("shape ({rows}, {cols}) is too large")]
+    TooLarge {
+        /// Rows of the header's shape.
+        rows: usize,
+        /// Columns of the header's shape.
+        cols: usize,
+    },
+    /// The data is not as long as the shape says.
+    #[error(
+        "the data has {bytes} bytes, the shape ({rows}, {cols}) of {descr} needs {needed} (the \
+         file is truncated or damaged)"
+    )]
+    Length {
+        /// Bytes after the header.
+        bytes: usize,
+        /// Rows of the header's shape.
+        rows: usize,
+        /// Columns of the header's shape.
+        cols: usize,
+        /// The dtype.
+        descr: String,
+        /// Bytes the shape needs.
+        needed: usize,
+    },
+}
+
 /// Reads a `.npy` file; errors say what is wrong and what is expected.
-pub fn read_matrix(path: &Path) -> Result<Matrix, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read: {e}"))?;
+pub fn read_matrix(path: &Path) -> Result<Matrix, NpyError> {
+    let bytes = std::fs::read(path).map_err(|e| NpyError::Read {
+        path: path.to_owned(),
+        message: e.to_string(),
+    })?;
     parse_matrix(&bytes)
 }
 
 /// Parses the bytes of a `.npy` file holding a 2-D `<f2`/`<f4` array in C order (a 1-D array
 /// is one row).
-pub fn parse_matrix(bytes: &[u8]) -> Result<Matrix, String> {
-    const EXPECTED: &str = "a .npy file of a 2-D float16 or float32 array, as numpy.save writes";
+pub fn parse_matrix(bytes: &[u8]) -> Result<Matrix, NpyError> {
     if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
-        return Err(format!("not a .npy file (expected {EXPECTED})"));
+        return Err(NpyError::NotNpy);
     }
     let (header_len, header_start) = match bytes[6] {
         1 => (usize::from(u16::from_le_bytes([bytes[8], bytes[9]])), 10),
@@ -33,20 +117,16 @@ pub fn parse_matrix(bytes: &[u8]) -> Result<Matrix, String> {
             u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
             12,
         ),
-        v => {
-            return Err(format!(
-                "unsupported .npy version {v} (expected {EXPECTED})"
-            ))
-        }
+        v => return Err(NpyError::Version(v)),
     };
     let header = bytes
         .get(header_start..header_start + header_len)
         .and_then(|h| std::str::from_utf8(h).ok())
-        .ok_or_else(|| format!("truncated or non-text header (expected {EXPECTED})"))?;
-    let field = |key: &str| -> Result<&str, String> {
+        .ok_or(NpyError::Header)?;
+    let field = |key: &str| -> Result<&str, NpyError> {
         let at = header
             .find(&format!("'{key}'"))
-            .ok_or_else(|| format!("the header has no '{key}' (expected {EXPECTED})"))?;
+            .ok_or_else(|| NpyError::MissingKey(key.to_owned()))?;
         let rest = &header[at + key.len() + 2..];
         let rest = rest
             .trim_start()
@@ -59,57 +139,46 @@ pub fn parse_matrix(bytes: &[u8]) -> Result<Matrix, String> {
     let descr = descr
         .strip_prefix('\'')
         .and_then(|d| d.split('\'').next())
-        .ok_or_else(|| format!("unreadable descr (expected {EXPECTED})"))?;
+        .ok_or(NpyError::Descr)?;
     let width = match descr {
         "<f2" | "|f2" => 2,
         "<f4" => 4,
-        other => {
-            return Err(format!(
-                "dtype {other} (expected float16 '<f2' or float32 '<f4', little-endian; convert \
-                 with array.astype('float32'))"
-            ))
-        }
+        other => return Err(NpyError::Dtype(other.to_owned())),
     };
     if field("fortran_order")?.starts_with("True") {
-        return Err(
-            "fortran_order is True (expected C order: save numpy.ascontiguousarray(array))"
-                .to_owned(),
-        );
+        return Err(NpyError::FortranOrder);
     }
     let shape = field("shape")?;
     let shape = shape
         .strip_prefix('(')
         .and_then(|s| s.split(')').next())
-        .ok_or_else(|| format!("unreadable shape (expected {EXPECTED})"))?;
+        .ok_or(NpyError::Shape)?;
     let dims: Vec<usize> = shape
         .split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
         .map(|s| s.parse::<usize>())
         .collect::<Result<_, _>>()
-        .map_err(|_| format!("unreadable shape ({shape}) (expected {EXPECTED})"))?;
+        .map_err(|_| NpyError::ShapeText(shape.to_owned()))?;
     let (rows, cols) = match dims.as_slice() {
         [n] => (1, *n),
         [r, c] => (*r, *c),
-        _ => {
-            return Err(format!(
-                "the array has {} dimensions (expected 2: one row per item)",
-                dims.len()
-            ))
-        }
+        _ => return Err(NpyError::Dimensions(dims.len())),
     };
-    let count = rows
+    let needed = rows
         .checked_mul(cols)
-        .ok_or_else(|| format!("shape ({rows}, {cols}) is too large"))?;
+        .and_then(|count| count.checked_mul(width))
+        .ok_or(NpyError::TooLarge { rows, cols })?;
     let data_start = header_start + header_len;
     let body = &bytes[data_start.min(bytes.len())..];
-    if body.len() != count * width {
-        return Err(format!(
-            "the data has {} bytes, the shape ({rows}, {cols}) of {descr} needs {} (the file is \
-             truncated or damaged)",
-            body.len(),
-            count * width
-        ));
+    if body.len() != needed {
+        return Err(NpyError::Length {
+            bytes: body.len(),
+            rows,
+            cols,
+            descr: descr.to_owned(),
+            needed,
+        });
     }
     let data = if width == 2 {
         body.chunks_exact(2)
@@ -203,9 +272,34 @@ mod tests {
     }
 
     #[test]
+    fn a_shape_whose_byte_length_overflows_is_refused() {
+        // 2^62 float32 values: the count fits a usize, its bytes do not (a panic in debug
+        // builds before the check covered the bytes).
+        let mut bytes = b"\x93NUMPY\x01\x00v\x00".to_vec();
+        let mut header =
+            "{'descr': '<f4', 'fortran_order': False, 'shape': (4611686018427387904, 1), }"
+                .to_owned();
+        while header.len() < 117 {
+            header.push(' ');
+        }
+        header.push('\n');
+        bytes.extend_from_slice(header.as_bytes());
+        bytes.extend_from_slice(&[0u8; 16]);
+        let e = parse_matrix(&bytes).expect_err("an error");
+        assert_eq!(
+            e,
+            NpyError::TooLarge {
+                rows: 1 << 62,
+                cols: 1
+            }
+        );
+    }
+
+    #[test]
     fn bad_files_say_what_is_expected() {
         assert!(parse_matrix(b"PK\x03\x04")
             .expect_err("an error")
+            .to_string()
             .starts_with("not a .npy file"));
         let m = Matrix {
             rows: 1,
@@ -216,11 +310,12 @@ mod tests {
         bytes.pop();
         assert!(parse_matrix(&bytes)
             .expect_err("an error")
+            .to_string()
             .contains("truncated"));
         let mut f8 = write_matrix(&m, false);
         let at = f8.windows(3).position(|w| w == b"<f4").expect("descr");
         f8[at + 2] = b'8';
-        let e = parse_matrix(&f8).expect_err("an error");
+        let e = parse_matrix(&f8).expect_err("an error").to_string();
         assert!(e.starts_with("dtype <f8 (expected float16"), "{e}");
     }
 }

@@ -442,6 +442,7 @@ fn a_bad_recipe_is_refused() {
     assert!(config
         .check()
         .expect_err("final > text")
+        .to_string()
         .contains("final_top_k 30"));
 }
 

@@ -6,8 +6,18 @@ use base64::Engine as _;
 use serde_json::{json, Value};
 
 use crate::tasks::prompts::RenderedPrompt;
-use crate::tasks::scene::View;
 use crate::tasks::LlmConfig;
+
+/// A rendered view of the scene.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct View {
+    /// `front` or `perspective`.
+    pub name: String,
+    /// The file, relative to the scene folder (`render/front.png`).
+    pub file: String,
+    /// The PNG bytes.
+    pub png: Vec<u8>,
+}
 
 /// The three kinds of model call of a scene.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

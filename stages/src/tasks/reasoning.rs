@@ -10,6 +10,7 @@
 use std::ops::Range;
 
 use crate::tasks::types::SceneTypes;
+use crate::tasks::validate::ReplyProblems;
 
 /// The exact header of the task objects list.
 pub const CORE_HEADER: &str = "Core Task Objects:";
@@ -42,7 +43,11 @@ pub struct ReasoningLists {
 }
 
 /// Reads the two lists of a reasoning text; every structural problem is reported.
-pub fn read_lists(text: &str) -> Result<ReasoningLists, Vec<String>> {
+pub fn read_lists(text: &str) -> Result<ReasoningLists, ReplyProblems> {
+    lists_of(text).map_err(ReplyProblems)
+}
+
+fn lists_of(text: &str) -> Result<ReasoningLists, Vec<String>> {
     let mut problems = Vec::new();
     let core_at = find_once(text, CORE_HEADER, &mut problems);
     let env_at = find_once(text, ENVIRONMENT_HEADER, &mut problems);
@@ -198,7 +203,7 @@ pub fn check_reasoning(text: &str, scene: &SceneTypes, task_types: &[String]) ->
     }
     let lists = match read_lists(text) {
         Ok(lists) => lists,
-        Err(mut found) => {
+        Err(ReplyProblems(mut found)) => {
             problems.append(&mut found);
             return problems;
         }

@@ -17,16 +17,8 @@ use crate::tasks::types::{ObjectType, SceneTypes};
 use crate::tasks::validate::{check_description, check_task, read_tasks_reply, TaskDraft};
 use crate::tasks::{Backend, TasksConfig};
 
-/// A rendered view of the scene.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct View {
-    /// `front` or `perspective`.
-    pub name: String,
-    /// The file, relative to the scene folder (`render/front.png`).
-    pub file: String,
-    /// The PNG bytes.
-    pub png: Vec<u8>,
-}
+// Defined beside the chat requests that carry the images, so chat needs nothing from here.
+pub use crate::tasks::chat::View;
 
 /// Everything the tasks of a scene are written from.
 #[derive(Debug, Clone, PartialEq)]
@@ -285,7 +277,7 @@ pub fn write_scene_tasks(
         });
         let description = check.map_err(|reasons| TasksError::Template {
             call: "description",
-            reasons: reasons.join("; "),
+            reasons: reasons.to_string(),
         })?;
         let drafts = template.tasks(count, min_objects, seed);
         if drafts.len() < count {
@@ -365,7 +357,7 @@ pub fn write_scene_tasks(
         &images,
         false,
         None,
-        |_, reply, _| check_description(reply),
+        |_, reply, _| check_description(reply).map_err(Vec::from),
     )?;
 
     // Call 2: the tasks.

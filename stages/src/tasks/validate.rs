@@ -57,8 +57,24 @@ fn instance_words(text: &str) -> Vec<&str> {
         .collect()
 }
 
+/// Everything wrong with a model reply, each reason a sentence; shown joined by `; ` (how the
+/// rejects record them).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{}", .0.join("; "))]
+pub struct ReplyProblems(pub Vec<String>);
+
+impl From<ReplyProblems> for Vec<String> {
+    fn from(problems: ReplyProblems) -> Self {
+        problems.0
+    }
+}
+
 /// Checks a table description; the description (trimmed) when it passes.
-pub fn check_description(reply: &ChatReply) -> Result<String, Vec<String>> {
+pub fn check_description(reply: &ChatReply) -> Result<String, ReplyProblems> {
+    description_problems(reply).map_err(ReplyProblems)
+}
+
+fn description_problems(reply: &ChatReply) -> Result<String, Vec<String>> {
     let mut problems = reply_problems(reply);
     let text = reply.content.trim();
     if text.starts_with('{') || text.starts_with('[') || text.starts_with("```") {
@@ -101,6 +117,14 @@ pub struct TasksVerdict {
 /// Reads a tasks reply (`{"tasks": [...]}`, or a bare list; a code fence is tolerated) and
 /// checks each task. Errors are problems of the whole reply.
 pub fn read_tasks_reply(
+    reply: &ChatReply,
+    scene: &SceneTypes,
+    min_task_objects: usize,
+) -> Result<TasksVerdict, ReplyProblems> {
+    tasks_reply(reply, scene, min_task_objects).map_err(ReplyProblems)
+}
+
+fn tasks_reply(
     reply: &ChatReply,
     scene: &SceneTypes,
     min_task_objects: usize,
@@ -384,7 +408,7 @@ mod tests {
             finish_reason: Some("length".into()),
         };
         let err = read_tasks_reply(&cut, &scene(), 3).expect_err("cut");
-        assert!(err[0].contains("max_tokens"));
+        assert!(err.0[0].contains("max_tokens"));
     }
 
     #[test]
