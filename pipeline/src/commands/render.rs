@@ -395,7 +395,7 @@ impl SceneStage for RenderStage {
 pub use mesa_schemas::artifacts::{AssetViewsRecord, ASSET_VIEWS_SCHEMA};
 
 /// What a run of `mesa render --assets` did.
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, serde::Serialize)]
 pub struct AssetViewsSummary {
     /// Assets selected.
     pub assets: usize,
