@@ -2,7 +2,9 @@
 # Runs the fuzz targets for SECONDS each (default 600), with seed corpora made on the spot:
 #   glb_reader: the GLBs of ../shared/realdata/glb (every exporter and defect there), the demo's
 #               asset library, a demo pack and a simulated annotator's edit of it;
-#   ingest:     a demo pack and its edit, against that pack (MESA_FUZZ_SCENE).
+#   ingest:     a demo pack and its edit, against that pack (MESA_FUZZ_SCENE);
+#   lift_inputs: a demo scene's input/ files, and the forms lift reads that the demo does not
+#               write (depth.npy, RLE masks, masks/<id>.png; fuzz/lift_seeds.py).
 # Needs cargo-fuzz (`cargo install cargo-fuzz`) and a nightly toolchain; the corpora grow
 # under fuzz/corpus/ (ignored by git), crashes land in fuzz/artifacts/. The fuzz build goes to
 # $FUZZ_TARGET_DIR (default: $CARGO_TARGET_DIR/fuzz, else fuzz/target). Built with cargo-fuzz's
@@ -14,7 +16,7 @@ cd "$(dirname "$0")/.."
 seconds="${1:-600}"
 shift || true
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(glb_reader ingest)
+[ ${#targets[@]} -gt 0 ] || targets=(glb_reader ingest lift_inputs)
 mesa="${MESA:-${CARGO_TARGET_DIR:-target}/release/mesa}"
 fuzz_target_dir="${FUZZ_TARGET_DIR:-${CARGO_TARGET_DIR:-$(pwd)/fuzz/target}/fuzz}"
 [ -x "$mesa" ] || cargo build --release
@@ -29,6 +31,7 @@ for target in glb_reader ingest; do
   cp "$scene/refined/office_table_0001.glb" "fuzz/corpus/$target/refined.glb"
 done
 cp "$work"/demo/assets/library/*.glb fuzz/corpus/glb_reader/
+python3 fuzz/lift_seeds.py "$scene/input" fuzz/corpus/lift_inputs
 # The real files are read as a second, read-only corpus (never copied into the repository).
 shared="$(cd "${MESA_SHARED:-../shared}" 2>/dev/null && pwd)/realdata/glb"
 export MESA_FUZZ_SCENE="$(pwd)/$scene"
@@ -39,8 +42,10 @@ for target in "${targets[@]}"; do
   # glb_reader explores a GLB's structure: inputs up to 256 KiB keep it fast. ingest needs a
   # whole edited scene (about 430 KiB for the demo's): a shorter limit would cut every seed and
   # leave only the header checks to explore.
+  # lift_inputs: the demo's depth.png and photo are about 320 KiB.
   max_len=262144
   [ "$target" = ingest ] && max_len=1048576
+  [ "$target" = lift_inputs ] && max_len=524288
   (cd fuzz && cargo +nightly fuzz run --target-dir "$fuzz_target_dir" "$target" "corpus/$target" "${extra[@]}" -- \
      -max_total_time="$seconds" -rss_limit_mb=4096 -max_len="$max_len" -print_final_stats=1)
 done
