@@ -121,9 +121,16 @@ impl Config {
                 path
             }
         };
-        let text = std::fs::read_to_string(&path).map_err(|source| ConfigError::Read {
+        let bytes =
+            crate::fsio::read_bounded(&path, crate::fsio::CONFIG_LIMIT).map_err(|source| {
+                ConfigError::Read {
+                    path: path.clone(),
+                    source,
+                }
+            })?;
+        let text = String::from_utf8(bytes).map_err(|_| ConfigError::Parse {
             path: path.clone(),
-            source,
+            message: "not UTF-8 text (expected TOML) ".to_owned(),
         })?;
         Self::from_toml(&text).map_err(|message| ConfigError::Parse { path, message })
     }

@@ -4,6 +4,11 @@
 //! - 1: some scenes failed, some files are invalid, or the work stopped on an error (I/O, a
 //!   broken dataset file): the error chain is printed;
 //! - 2: bad usage or configuration, found before any work starts ([`UsageError`]).
+//!
+//! A closed standard output (`mesa graph --layout F | head -1`) ends the command quietly with
+//! 1 ([`is_broken_pipe`]): not all of the output was delivered, which a `set -o pipefail`
+//! script should see, but the reader stopped on purpose, so no message. A full disk or any
+//! other write error is an error like any other: a message and 1.
 
 use std::process::ExitCode;
 
@@ -46,6 +51,15 @@ pub fn code_of(error: &anyhow::Error) -> ExitCode {
     }
 }
 
+/// Whether `error` comes from writing to a closed pipe (the reader went away).
+pub fn is_broken_pipe(error: &anyhow::Error) -> bool {
+    error.chain().any(|cause| {
+        cause
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -58,5 +72,14 @@ mod tests {
         // Context on top of a usage error keeps it a usage error.
         let wrapped = usage("bad flag").context("resolving");
         assert_eq!(code_of(&wrapped), ExitCode::from(EXIT_USAGE));
+    }
+
+    #[test]
+    fn a_closed_pipe_is_recognised_under_context() {
+        let pipe = anyhow::Error::from(std::io::Error::from(std::io::ErrorKind::BrokenPipe))
+            .context("standard output: cannot write");
+        assert!(is_broken_pipe(&pipe));
+        let full = anyhow::Error::from(std::io::Error::other("no space")).context("x");
+        assert!(!is_broken_pipe(&full));
     }
 }

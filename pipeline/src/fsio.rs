@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
-use anyhow::{anyhow, Context as _};
+use anyhow::{anyhow, bail, Context as _};
 use serde::de::DeserializeOwned;
 use sha2::{Digest, Sha256};
 
@@ -148,9 +148,146 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     hex(&Sha256::digest(bytes))
 }
 
-/// SHA-256 of a file's content, streamed.
+/// The most bytes mesa reads or hashes of one kind of file, so a stray huge file (a sparse
+/// disk image, a wrong path) fails in a second with a message instead of costing minutes and
+/// gigabytes of memory.
+#[derive(Debug, Clone, Copy)]
+pub struct SizeLimit {
+    /// The limit in bytes.
+    pub bytes: u64,
+    /// The kind of file, for messages ("a layout or JSON file").
+    pub what: &'static str,
+    /// The constant's name, so a message can say where the limit is set.
+    pub name: &'static str,
+}
+
+/// A stage's declared input, hashed for its digests (4 GiB): far above any scene file or asset
+/// index mesa writes; hashing is streamed, so this bounds time, not memory.
+pub const HASHED_INPUT_LIMIT: SizeLimit = SizeLimit {
+    bytes: 4 << 30,
+    what: "a stage input",
+    name: "HASHED_INPUT_LIMIT",
+};
+
+/// A layout file or JSON artifact read whole (64 MiB): a dense layout of a thousand objects is
+/// under 1 MiB.
+pub const JSON_LIMIT: SizeLimit = SizeLimit {
+    bytes: 64 << 20,
+    what: "a layout or JSON file",
+    name: "JSON_LIMIT",
+};
+
+/// A records file `mesa validate` reads whole (`sft.json`, `dpo.json`, `test.json`, `.jsonl`:
+/// 1 GiB), which grows with the dataset, unlike a layout.
+pub const RECORDS_LIMIT: SizeLimit = SizeLimit {
+    bytes: 1 << 30,
+    what: "a records file",
+    name: "RECORDS_LIMIT",
+};
+
+/// A configuration file (`mesa.toml`, 1 MiB): every key with its default is under 10 KiB.
+pub const CONFIG_LIMIT: SizeLimit = SizeLimit {
+    bytes: 1 << 20,
+    what: "a configuration file",
+    name: "CONFIG_LIMIT",
+};
+
+/// What kind of non-regular file `meta` describes, for messages.
+fn special_kind(meta: &fs::Metadata) -> &'static str {
+    let kind = meta.file_type();
+    if kind.is_dir() {
+        return "a folder";
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt as _;
+        if kind.is_fifo() {
+            return "a FIFO";
+        }
+        if kind.is_char_device() {
+            return "a character device";
+        }
+        if kind.is_block_device() {
+            return "a block device";
+        }
+        if kind.is_socket() {
+            return "a socket";
+        }
+    }
+    "a special file"
+}
+
+/// Checks, before anything opens it, that `path` (symlinks followed) is a regular file of at
+/// most `limit` bytes, and returns its size. A FIFO would block an open or a read forever and a
+/// device such as `/dev/zero` never ends, so only regular files are read. The error's kind is
+/// `InvalidInput` (`NotFound` for a missing file); its message does not repeat the path, which
+/// callers already put in front.
+pub fn check_regular_file(path: &Path, limit: SizeLimit) -> io::Result<u64> {
+    let meta = fs::metadata(path)?;
+    if !meta.is_file() {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "not a regular file ({}): only regular files are read; replace it with the file \
+                 itself",
+                special_kind(&meta)
+            ),
+        ));
+    }
+    if meta.len() > limit.bytes {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "{}, over the limit of {} for {}: check it is the file meant (a disk image, a \
+                 sparse or corrupt copy?); the limit is mesa's `fsio::{}`",
+                human_bytes(meta.len()),
+                human_bytes(limit.bytes),
+                limit.what,
+                limit.name
+            ),
+        ));
+    }
+    Ok(meta.len())
+}
+
+/// A byte count for messages: bytes with MiB or GiB beside them.
+pub fn human_bytes(n: u64) -> String {
+    const MIB: u64 = 1 << 20;
+    const GIB: u64 = 1 << 30;
+    if n >= GIB {
+        format!("{n} bytes ({:.1} GiB)", n as f64 / GIB as f64)
+    } else if n >= MIB {
+        format!("{n} bytes ({:.1} MiB)", n as f64 / MIB as f64)
+    } else {
+        format!("{n} bytes")
+    }
+}
+
+/// Reads a regular file of at most `limit.bytes` bytes whole ([`check_regular_file`] first, and the
+/// read itself bounded, so a file that grows meanwhile cannot exceed the limit).
+pub fn read_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
+    let len = check_regular_file(path, limit)?;
+    let file = fs::File::open(path)?;
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(limit.bytes.saturating_add(1))
+        .read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > limit.bytes {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "grew over the limit of {} while being read",
+                human_bytes(limit.bytes)
+            ),
+        ));
+    }
+    Ok(bytes)
+}
+
+/// SHA-256 of a file's content, streamed. Only a regular file of at most
+/// [`HASHED_INPUT_LIMIT`] is hashed (see [`check_regular_file`]).
 pub fn sha256_file(path: &Path) -> io::Result<String> {
-    let mut file = fs::File::open(path)?;
+    check_regular_file(path, HASHED_INPUT_LIMIT)?;
+    let mut file = fs::File::open(path)?.take(HASHED_INPUT_LIMIT.bytes);
     let mut hasher = Sha256::new();
     let mut buf = vec![0u8; 1 << 16];
     loop {
@@ -198,10 +335,16 @@ impl DigestCache {
     }
 }
 
-/// Reads a JSON artifact, naming the file in every error.
+/// Reads a JSON artifact, naming the file in every error: at most [`JSON_LIMIT`], a
+/// regular file only.
 pub fn read_json<T: DeserializeOwned>(path: &Path, hint: &str) -> anyhow::Result<T> {
-    let text = std::fs::read_to_string(path)
+    let bytes = read_bounded(path, JSON_LIMIT)
         .with_context(|| format!("{}: cannot read ({hint})", path.display()))?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| anyhow!("{}: not UTF-8 text (expected JSON; {hint})", path.display()))?;
+    if mesa_schemas::json::starts_with_bom(&text) {
+        bail!("{}: {}", path.display(), mesa_schemas::json::BOM_PROBLEM);
+    }
     serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e} ({hint})", path.display()))
 }
 

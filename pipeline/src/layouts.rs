@@ -13,7 +13,7 @@ use mesa_schemas::DatasetLayout;
 use mesa_stages::graph::LoadedLayout;
 use mesa_stages::paths::scene::LAYOUT_CANDIDATES;
 
-use crate::fsio::sha256_hex;
+use crate::fsio::{read_bounded, sha256_hex, JSON_LIMIT};
 use crate::runner::Scene;
 
 /// The layout file a scene's stages after `ingest` read: the first present of
@@ -35,7 +35,8 @@ pub fn present_layouts(scene: &Scene) -> Vec<&'static str> {
 
 /// The bytes of a layout file as text, with their SHA-256.
 fn read_text(path: &Path) -> anyhow::Result<(String, String, Vec<u8>)> {
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let bytes = read_bounded(path, JSON_LIMIT)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
     let sha = sha256_hex(&bytes);
     let text = String::from_utf8(bytes.clone()).map_err(|_| {
         anyhow!(
@@ -43,6 +44,9 @@ fn read_text(path: &Path) -> anyhow::Result<(String, String, Vec<u8>)> {
             path.display()
         )
     })?;
+    if mesa_schemas::json::starts_with_bom(&text) {
+        bail!("{}: {}", path.display(), mesa_schemas::json::BOM_PROBLEM);
+    }
     Ok((text, sha, bytes))
 }
 

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use mesa_pipeline::cli::Global;
 use mesa_pipeline::commands::Cli;
-use mesa_pipeline::exit::code_of;
+use mesa_pipeline::exit::{code_of, is_broken_pipe, EXIT_FAILED};
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -13,6 +13,8 @@ fn main() -> ExitCode {
     quiet_worker_panics();
     match cli.command.run(Global { quiet: cli.quiet }) {
         Ok(code) => code,
+        // The reader of standard output went away: nothing to tell it (see exit.rs).
+        Err(e) if is_broken_pipe(&e) => ExitCode::from(EXIT_FAILED),
         Err(e) => {
             eprintln!("mesa: error: {e:#}");
             // Usage and configuration errors are 2; anything else stopped the work: 1.

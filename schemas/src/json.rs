@@ -18,9 +18,33 @@ pub fn nonfinite_token(value: &Value) -> Option<&str> {
     value.as_str()?.strip_prefix(NONFINITE_PREFIX)
 }
 
+/// A value as a message shows it: a non-finite stand-in as the file spelled it, with why it
+/// is refused (never the internal sentinel), anything else as JSON.
+pub fn describe_value(value: &Value) -> String {
+    match nonfinite_token(value) {
+        Some(token) => format!("{token}, which is not a number JSON allows"),
+        None => value.to_string(),
+    }
+}
+
+/// The problem with JSON text that starts with a UTF-8 byte order mark (some Windows editors
+/// write one). It is refused, not skipped, in every JSON reader, so a file mesa accepts is one
+/// any strict reader downstream accepts too.
+pub const BOM_PROBLEM: &str =
+    "starts with a UTF-8 byte order mark (expected JSON text; save the file without one)";
+
+/// Whether `text` starts with a UTF-8 byte order mark (see [`BOM_PROBLEM`]).
+pub fn starts_with_bom(text: &str) -> bool {
+    text.starts_with('\u{feff}')
+}
+
 /// Parses JSON text, accepting the non-finite tokens `NaN`, `Infinity` and `-Infinity` outside
-/// strings (they become sentinel strings, see [`nonfinite_token`]).
+/// strings (they become sentinel strings, see [`nonfinite_token`]). Text that starts with a
+/// byte order mark is refused with [`BOM_PROBLEM`].
 pub fn parse_lenient(text: &str) -> Result<Value, serde_json::Error> {
+    if starts_with_bom(text) {
+        return Err(<serde_json::Error as serde::de::Error>::custom(BOM_PROBLEM));
+    }
     match serde_json::from_str(text) {
         Ok(value) => Ok(value),
         Err(strict_error) => {
@@ -107,6 +131,26 @@ mod tests {
         assert_eq!(nonfinite_token(&value["b"][0]), Some("-Infinity"));
         assert_eq!(nonfinite_token(&value["b"][1]), Some("Infinity"));
         assert_eq!(value["c"], "NaN \" NaN");
+    }
+
+    #[test]
+    fn messages_show_nonfinite_values_as_the_file_spelled_them() {
+        let value = parse_lenient(r#"{"a": NaN, "b": 2}"#).expect("lenient parse");
+        assert_eq!(
+            describe_value(&value["a"]),
+            "NaN, which is not a number JSON allows"
+        );
+        assert_eq!(describe_value(&value["b"]), "2");
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_refused_with_its_name() {
+        let e = parse_lenient("\u{feff}{\"a\": 1}").expect_err("refused");
+        assert!(e.to_string().contains("byte order mark"), "{e}");
+        assert!(
+            parse_lenient("{\"a\": \"\u{feff}\"}").is_ok(),
+            "inside a string is fine"
+        );
     }
 
     #[test]

@@ -84,6 +84,16 @@ pub fn validate_text(text: &str, kind: Option<&'static Kind>, jsonl: bool) -> Ve
 }
 
 fn validate_document(text: &str, kind: Option<&'static Kind>) -> Vec<Located> {
+    if json::starts_with_bom(text) {
+        return vec![Located {
+            line: Some(1),
+            problem: Problem::new(
+                "$",
+                "starts with a UTF-8 byte order mark",
+                "JSON text: save the file without one",
+            ),
+        }];
+    }
     let value = match json::parse_lenient(text) {
         Ok(value) => value,
         Err(e) => {

@@ -19,7 +19,7 @@ use mesa_stages::graph::{
 
 use crate::cli::Global;
 use crate::exit::{UsageError, EXIT_FAILED, EXIT_OK};
-use crate::fsio::write_atomic;
+use crate::fsio::{read_bounded, write_atomic, JSON_LIMIT, RECORDS_LIMIT};
 use crate::layouts::{read_any_layout, read_graph_layout, AnyLayout};
 
 /// `mesa validate`.
@@ -56,7 +56,8 @@ pub struct ConvertArgs {
     /// The form to write.
     #[arg(long, value_enum)]
     pub to: LayoutForm,
-    /// Where to write (default: standard output).
+    /// Where to write (default, or `-`: standard output). A new or regular file is replaced
+    /// atomically (through a symlink, its target); a FIFO or device is written in place.
     #[arg(short, long, value_name = "FILE")]
     pub output: Option<PathBuf>,
     /// Keep the input's object order instead of sorting by descending footprint w·d (the
@@ -157,7 +158,13 @@ pub fn validate(args: ValidateArgs, _global: Global) -> anyhow::Result<ExitCode>
     let mut problems = 0usize;
     let mut bad_files = 0usize;
     for file in &files {
-        let text = match std::fs::read(file) {
+        let jsonl = file.extension().is_some_and(|e| e == "jsonl");
+        let records = jsonl
+            || file
+                .file_name()
+                .is_some_and(|n| n == "sft.json" || n == "dpo.json" || n == "test.json");
+        let limit = if records { RECORDS_LIMIT } else { JSON_LIMIT };
+        let text = match read_bounded(file, limit) {
             Ok(bytes) => match String::from_utf8(bytes) {
                 Ok(text) => text,
                 Err(_) => {
@@ -178,7 +185,6 @@ pub fn validate(args: ValidateArgs, _global: Global) -> anyhow::Result<ExitCode>
                 continue;
             }
         };
-        let jsonl = file.extension().is_some_and(|e| e == "jsonl");
         let kind = forced.or_else(|| {
             // Only files without a `schema` field fall back to their well-known names.
             let first_doc = if jsonl {
@@ -212,6 +218,7 @@ pub fn validate(args: ValidateArgs, _global: Global) -> anyhow::Result<ExitCode>
             }
         }
     }
+    out.flush().context("standard output: cannot write")?;
     eprintln!(
         "{} files checked: {} valid, {bad_files} with problems ({problems} problems)",
         files.len(),
@@ -278,11 +285,50 @@ pub fn convert(args: ConvertArgs, _global: Global) -> anyhow::Result<ExitCode> {
         eprintln!("warning: {}: {warning}", args.input.display());
     }
     match &args.output {
-        Some(path) => write_atomic(path, &bytes)
-            .with_context(|| format!("{}: cannot write", path.display()))?,
-        None => std::io::stdout().write_all(&bytes)?,
+        Some(path) if path.as_os_str() != "-" => write_output(path, &bytes)?,
+        _ => write_stdout(&bytes)?,
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Writes `bytes` to `-o PATH`. Through a temporary file renamed over it (a reader never sees
+/// half a file) only onto a new path or a regular file; a symlink to a regular file is
+/// resolved first, so the link stays and its target is replaced. Anything else (a FIFO, a
+/// terminal, `/dev/stdout`, `/proc/self/fd/1`) is written in place: renaming over it would
+/// replace it with a regular file and the bytes would never reach its reader.
+fn write_output(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let cannot = || format!("{}: cannot write", path.display());
+    let target = match std::fs::metadata(path) {
+        Ok(meta) if meta.is_dir() => {
+            return Err(UsageError(format!(
+                "{}: -o names a folder (expected a file name)",
+                path.display()
+            ))
+            .into())
+        }
+        Ok(meta) if meta.is_file() => std::fs::canonicalize(path).with_context(cannot)?,
+        Ok(_) => {
+            let mut file = std::fs::OpenOptions::new()
+                .write(true)
+                .open(path)
+                .with_context(cannot)?;
+            return file.write_all(bytes).with_context(cannot);
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            if std::fs::symlink_metadata(path).is_ok() {
+                // A link to nothing: replacing it would silently drop the link.
+                return Err(UsageError(format!(
+                    "{}: a symlink to a missing file (point it at an existing file or \
+                     remove it)",
+                    path.display()
+                ))
+                .into());
+            }
+            path.to_owned()
+        }
+        Err(e) => return Err(e).with_context(cannot),
+    };
+    write_atomic(&target, bytes).with_context(cannot)
 }
 
 /// An LLM layout as pretty JSON in the published key order, with a trailing newline.
@@ -294,11 +340,13 @@ pub fn llm_bytes(layout: &mesa_schemas::LlmLayout) -> anyhow::Result<Vec<u8>> {
 
 /// Runs `mesa parse-output`.
 pub fn parse_output(args: ParseOutputArgs, _global: Global) -> anyhow::Result<ExitCode> {
-    let text = std::fs::read_to_string(&args.file)
+    let bytes = read_bounded(&args.file, JSON_LIMIT)
         .with_context(|| format!("{}: cannot read", args.file.display()))?;
+    let text =
+        String::from_utf8(bytes).map_err(|_| anyhow!("{}: not UTF-8 text", args.file.display()))?;
     match parse_model_output(&text) {
         Ok(parsed) => {
-            std::io::stdout().write_all(&llm_bytes(&parsed.layout)?)?;
+            write_stdout(&llm_bytes(&parsed.layout)?)?;
             eprintln!(
                 "{}: success: {} objects, {} scene-graph lines, reasoning of {} characters",
                 args.file.display(),
@@ -375,6 +423,16 @@ pub fn print_layout_graph(
     }
     let graph = extract_graph(&loaded.scene, &flags, &options)
         .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    print!("{}", graph.to_text());
+    write_stdout(graph.to_text().as_bytes())?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// Writes `bytes` to standard output and flushes, so a write error (a full disk) is an error
+/// here rather than lost at exit; a closed pipe keeps its `BrokenPipe` kind in the chain,
+/// which `main` turns into a quiet exit (see `exit.rs`). `print!` would panic instead.
+pub fn write_stdout(bytes: &[u8]) -> anyhow::Result<()> {
+    let mut out = std::io::stdout().lock();
+    out.write_all(bytes)
+        .and_then(|()| out.flush())
+        .context("standard output: cannot write")
 }

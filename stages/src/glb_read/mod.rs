@@ -968,6 +968,25 @@ fn scene_instances(root: &Root, warnings: &mut Vec<String>) -> Result<SceneNodes
             });
         }
         let node = &root.nodes[node_index];
+        if let Some(q) = node.rotation.filter(|_| node.matrix.is_none()) {
+            // Normalising a zero quaternion divides by zero: say so rather than report the
+            // NaN it would leave in the transform.
+            let norm =
+                q.0.iter()
+                    .map(|c| f64::from(*c).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+            if norm.is_finite() && norm < 1e-12 {
+                return Err(GlbError::Data {
+                    path: format!("nodes[{node_index}].rotation"),
+                    problem: format!(
+                        "is the zero quaternion {:?}, not a rotation (expected a unit \
+                         quaternion [x, y, z, w], e.g. [0, 0, 0, 1] for none)",
+                        q.0
+                    ),
+                });
+            }
+        }
         let matrix = parent * local_matrix(node);
         if matrix.iter().any(|v| !v.is_finite()) {
             return Err(GlbError::Data {

@@ -723,3 +723,21 @@ fn a_position_naming_no_accessor_is_an_error_not_a_panic() {
     let e = open_glb(&glb(&doc, &[])).map(|_| ()).expect_err("invalid");
     assert_eq!(e.code(), "invalid_gltf");
 }
+
+#[test]
+fn a_zero_quaternion_is_named_as_such() {
+    let mut b = Builder::default();
+    let pos = b.positions(&QUAD[..3]);
+    let e = error_of(&b.glb(one_mesh(
+        json!({"attributes": {"POSITION": pos}}),
+        json!({"mesh": 0, "rotation": [0.0, 0.0, 0.0, 0.0]}),
+    )));
+    let e = e.to_string();
+    assert!(
+        e.starts_with(
+            "nodes[0].rotation: is the zero quaternion [0.0, 0.0, 0.0, 0.0], not a rotation"
+        ),
+        "{e}"
+    );
+    assert!(!e.contains("non-finite"), "{e}");
+}

@@ -304,7 +304,10 @@ pub fn read_camera(path: &Path, config: &LiftConfig) -> Result<Camera, LiftError
                 .as_f64()
                 .filter(|x| x.is_finite())
                 .map(Some)
-                .ok_or_else(|| LiftError::input(path, key, format!("is {v}"), "a finite number")),
+                .ok_or_else(|| {
+                    let shown = mesa_schemas::json::describe_value(v);
+                    LiftError::input(path, key, format!("is {shown}"), "a finite number")
+                }),
         }
     };
     let size = |key: &str| -> Result<usize, LiftError> {
@@ -413,8 +416,40 @@ pub fn read_camera(path: &Path, config: &LiftConfig) -> Result<Camera, LiftError
     })
 }
 
-/// Reads a JSON file, naming it on failure.
+/// The largest `camera.json` or `instances.json` read (64 MiB; RLE masks of a few dozen
+/// instances are a few MiB).
+pub const MAX_INPUT_JSON_BYTES: u64 = 64 << 20;
+
+/// Reads a JSON file, naming it on failure: a regular file (a FIFO would block the read
+/// forever, `/dev/zero` never ends) of at most [`MAX_INPUT_JSON_BYTES`].
 pub fn read_json(path: &Path) -> Result<Value, LiftError> {
+    let meta = std::fs::metadata(path).map_err(|e| {
+        LiftError::input(
+            path,
+            "$",
+            format!("cannot read: {e}"),
+            "the file must exist and be UTF-8 JSON",
+        )
+    })?;
+    if !meta.is_file() {
+        return Err(LiftError::input(
+            path,
+            "$",
+            "is not a regular file (a FIFO, device or folder)",
+            "a regular JSON file",
+        ));
+    }
+    if meta.len() > MAX_INPUT_JSON_BYTES {
+        return Err(LiftError::input(
+            path,
+            "$",
+            format!(
+                "is {} bytes, over the limit of {MAX_INPUT_JSON_BYTES} bytes",
+                meta.len()
+            ),
+            "a JSON file of at most 64 MiB: check it is the file meant",
+        ));
+    }
     let text = std::fs::read_to_string(path).map_err(|e| {
         LiftError::input(
             path,

@@ -1,0 +1,445 @@
+//! Hostile files where mesa expects a small regular file: a FIFO or a device as a scene input,
+//! a huge sparse file as a layout or JSON artifact, special files as `convert -o` targets, and
+//! a standard output that is closed or full. Every crafted file is made here, in a temp folder,
+//! and every command runs under a deadline so a hang fails the test instead of stalling it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// How long any one command may take before the test calls it hung.
+const DEADLINE: Duration = Duration::from_secs(60);
+
+fn mesa_bin() -> PathBuf {
+    assert_cmd::cargo::cargo_bin("mesa")
+}
+
+/// Waits for `child` at most [`DEADLINE`], killing it (and failing the test) on timeout.
+fn wait_with_deadline(mut child: Child, what: &str) -> Output {
+    let start = Instant::now();
+    loop {
+        match child.try_wait().expect("poll the child") {
+            Some(_) => return child.wait_with_output().expect("collect output"),
+            None if start.elapsed() > DEADLINE => {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!("`{what}` still running after {DEADLINE:?}: it hangs");
+            }
+            None => std::thread::sleep(Duration::from_millis(50)),
+        }
+    }
+}
+
+/// Runs `mesa ARGS` with stdout and stderr captured, under the deadline.
+fn run_mesa(args: &[&std::ffi::OsStr]) -> Output {
+    let child = Command::new(mesa_bin())
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn mesa");
+    let what = format!(
+        "mesa {}",
+        args.join(std::ffi::OsStr::new(" ")).to_string_lossy()
+    );
+    wait_with_deadline(child, &what)
+}
+
+fn os(s: &str) -> &std::ffi::OsStr {
+    std::ffi::OsStr::new(s)
+}
+
+fn stderr_of(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A 2-scene demo dataset; returns its folder and the scene folders (relative, sorted).
+fn demo(dir: &Path) -> (PathBuf, Vec<String>) {
+    let ws = dir.join("demo");
+    let out = run_mesa(&[
+        os("demo"),
+        ws.as_os_str(),
+        os("--scenes"),
+        os("2"),
+        os("--seed"),
+        os("7"),
+        os("-q"),
+    ]);
+    assert!(out.status.success(), "demo: {}", stderr_of(&out));
+    let mut scenes = Vec::new();
+    for table in std::fs::read_dir(ws.join("scenes")).expect("scenes") {
+        let table = table.expect("entry").path();
+        for scene in std::fs::read_dir(&table).expect("table") {
+            let scene = scene.expect("entry").path();
+            let rel = scene.strip_prefix(ws.join("scenes")).expect("prefix");
+            scenes.push(rel.to_string_lossy().into_owned());
+        }
+    }
+    scenes.sort();
+    assert_eq!(scenes.len(), 2, "{scenes:?}");
+    (ws, scenes)
+}
+
+fn mkfifo(path: &Path) {
+    let status = Command::new("mkfifo")
+        .arg(path)
+        .status()
+        .expect("run mkfifo");
+    assert!(status.success(), "mkfifo {}", path.display());
+}
+
+/// Lifts a demo whose first scene's camera.json was replaced by `make_special`; the scene
+/// fails with a marker naming the file as not a regular file, the other is lifted.
+fn lift_with_special_camera(make_special: impl FnOnce(&Path), kind: &str) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (ws, scenes) = demo(dir.path());
+    let camera = ws.join("scenes").join(&scenes[0]).join("input/camera.json");
+    std::fs::remove_file(&camera).expect("remove camera.json");
+    make_special(&camera);
+
+    let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
+    let stderr = stderr_of(&out);
+    assert_eq!(out.status.code(), Some(1), "one scene fails: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+
+    let marker = ws
+        .join(".mesa/markers/lift")
+        .join(format!("{}.json", scenes[0]));
+    let marker: Value =
+        serde_json::from_slice(&std::fs::read(&marker).expect("failed marker")).expect("json");
+    assert_eq!(marker["status"], "failed", "{marker}");
+    let error = marker["error"].to_string();
+    assert!(
+        error.contains("input/camera.json") && error.contains("not a regular file"),
+        "the marker names the file and says what is wrong: {error}"
+    );
+    assert!(error.contains(kind), "{error}");
+
+    // The other scene finished.
+    let lifted = ws.join("scenes").join(&scenes[1]).join("coarse/lift.json");
+    assert!(lifted.is_file(), "the other scene is lifted: {stderr}");
+}
+
+#[test]
+fn a_fifo_as_a_scene_input_fails_that_scene_only() {
+    lift_with_special_camera(mkfifo, "a FIFO");
+}
+
+#[test]
+fn a_symlink_to_dev_zero_as_a_scene_input_fails_that_scene_only() {
+    lift_with_special_camera(
+        |camera| std::os::unix::fs::symlink("/dev/zero", camera).expect("symlink"),
+        "a character device",
+    );
+}
+
+/// A 3 GiB sparse file (no disk used).
+fn sparse(path: &Path) {
+    let file = std::fs::File::create(path).expect("create");
+    file.set_len(3 << 30).expect("set_len");
+}
+
+/// Asserts `out` is a quick refusal naming the file, its size and the limit.
+fn assert_too_big(out: &Output, path: &Path, text: &str) {
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(!text.contains("panicked"), "{text}");
+    for part in [
+        path.display().to_string().as_str(),
+        "3221225472 bytes (3.0 GiB)",
+        "over the limit of 67108864 bytes (64.0 MiB) for a layout or JSON file",
+        "check it is the file meant",
+    ] {
+        assert!(text.contains(part), "missing {part:?} in: {text}");
+    }
+}
+
+#[test]
+fn a_huge_layout_is_refused_before_it_is_read() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let big = dir.path().join("layout.json");
+    sparse(&big);
+
+    let out = run_mesa(&[os("convert"), big.as_os_str(), os("--to"), os("llm")]);
+    assert_too_big(&out, &big, &stderr_of(&out));
+
+    let out = run_mesa(&[os("graph"), os("--layout"), big.as_os_str()]);
+    assert_too_big(&out, &big, &stderr_of(&out));
+
+    // validate reports on standard output, one line per problem.
+    let out = run_mesa(&[os("validate"), big.as_os_str()]);
+    assert_too_big(&out, &big, &String::from_utf8_lossy(&out.stdout));
+
+    let out = run_mesa(&[os("parse-output"), big.as_os_str()]);
+    assert_too_big(&out, &big, &stderr_of(&out));
+}
+
+#[test]
+fn a_huge_or_special_config_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (ws, _) = demo(dir.path());
+    let config = ws.join("mesa.toml");
+    sparse(&config);
+    let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
+    let stderr = stderr_of(&out);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "a configuration error: {stderr}"
+    );
+    assert!(
+        stderr.contains("mesa.toml")
+            && stderr
+                .contains("over the limit of 1048576 bytes (1.0 MiB) for a configuration file"),
+        "{stderr}"
+    );
+
+    std::fs::remove_file(&config).expect("remove");
+    mkfifo(&config);
+    let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
+    let stderr = stderr_of(&out);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "a configuration error: {stderr}"
+    );
+    assert!(
+        stderr.contains("mesa.toml") && stderr.contains("not a regular file (a FIFO)"),
+        "{stderr}"
+    );
+}
+
+/// An LLM layout of `n` small objects on a grid (a long graph to print).
+fn grid_layout(path: &Path, n: usize) {
+    let objects: Vec<Value> = (0..n)
+        .map(|i| {
+            let (x, y) = ((i % 20) as f64 * 10.0 + 5.0, (i / 20) as f64 * 10.0 + 5.0);
+            serde_json::json!({"instance": format!("cup_{i}"), "size": [4.0, 4.0, 8.0],
+                "position": [x, y, 4.0], "z_rotation": 0.0, "description": ""})
+        })
+        .collect();
+    let rows = n.div_ceil(20) as f64;
+    let layout = serde_json::json!({
+        "item_placement_zone": [0.0, 200.0, 0.0, rows * 10.0],
+        "objects": objects,
+    });
+    std::fs::write(path, serde_json::to_vec_pretty(&layout).expect("json")).expect("write");
+}
+
+#[test]
+fn a_closed_stdout_is_a_quiet_exit_not_a_panic() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let layout = dir.path().join("layout.json");
+    grid_layout(&layout, 200);
+    let mut child = Command::new(mesa_bin())
+        .args([os("graph"), os("--layout"), layout.as_os_str()])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    // Close the read end before mesa has parsed the layout, so its first write meets a
+    // closed pipe.
+    drop(child.stdout.take());
+    let out = wait_with_deadline(child, "mesa graph --layout");
+    let stderr = stderr_of(&out);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(!stderr.contains("error"), "quiet: {stderr}");
+}
+
+#[test]
+fn a_full_stdout_is_an_error_with_a_message() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let layout = dir.path().join("layout.json");
+    grid_layout(&layout, 20);
+    for args in [
+        vec![os("graph"), os("--layout"), layout.as_os_str()],
+        vec![os("convert"), layout.as_os_str(), os("--to"), os("dataset")],
+    ] {
+        let full = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .expect("/dev/full");
+        let child = Command::new(mesa_bin())
+            .args(&args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::from(full))
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn");
+        let out = wait_with_deadline(child, "mesa > /dev/full");
+        let stderr = stderr_of(&out);
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(
+            stderr.contains("standard output: cannot write") && stderr.contains("No space left"),
+            "{stderr}"
+        );
+    }
+}
+
+/// `mesa convert LAYOUT --to dataset -o TARGET`, under the deadline.
+fn convert_to(layout: &Path, target: &Path) -> Output {
+    run_mesa(&[
+        os("convert"),
+        layout.as_os_str(),
+        os("--to"),
+        os("dataset"),
+        os("-o"),
+        target.as_os_str(),
+    ])
+}
+
+#[test]
+fn convert_output_onto_a_symlink_updates_its_target() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let layout = dir.path().join("layout.json");
+    grid_layout(&layout, 3);
+    let real = dir.path().join("real.json");
+    std::fs::write(&real, b"old").expect("write");
+    let link = dir.path().join("link.json");
+    std::os::unix::fs::symlink(&real, &link).expect("symlink");
+    let out = convert_to(&layout, &link);
+    assert!(out.status.success(), "{}", stderr_of(&out));
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .expect("link")
+            .file_type()
+            .is_symlink(),
+        "the symlink stays a symlink"
+    );
+    let written = std::fs::read_to_string(&real).expect("read");
+    assert!(
+        written.contains("cup_0"),
+        "its target is updated: {written}"
+    );
+}
+
+#[test]
+fn convert_output_dash_is_standard_output() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let layout = dir.path().join("layout.json");
+    grid_layout(&layout, 3);
+    let out = convert_to(&layout, Path::new("-"));
+    assert!(out.status.success(), "{}", stderr_of(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("cup_0"));
+    assert!(!dir.path().join("-").exists() && !Path::new("-").exists());
+}
+
+#[test]
+fn convert_output_onto_a_fifo_writes_through_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let layout = dir.path().join("layout.json");
+    grid_layout(&layout, 3);
+    let fifo = dir.path().join("out.fifo");
+    mkfifo(&fifo);
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read(&fifo).expect("read the fifo"))
+    };
+    let out = convert_to(&layout, &fifo);
+    assert!(out.status.success(), "{}", stderr_of(&out));
+    let received = reader.join().expect("reader");
+    assert!(String::from_utf8_lossy(&received).contains("cup_0"));
+    use std::os::unix::fs::FileTypeExt as _;
+    assert!(
+        std::fs::symlink_metadata(&fifo)
+            .expect("fifo")
+            .file_type()
+            .is_fifo(),
+        "the FIFO remains a FIFO"
+    );
+}
+
+#[test]
+fn convert_output_onto_a_regular_file_is_still_atomic() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let layout = dir.path().join("layout.json");
+    grid_layout(&layout, 3);
+    let target = dir.path().join("out.json");
+    std::fs::write(&target, b"old").expect("write");
+    let inode_before = std::os::unix::fs::MetadataExt::ino(&std::fs::metadata(&target).expect("m"));
+    let out = convert_to(&layout, &target);
+    assert!(out.status.success(), "{}", stderr_of(&out));
+    let meta = std::fs::metadata(&target).expect("meta");
+    assert!(meta.is_file());
+    // A rename over the target gives it a new inode; an in-place write would keep the old one.
+    assert_ne!(std::os::unix::fs::MetadataExt::ino(&meta), inode_before);
+    assert!(std::fs::read_to_string(&target)
+        .expect("read")
+        .contains("cup_0"));
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .expect("list")
+        .map(|e| e.expect("entry").file_name())
+        .filter(|n| n.to_string_lossy().contains(".mesa-tmp-"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn a_nan_in_camera_json_is_named_not_shown_as_a_sentinel() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (ws, scenes) = demo(dir.path());
+    let camera = ws.join("scenes").join(&scenes[0]).join("input/camera.json");
+    let mut value: Value =
+        serde_json::from_slice(&std::fs::read(&camera).expect("read")).expect("json");
+    value["width"] = Value::from("__NAN__");
+    let text = serde_json::to_string_pretty(&value)
+        .expect("json")
+        .replace("\"__NAN__\"", "NaN");
+    std::fs::write(&camera, text).expect("write");
+
+    let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
+    let stderr = stderr_of(&out);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let marker = ws
+        .join(".mesa/markers/lift")
+        .join(format!("{}.json", scenes[0]));
+    let marker = std::fs::read_to_string(&marker).expect("failed marker");
+    assert!(
+        marker.contains("width: is NaN, which is not a number JSON allows"),
+        "{marker}"
+    );
+    assert!(
+        !marker.contains("nonfinite") && !stderr.contains("nonfinite"),
+        "no internal sentinel: {marker}\n{stderr}"
+    );
+    assert!(ws
+        .join("scenes")
+        .join(&scenes[1])
+        .join("coarse/lift.json")
+        .is_file());
+}
+
+#[test]
+fn a_byte_order_mark_is_named_by_every_json_reader() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plain = dir.path().join("plain.json");
+    grid_layout(&plain, 3);
+    let layout = dir.path().join("layout.json");
+    let mut bytes = "\u{feff}".as_bytes().to_vec();
+    bytes.extend(std::fs::read(&plain).expect("read"));
+    std::fs::write(&layout, bytes).expect("write");
+
+    for args in [
+        vec![os("convert"), layout.as_os_str(), os("--to"), os("dataset")],
+        vec![os("graph"), os("--layout"), layout.as_os_str()],
+        vec![os("validate"), layout.as_os_str()],
+    ] {
+        let out = run_mesa(&args);
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            stderr_of(&out)
+        );
+        assert_eq!(out.status.code(), Some(1), "{text}");
+        assert!(
+            text.contains("starts with a UTF-8 byte order mark") && text.contains("without one"),
+            "{args:?}: {text}"
+        );
+        assert!(!text.contains("expected value at line 1"), "{text}");
+    }
+}
