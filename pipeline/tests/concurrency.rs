@@ -76,7 +76,10 @@ fn a_lock_of_a_running_process_stops_the_run_with_code_2_naming_it() {
     ] {
         assert!(stderr.contains(part), "{part:?} not in: {stderr}");
     }
-    assert!(lock_file(dir.path()).exists(), "another run's lock is left alone");
+    assert!(
+        lock_file(dir.path()).exists(),
+        "another run's lock is left alone"
+    );
 }
 
 #[test]
