@@ -60,6 +60,11 @@ pub struct RunConfig {
     pub progress: ProgressMode,
     /// Seconds between progress lines when lines are printed.
     pub progress_interval_s: f64,
+    /// When another run of the same stage holds this dataset's lock
+    /// (`.mesa/locks/<stage>.lock`): "fail" (exit code 2, naming the lock and its process) or
+    /// "wait" (poll until it is released). A lock of a process that no longer runs is taken
+    /// over either way, with a warning.
+    pub lock: LockMode,
 }
 
 impl Default for RunConfig {
@@ -69,6 +74,7 @@ impl Default for RunConfig {
             seed: 0,
             progress: ProgressMode::Auto,
             progress_interval_s: 10.0,
+            lock: LockMode::Fail,
         }
     }
 }
@@ -85,6 +91,16 @@ pub enum ProgressMode {
     Lines,
     /// Nothing until the summary.
     Off,
+}
+
+/// What a stage run does when another run of the same stage holds the dataset's lock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum LockMode {
+    /// Stop with exit code 2 and say who holds the lock.
+    Fail,
+    /// Wait until the lock is released.
+    Wait,
 }
 
 /// A configuration that cannot be used.

@@ -2,8 +2,10 @@
 //!
 //! A file is written to a temporary name in the same folder and renamed over the target, so a
 //! reader (or a rerun after `kill -9`) sees either the old bytes or the new ones, never a
-//! mixture. Temporary names carry [`TMP_MARK`] and the owner's file name, so a rerun can sweep
-//! the leftovers of a killed run for exactly the files it is about to write.
+//! mixture. Temporary names carry the owner's file name, [`TMP_MARK`] and the writing process's
+//! pid (`.<name>.mesa-tmp-<pid>-<n>`), so a rerun can sweep the leftovers of a killed run for
+//! exactly the files it is about to write, and leave alone those of a run still going (two
+//! runs on one dataset must not delete each other's files half-way).
 
 use std::collections::HashMap;
 use std::fs;
@@ -123,7 +125,9 @@ impl Drop for AtomicFile {
     }
 }
 
-/// Removes temporary files left beside `path` by a killed writer of that same file.
+/// Removes temporary files left beside `path` by a killed writer of that same file: those whose
+/// pid names a process that no longer runs (or whose name carries no pid). Those of a process
+/// still running, this one included, are left alone: they are another run's work in progress.
 pub fn sweep_tmp_for(path: &Path) -> io::Result<()> {
     let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
         return Ok(());
@@ -136,11 +140,41 @@ pub fn sweep_tmp_for(path: &Path) -> io::Result<()> {
     };
     for entry in entries {
         let entry = entry?;
-        if entry.file_name().to_string_lossy().starts_with(&prefix) {
+        let file_name = entry.file_name();
+        let Some(rest) = file_name
+            .to_string_lossy()
+            .strip_prefix(&prefix)
+            .map(str::to_owned)
+        else {
+            continue;
+        };
+        let owner = rest.split('-').next().and_then(|p| p.parse::<u32>().ok());
+        let in_use = owner.is_some_and(|pid| pid == std::process::id() || process_running(pid));
+        if !in_use {
             let _ = fs::remove_file(entry.path());
         }
     }
     Ok(())
+}
+
+/// Whether process `pid` of this machine may still be running. On Linux it is whether
+/// `/proc/<pid>` exists (a reaped process has none); where there is no `/proc`, every process
+/// counts as running, so nothing that might be in use is swept or taken over.
+pub fn process_running(pid: u32) -> bool {
+    let proc_root = Path::new("/proc");
+    if !proc_root.join("self").exists() {
+        return true;
+    }
+    proc_root.join(pid.to_string()).exists()
+}
+
+/// When process `pid` started, in clock ticks since boot (`/proc/<pid>/stat`, field 22), to
+/// tell a process from a later one that got the same pid; `None` where it cannot be read.
+pub fn process_start_ticks(pid: u32) -> Option<u64> {
+    let stat = fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name (field 2) is in parentheses and may hold spaces: count from after it.
+    let after_name = &stat[stat.rfind(')')? + 1..];
+    after_name.split_whitespace().nth(19)?.parse().ok()
 }
 
 /// SHA-256 of bytes, as lowercase hex.
@@ -359,13 +393,42 @@ mod tests {
         write_atomic(&target, b"one").expect("write");
         write_atomic(&target, b"two").expect("write");
         assert_eq!(fs::read(&target).expect("read"), b"two");
-        let stray = dir.path().join(format!("a/b/.out.json{TMP_MARK}999-0"));
+        let dead = dead_pid();
+        let stray = dir.path().join(format!("a/b/.out.json{TMP_MARK}{dead}-0"));
         fs::write(&stray, b"half").expect("stray");
-        let other = dir.path().join(format!("a/b/.other.json{TMP_MARK}999-0"));
+        let other = dir
+            .path()
+            .join(format!("a/b/.other.json{TMP_MARK}{dead}-0"));
         fs::write(&other, b"half").expect("other");
+        // A leftover of a process that runs (this one) is another run's work in progress.
+        let live = dir
+            .path()
+            .join(format!("a/b/.out.json{TMP_MARK}{}-7", std::process::id()));
+        fs::write(&live, b"busy").expect("live");
         sweep_tmp_for(&target).expect("sweep");
-        assert!(!stray.exists());
+        assert!(!stray.exists(), "a dead writer's leftover is swept");
         assert!(other.exists(), "only the named file's leftovers are swept");
+        assert!(
+            live.exists(),
+            "a live writer's temporary file is left alone"
+        );
+    }
+
+    /// The pid of a process that has exited and been reaped.
+    fn dead_pid() -> u32 {
+        let mut child = std::process::Command::new("true")
+            .spawn()
+            .expect("spawn true");
+        let pid = child.id();
+        child.wait().expect("wait");
+        pid
+    }
+
+    #[test]
+    fn running_processes_are_told_from_dead_ones() {
+        assert!(process_running(std::process::id()));
+        assert!(!process_running(dead_pid()));
+        assert!(process_start_ticks(std::process::id()).is_some());
     }
 
     #[test]

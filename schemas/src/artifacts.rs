@@ -146,8 +146,28 @@ pub struct LiftArtifact {
     /// The item placement zone [x_min, x_max, y_min, y_max] in cm.
     #[serde(rename = "item_placement_zone")]
     pub zone_cm: ZoneCm,
-    /// One entry per non-support instance, in instance-id order.
+    /// One entry per non-support instance, in instance-id order, except those in `dropped`.
     pub instances: Vec<LiftedInstance>,
+    /// Instances left out because too few of their points survived filtering (absent when
+    /// none was): they get no box, no asset and no place in the layout.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dropped: Vec<DroppedInstance>,
+}
+
+/// An instance that `mesa lift` left out of a scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DroppedInstance {
+    /// The name it would have had, like `pen_0`.
+    pub instance: String,
+    /// Its id in `input/instances.json`.
+    pub mask_id: u32,
+    /// Its label.
+    pub label: String,
+    /// Points it kept after filtering.
+    pub points_kept: u64,
+    /// Why it was left out, and how to keep it.
+    pub reason: String,
 }
 
 /// Intrinsics after resolving a FOV-only camera.

@@ -78,6 +78,7 @@ fn lift(rng: &mut impl Rng) -> LiftArtifact {
         },
         zone_cm: ZoneCm([0.0, 120.0, 0.0, 80.0]),
         instances,
+        dropped: Vec::new(),
     }
 }
 

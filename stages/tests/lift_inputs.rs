@@ -452,3 +452,123 @@ fn a_truncated_or_corrupt_image() {
     std::fs::write(scene.path("masks.png"), b"not a png at all").expect("corrupt");
     assert_mentions(&scene.error(), &["masks.png", "cannot decode the image"]);
 }
+
+/// The synthetic scene with a third instance: 9 scattered table pixels, a mask too
+/// thin and broken to keep [lift] min_points = 10 points (isolated pixels: filtering keeps none).
+fn scene_with_a_thin_mask() -> Scene {
+    let scene = Scene::new();
+    let (_, mut labels) = render();
+    let row = H - 3;
+    for u in (4..40).step_by(4) {
+        let i = (row * W + u) as usize;
+        assert_eq!(labels[i], 0, "the thin mask lies on the table");
+        labels[i] = 3;
+    }
+    GrayImage::from_raw(W, H, labels)
+        .expect("labels")
+        .save(scene.path("masks.png"))
+        .expect("save");
+    scene.json(
+        "instances.json",
+        &json!({"instances": [
+        {"id": 1, "label": "box", "description": "a tall box"},
+        {"id": 2, "label": "box", "description": "a flat box"},
+        {"id": 3, "label": "pen", "description": "a thin pen"}]}),
+    );
+    scene
+}
+
+fn names(out: &LiftOutput) -> Vec<&str> {
+    out.artifact
+        .instances
+        .iter()
+        .map(|i| i.instance.as_str())
+        .collect()
+}
+
+#[test]
+fn an_object_with_too_few_points_is_dropped_with_a_warning_and_the_scene_goes_on() {
+    let scene = scene_with_a_thin_mask();
+    let config = LiftConfig {
+        plane_min_points: 100,
+        ..LiftConfig::default()
+    };
+    assert_eq!(config.min_points, 10, "the default this test is about");
+    let out = scene.lift_with(&config).expect("the scene lifts");
+    assert_eq!(
+        names(&out),
+        ["box_0", "box_1"],
+        "the other objects are kept"
+    );
+    let dropped = &out.artifact.dropped;
+    assert_eq!(dropped.len(), 1, "{dropped:?}");
+    assert_eq!(
+        (dropped[0].instance.as_str(), dropped[0].mask_id),
+        ("pen_0", 3)
+    );
+    let kept = dropped[0].points_kept;
+    assert!(kept < 9, "{kept}");
+    let warning = out
+        .warnings
+        .iter()
+        .find(|w| w.contains("dropped"))
+        .expect("a warning");
+    assert_mentions(
+        warning,
+        &[
+            "pen_0",
+            "instance id 3",
+            &format!("keeps {kept} points"),
+            "[lift] min_points = 10",
+            "lower [lift] min_points",
+        ],
+    );
+    // The control (the scene as before, without the thin mask) keeps both boxes and drops
+    // nothing. (Lowering min_points cannot keep this mask: filtering leaves it no point.)
+    let out = Scene::new().lift_with(&config).expect("the scene lifts");
+    assert_eq!(names(&out), ["box_0", "box_1"]);
+    assert!(out.artifact.dropped.is_empty());
+    assert!(!out.warnings.iter().any(|w| w.contains("dropped")));
+}
+
+#[test]
+fn a_scene_whose_every_object_is_dropped_fails_naming_the_setting() {
+    // Only the thin mask is an object; the boxes are left to the background.
+    let scene = scene_with_a_thin_mask();
+    let (_, labels) = render();
+    let thin = image::open(scene.path("masks.png"))
+        .expect("masks")
+        .to_luma8();
+    let only_thin: Vec<u8> = thin
+        .as_raw()
+        .iter()
+        .zip(&labels)
+        .map(|(&now, &boxes)| if boxes == 0 { now } else { 0 })
+        .collect();
+    GrayImage::from_raw(W, H, only_thin)
+        .expect("labels")
+        .save(scene.path("masks.png"))
+        .expect("save");
+    scene.json(
+        "instances.json",
+        &json!({"instances": [{"id": 3, "label": "pen", "description": "a thin pen"}]}),
+    );
+    let config = LiftConfig {
+        plane_min_points: 100,
+        ..LiftConfig::default()
+    };
+    let message = match scene.lift_with(&config) {
+        Ok(out) => panic!("expected a failure, got {:?}", names(&out)),
+        Err(e) => e.to_string(),
+    };
+    assert_mentions(
+        &message,
+        &[
+            "masks.png",
+            "every object keeps too few points",
+            "pen_0 keeps",
+            "[lift] min_points = 10",
+            "fix:",
+        ],
+    );
+}

@@ -5,7 +5,8 @@
 //! record at `.mesa/runs/<stage>/run.json`. The stage says what one unit of work is (an asset,
 //! a scene) through [`Executor::map`]; the executor owns the pool and the display. A stage
 //! whose output depends on all its inputs at once keeps a dataset marker
-//! (`.mesa/markers/<stage>.json`, the per-scene marker's format with scene `(dataset)`).
+//! (`.mesa/markers/<stage>.json`, the per-scene marker's format with scene `(dataset)`), and
+//! holds the stage's lock ([`super::lock`]) for the whole run.
 
 use std::path::PathBuf;
 
@@ -140,6 +141,12 @@ pub fn run_dataset_stage(
     ctx: &StageContext<'_>,
     options: &RunOptions,
 ) -> anyhow::Result<DatasetReport> {
+    // A folder that does not exist gets no lock folder: the stage says what is wrong.
+    let _lock = if ctx.dataset.is_dir() {
+        Some(super::lock::lock_stage(ctx, stage.name(), options.shard)?)
+    } else {
+        None
+    };
     let exec = Executor::new(stage.name(), options)?;
     let report = stage.run(ctx, &exec)?;
     let record = ctx

@@ -16,6 +16,7 @@
 //! - the stage lifecycle: [`SceneStage::preflight`] before any work (bad settings fail in the
 //!   first second), [`SceneStage::prepare`] once before the scenes, [`SceneStage::finish`]
 //!   once after the last (a dataset summary);
+//! - one writer per stage and dataset: a run holds `.mesa/locks/<stage>.lock` ([`lock`]);
 //! - one thread pool and one progress display per stage run, for per-scene stages and for the
 //!   dataset-level stages of [`dataset`] alike.
 //!
@@ -24,6 +25,7 @@
 
 mod core;
 pub mod dataset;
+pub mod lock;
 mod scene;
 
 pub use self::core::{

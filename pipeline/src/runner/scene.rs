@@ -461,6 +461,9 @@ pub fn run_stage(
     if let Some(only) = &options.only {
         scenes.retain(|s| only.contains(&s.key()));
     }
+    // Held until the summary is made: a second run of this stage would sweep and rename
+    // this one's files away.
+    let _lock = super::lock::lock_stage(ctx, stage.name(), options.shard)?;
     let config_digest = stage.config_digest(ctx);
     let cache = DigestCache::default();
     let pool = thread_pool(options.jobs)?;

@@ -55,7 +55,7 @@ pub mod synthetic;
 use std::path::{Path, PathBuf};
 
 use mesa_schemas::artifacts::{
-    LiftArtifact, LiftStats, LiftedInstance, PlaneFit, ResolvedCamera, LIFT_SCHEMA,
+    DroppedInstance, LiftArtifact, LiftStats, LiftedInstance, PlaneFit, ResolvedCamera, LIFT_SCHEMA,
 };
 use mesa_schemas::units::{PositionCm, SizeCm, ZoneCm};
 use nalgebra::{Matrix3, Vector3};
@@ -278,6 +278,7 @@ pub fn lift_scene(
     let frame = TableFrame::new(&plane, &plane_points, config)?;
 
     let mut lifted = Vec::new();
+    let mut dropped = Vec::new();
     let mut clouds = Vec::new();
     let mut label_counts = std::collections::BTreeMap::<String, usize>::new();
     let masks_file = PathBuf::from(&masks.source);
@@ -320,17 +321,27 @@ pub fn lift_scene(
         let eroded_px = kept.len();
         let (points, removed) = remove_outliers(&depth, &k, &kept, config);
         if points.len() < config.min_points.min(valid.len() as u32) as usize || points.is_empty() {
-            return Err(LiftError::input(
-                &masks_file,
-                &format!("id {}", entry.id),
-                format!(
-                    "instance {} (\"{}\") keeps {} points after filtering",
-                    entry.id,
-                    entry.label,
-                    points.len()
-                ),
-                "check its mask and depth, or lower [lift] min_points",
+            // One thin or noisy mask must not cost the scene its other objects: this one is
+            // left out, and said so (in the warnings and in lift.json's `dropped`).
+            let reason = format!(
+                "keeps {} points after filtering, fewer than [lift] min_points = {} (check its \
+                 mask and depth in {}, or lower [lift] min_points to keep it)",
+                points.len(),
+                config.min_points,
+                masks_file.display()
+            );
+            warnings.push(format!(
+                "{instance} (instance id {}, \"{}\") dropped: {reason}",
+                entry.id, entry.label
             ));
+            dropped.push(DroppedInstance {
+                instance,
+                mask_id: entry.id,
+                label: entry.label.clone(),
+                points_kept: points.len() as u64,
+                reason,
+            });
+            continue;
         }
         let mut table_points = Vec::with_capacity(points.len());
         let mut ply_points = Vec::with_capacity(points.len());
@@ -411,6 +422,23 @@ pub fn lift_scene(
             },
         });
     }
+    if lifted.is_empty() && !dropped.is_empty() {
+        let counts: Vec<String> = dropped
+            .iter()
+            .map(|d| format!("{} keeps {}", d.instance, d.points_kept))
+            .collect();
+        return Err(LiftError::input(
+            &masks_file,
+            "instances",
+            format!(
+                "every object keeps too few points after filtering ({}; [lift] min_points = {}): \
+                 the scene would have no object",
+                counts.join(", "),
+                config.min_points
+            ),
+            "check that the masks and the depth map are registered, or lower [lift] min_points",
+        ));
+    }
     let artifact = LiftArtifact {
         schema: LIFT_SCHEMA.to_owned(),
         scene_id: scene_id.to_owned(),
@@ -434,6 +462,7 @@ pub fn lift_scene(
         },
         zone_cm: ZoneCm([0.0, frame.zone_m[0] * 100.0, 0.0, frame.zone_m[1] * 100.0]),
         instances: lifted,
+        dropped,
     };
     Ok(LiftOutput {
         artifact,

@@ -67,6 +67,7 @@ pub(crate) fn lift_of(instances: Vec<LiftedInstance>) -> LiftArtifact {
         },
         zone_cm: ZoneCm([0.0, 120.0, 0.0, 80.0]),
         instances,
+        dropped: Vec::new(),
     }
 }
 

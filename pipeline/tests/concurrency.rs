@@ -1,0 +1,132 @@
+//! Two runs on one dataset: a stage's lock (`.mesa/locks/<stage>.lock`) stops a second run of
+//! the same stage with exit code 2, a lock left by a killed run is taken over, and a run sweeps
+//! only the temporary files of writers that no longer run. Nothing of either stays in the
+//! dataset after a run.
+
+mod common;
+
+use common::{all_files, gallery_dataset, mesa};
+
+use std::path::{Path, PathBuf};
+
+use serde_json::json;
+
+/// The pid of a process that has exited and been reaped.
+fn dead_pid() -> u32 {
+    let mut child = std::process::Command::new("true")
+        .spawn()
+        .expect("spawn true");
+    let pid = child.id();
+    child.wait().expect("wait");
+    pid
+}
+
+fn lock_file(dataset: &Path) -> PathBuf {
+    dataset.join(".mesa/locks/graph.lock")
+}
+
+fn hold_lock(dataset: &Path, pid: u32) {
+    let path = lock_file(dataset);
+    std::fs::create_dir_all(path.parent().expect("parent")).expect("mkdir");
+    std::fs::write(&path, json!({ "pid": pid }).to_string()).expect("write lock");
+}
+
+fn graph(dataset: &Path) -> std::process::Output {
+    mesa()
+        .args(["graph", "--progress", "off"])
+        .arg(dataset)
+        .output()
+        .expect("runs")
+}
+
+/// The scene's graph output, the first of the dataset.
+fn first_graph_json(dataset: &Path) -> PathBuf {
+    let files = all_files(dataset);
+    let rel = files
+        .keys()
+        .find(|k| k.ends_with("graph/graph.json"))
+        .expect("a graph.json");
+    dataset.join(rel)
+}
+
+#[test]
+fn a_lock_of_a_running_process_stops_the_run_with_code_2_naming_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    gallery_dataset(dir.path());
+    // The control: without the lock the run succeeds and leaves no lock behind.
+    let free = graph(dir.path());
+    assert!(
+        free.status.success(),
+        "{}",
+        String::from_utf8_lossy(&free.stderr)
+    );
+    assert!(!dir.path().join(".mesa/locks").exists(), "no lock stays");
+
+    // This test's own process is alive: its pid holds the lock.
+    hold_lock(dir.path(), std::process::id());
+    let held = graph(dir.path());
+    let stderr = String::from_utf8_lossy(&held.stderr);
+    assert_eq!(held.status.code(), Some(2), "{stderr}");
+    for part in [
+        ".mesa/locks/graph.lock",
+        "`mesa graph` is already running on this dataset",
+        &format!("process {}", std::process::id()),
+        "[run] lock = \"wait\"",
+        "delete the lock file",
+    ] {
+        assert!(stderr.contains(part), "{part:?} not in: {stderr}");
+    }
+    assert!(
+        lock_file(dir.path()).exists(),
+        "another run's lock is left alone"
+    );
+}
+
+#[test]
+fn a_lock_of_a_dead_process_is_taken_over_with_a_warning() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    gallery_dataset(dir.path());
+    let dead = dead_pid();
+    hold_lock(dir.path(), dead);
+    let out = graph(dir.path());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    for part in [
+        "warning:",
+        "graph.lock",
+        &format!("process {dead}"),
+        "no longer runs",
+    ] {
+        assert!(stderr.contains(part), "{part:?} not in: {stderr}");
+    }
+    assert!(
+        !dir.path().join(".mesa/locks").exists(),
+        "the lock is released and its folder removed"
+    );
+}
+
+#[test]
+fn only_temporary_files_of_dead_writers_are_swept() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    gallery_dataset(dir.path());
+    let first = graph(dir.path());
+    assert!(first.status.success());
+    let output = first_graph_json(dir.path());
+    let folder = output.parent().expect("folder");
+    let live = folder.join(format!(".graph.json.mesa-tmp-{}-0", std::process::id()));
+    let dead = folder.join(format!(".graph.json.mesa-tmp-{}-0", dead_pid()));
+    std::fs::write(&live, b"another run's half-written file").expect("live");
+    std::fs::write(&dead, b"a killed run's leftover").expect("dead");
+    let out = mesa()
+        .args(["graph", "--progress", "off", "--force"])
+        .arg(dir.path())
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!dead.exists(), "a dead writer's leftover is swept");
+    assert!(live.exists(), "a running writer's file is left alone");
+}
