@@ -157,6 +157,7 @@ impl Resolved {
 
     /// Runs a dataset-level stage: preflight, the work, the summary, the exit code.
     pub fn run_dataset(&self, stage: &dyn DatasetStage) -> anyhow::Result<ExitCode> {
+        stage.preflight(&self.ctx())?;
         run_and_report_dataset(stage, &self.ctx(), &self.options)
     }
 }

@@ -34,11 +34,11 @@ pub fn present_layouts(scene: &Scene) -> Vec<&'static str> {
 }
 
 /// The bytes of a layout file as text, with their SHA-256.
-fn read_text(path: &Path) -> anyhow::Result<(String, String, Vec<u8>)> {
+fn read_text(path: &Path) -> anyhow::Result<(String, String)> {
     let bytes = read_bounded(path, JSON_LIMIT)
         .with_context(|| format!("{}: cannot read", path.display()))?;
     let sha = sha256_hex(&bytes);
-    let text = String::from_utf8(bytes.clone()).map_err(|_| {
+    let text = String::from_utf8(bytes).map_err(|_| {
         anyhow!(
             "{}: not UTF-8 text (expected a layout JSON)",
             path.display()
@@ -47,7 +47,7 @@ fn read_text(path: &Path) -> anyhow::Result<(String, String, Vec<u8>)> {
     if mesa_schemas::json::starts_with_bom(&text) {
         bail!("{}: {}", path.display(), mesa_schemas::json::BOM_PROBLEM);
     }
-    Ok((text, sha, bytes))
+    Ok((text, sha))
 }
 
 fn invalid(path: &Path, problems: &[mesa_schemas::Problem]) -> anyhow::Error {
@@ -64,7 +64,7 @@ fn invalid(path: &Path, problems: &[mesa_schemas::Problem]) -> anyhow::Error {
 
 /// Reads a layout file of any form with the SHA-256 of its bytes.
 pub fn read_layout_file(path: &Path) -> anyhow::Result<(ReadLayout, String)> {
-    let (text, sha, _) = read_text(path)?;
+    let (text, sha) = read_text(path)?;
     let read = read_layout_text(&text).map_err(|problems| invalid(path, &problems))?;
     Ok((read, sha))
 }
@@ -81,10 +81,25 @@ pub fn read_dataset_layout_bytes(
     path: &Path,
     needs_assets_to: &str,
 ) -> anyhow::Result<(DatasetLayout, Vec<u8>)> {
-    let (text, _, bytes) = read_text(path)?;
-    let read = read_layout_text(&text).map_err(|problems| invalid(path, &problems))?;
+    let (text, _) = read_text(path)?;
+    let layout = dataset_layout(path, &text, needs_assets_to)?;
+    Ok((layout, text.into_bytes()))
+}
+
+/// [`read_dataset_layout_bytes`] with the SHA-256 of the bytes instead of the bytes.
+pub fn read_dataset_layout(
+    path: &Path,
+    needs_assets_to: &str,
+) -> anyhow::Result<(DatasetLayout, String)> {
+    let (text, sha) = read_text(path)?;
+    Ok((dataset_layout(path, &text, needs_assets_to)?, sha))
+}
+
+/// The dataset layout of `text` (read from `path`), or why it is none.
+fn dataset_layout(path: &Path, text: &str, needs_assets_to: &str) -> anyhow::Result<DatasetLayout> {
+    let read = read_layout_text(text).map_err(|problems| invalid(path, &problems))?;
     match read.layout {
-        AnyLayout::Dataset(layout) => Ok((layout, bytes)),
+        AnyLayout::Dataset(layout) => Ok(layout),
         AnyLayout::Llm(_) => bail!(
             "{}: an LLM layout has no assets to {needs_assets_to} (no retrieved_uid or \
              scale_factor per object): expected a dataset layout (`mesa place` writes one; \
@@ -94,19 +109,10 @@ pub fn read_dataset_layout_bytes(
     }
 }
 
-/// [`read_dataset_layout_bytes`] with the SHA-256 of the bytes.
-pub fn read_dataset_layout(
-    path: &Path,
-    needs_assets_to: &str,
-) -> anyhow::Result<(DatasetLayout, String)> {
-    let (layout, bytes) = read_dataset_layout_bytes(path, needs_assets_to)?;
-    Ok((layout, sha256_hex(&bytes)))
-}
-
 /// Reads a layout file of any form for the scene graph (`mesa graph`): problems one per line,
 /// each naming the file.
 pub fn read_graph_layout(path: &Path) -> anyhow::Result<LoadedLayout> {
-    let (text, _, _) = read_text(path)?;
+    let (text, _) = read_text(path)?;
     mesa_stages::graph::read_layout_text(&text).map_err(|e| {
         let lines: Vec<String> = e
             .problems

@@ -159,13 +159,13 @@ pub fn run_dataset_stage(
     Ok(report)
 }
 
-/// Runs a dataset-level stage, prints its summary, and gives the exit code.
+/// Runs a dataset-level stage, prints its summary, and gives the exit code (its preflight is
+/// the caller's: `mesa run` checks every stage before the first runs).
 pub fn run_and_report_dataset(
     stage: &dyn DatasetStage,
     ctx: &StageContext<'_>,
     options: &RunOptions,
 ) -> anyhow::Result<std::process::ExitCode> {
-    stage.preflight(ctx)?;
     let report = run_dataset_stage(stage, ctx, options)?;
     eprint!("{}", report.text);
     Ok(crate::exit::code(report.success))
