@@ -443,3 +443,97 @@ fn a_byte_order_mark_is_named_by_every_json_reader() {
         assert!(!text.contains("expected value at line 1"), "{text}");
     }
 }
+
+/// Copies the first demo scene to a sibling folder named `name` (raw bytes on Unix).
+fn copy_scene_as(ws: &Path, scene: &str, name: &std::ffi::OsStr) -> PathBuf {
+    let from = ws.join("scenes").join(scene);
+    let to = from.parent().expect("table").join(name);
+    let status = Command::new("cp")
+        .arg("-r")
+        .arg(&from)
+        .arg(&to)
+        .status()
+        .expect("cp");
+    assert!(status.success());
+    to
+}
+
+#[test]
+fn scene_folders_mesa_cannot_name_fail_alone_and_say_why() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (ws, scenes) = demo(dir.path());
+    let long = "s".repeat(230);
+    let bad = [
+        (
+            std::ffi::OsStr::from_bytes(b"scene_\xff\xfe"),
+            "not valid UTF-8",
+        ),
+        (os(&long), "has 230 bytes (at most 200"),
+        (os("scene\nline"), "control character"),
+    ];
+    for (name, _) in &bad {
+        copy_scene_as(&ws, &scenes[0], name);
+    }
+    copy_scene_as(&ws, &scenes[0], os("..x"));
+
+    let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
+    let stderr = stderr_of(&out);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    for (_, why) in &bad {
+        assert!(stderr.contains(why), "{why}: {stderr}");
+    }
+    assert!(
+        stderr.contains("..x: a hidden folder (its name starts with '.') is not a scene"),
+        "a hidden folder is named, not skipped silently: {stderr}"
+    );
+    assert!(stderr.contains("5 scenes: 2 done"), "{stderr}");
+    assert!(stderr.contains("3 failed"), "{stderr}");
+    // The valid scenes are lifted, and no output is left under the bad folders.
+    for scene in &scenes {
+        assert!(ws
+            .join("scenes")
+            .join(scene)
+            .join("coarse/lift.json")
+            .is_file());
+    }
+    let table = ws.join("scenes").join(&scenes[0]);
+    let table = table.parent().expect("table");
+    for name in bad.iter().map(|(n, _)| n) {
+        assert!(!table.join(name).join("coarse").exists(), "{name:?}");
+    }
+
+    // Control: without the bad folders (the hidden one stays), the run succeeds.
+    for (name, _) in &bad {
+        std::fs::remove_dir_all(table.join(name)).expect("remove");
+    }
+    let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr_of(&out));
+}
+
+#[test]
+fn a_missing_raw_input_says_no_stage_writes_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (ws, scenes) = demo(dir.path());
+    std::fs::remove_file(ws.join("scenes").join(&scenes[0]).join("input/camera.json"))
+        .expect("remove");
+    let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
+    let stderr = stderr_of(&out);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(
+            "input/camera.json: missing input of `mesa lift` (a raw input: no stage writes it"
+        ),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("run the stage that writes it"), "{stderr}");
+
+    // A missing stage output names its stage.
+    let out = run_mesa(&[os("retrieve"), os("--progress"), os("off"), ws.as_os_str()]);
+    let stderr = stderr_of(&out);
+    assert!(
+        stderr
+            .contains("coarse/lift.json: missing input of `mesa retrieve` (run `mesa lift` first)"),
+        "{stderr}"
+    );
+}

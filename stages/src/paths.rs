@@ -124,3 +124,90 @@ pub mod scene {
         format!("{POINTS_DIR}/{instance}.ply")
     }
 }
+
+/// Who writes a file a stage reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Writer {
+    /// The user: a raw input of a scene (`input/`), the asset library or its annotations, the
+    /// configuration. No stage writes it.
+    User,
+    /// The annotator, in Blender (the edited scene GLB).
+    Annotator,
+    /// A stage (its subcommand name).
+    Stage(&'static str),
+}
+
+/// Who writes `rel`: a path relative to the dataset (`scenes/<table_type>/<scene_id>/...` for a
+/// scene file). `None` when mesa does not know the path.
+pub fn writer_of(rel: &str) -> Option<Writer> {
+    let in_scene = rel
+        .strip_prefix(&format!("{}/", dataset::SCENES))
+        .and_then(|rest| rest.splitn(3, '/').nth(2));
+    if let Some(file) = in_scene {
+        let top = file.split('/').next().unwrap_or("");
+        return match top {
+            "input" => Some(Writer::User),
+            "truth" => Some(Writer::Stage("demo")),
+            "coarse" if file == scene::RETRIEVAL => Some(Writer::Stage("retrieve")),
+            "coarse" if file == scene::COARSE_LAYOUT => Some(Writer::Stage("place")),
+            "coarse" => Some(Writer::Stage("lift")),
+            "pack" => Some(Writer::Stage("pack")),
+            "refined" if file.ends_with(".glb") => Some(Writer::Annotator),
+            "refined" => Some(Writer::Stage("ingest")),
+            "qa" => Some(Writer::Stage("check")),
+            "graph" => Some(Writer::Stage("graph")),
+            "render" => Some(Writer::Stage("render")),
+            "tasks" => Some(Writer::Stage("tasks")),
+            _ => None,
+        };
+    }
+    if rel == dataset::CONFIG
+        || rel == dataset::ANNOTATIONS
+        || rel.starts_with(&format!("{}/", dataset::LIBRARY))
+    {
+        return Some(Writer::User);
+    }
+    if rel.starts_with("assets/") {
+        return Some(Writer::Stage("assets"));
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_known_path_has_its_writer() {
+        let s = |f: &str| format!("scenes/office_desk/office_desk_0001/{f}");
+        assert_eq!(writer_of(&s(scene::CAMERA)), Some(Writer::User));
+        assert_eq!(writer_of(&s(scene::LIFT)), Some(Writer::Stage("lift")));
+        assert_eq!(
+            writer_of(&s(&scene::points("mug_0"))),
+            Some(Writer::Stage("lift"))
+        );
+        assert_eq!(
+            writer_of(&s(scene::RETRIEVAL)),
+            Some(Writer::Stage("retrieve"))
+        );
+        assert_eq!(
+            writer_of(&s(scene::COARSE_LAYOUT)),
+            Some(Writer::Stage("place"))
+        );
+        assert_eq!(
+            writer_of(&s(&scene::refined_glb("x"))),
+            Some(Writer::Annotator)
+        );
+        assert_eq!(
+            writer_of(&s(scene::REFINED_LAYOUT)),
+            Some(Writer::Stage("ingest"))
+        );
+        assert_eq!(
+            writer_of(&s(scene::SETTLED_LAYOUT)),
+            Some(Writer::Stage("check"))
+        );
+        assert_eq!(writer_of(dataset::INDEX), Some(Writer::Stage("assets")));
+        assert_eq!(writer_of(&dataset::asset_glb("u")), Some(Writer::User));
+        assert_eq!(writer_of("elsewhere/file"), None);
+    }
+}

@@ -225,8 +225,76 @@ impl RunError {
     }
 }
 
-/// Lists the scenes of a dataset, sorted by table type then scene id.
+/// Lists the scenes of a dataset, sorted by table type then scene id. Folders that cannot be
+/// scenes are left out; [`discover_all`] says which and why.
 pub fn discover_scenes(dataset: &Path) -> Result<Vec<Scene>, RunError> {
+    Ok(discover_all(dataset)?.scenes)
+}
+
+/// The longest scene id or table type, in bytes: a file name holds `<scene_id>.glb` and a
+/// writer's temporary name `.<name>.mesa-tmp-<pid>-<n>`, within the 255 bytes of a file name.
+pub const MAX_SCENE_NAME_BYTES: usize = 200;
+
+/// A folder under `scenes/` that is not taken as a scene.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SkippedFolder {
+    /// `<table_type>/<scene_id>` (lossy when the name is not UTF-8), or `<table_type>`.
+    pub key: String,
+    /// Why, and the fix.
+    pub problem: String,
+    /// A hidden folder (its name starts with '.'): a warning, not a failure.
+    pub hidden: bool,
+}
+
+/// The scenes of a dataset and the folders under `scenes/` that cannot be scenes.
+#[derive(Debug, Clone, Default)]
+pub struct Discovery {
+    /// The scenes, sorted.
+    pub scenes: Vec<Scene>,
+    /// The other folders, sorted by key.
+    pub skipped: Vec<SkippedFolder>,
+}
+
+/// Why a folder name cannot name a table type or a scene, or `None` when it can.
+fn folder_name_problem(name: &std::ffi::OsStr) -> Option<(String, bool)> {
+    let Some(name) = name.to_str() else {
+        return Some((
+            "the folder name is not valid UTF-8 (rename it: scene ids are written into \
+             layouts, records and file names)"
+                .to_owned(),
+            false,
+        ));
+    };
+    if name.starts_with('.') {
+        return Some((
+            "a hidden folder (its name starts with '.') is not a scene (rename it to make it \
+             one)"
+                .to_owned(),
+            true,
+        ));
+    }
+    if name.len() > MAX_SCENE_NAME_BYTES {
+        return Some((
+            format!(
+                "the folder name has {} bytes (at most {MAX_SCENE_NAME_BYTES}: mesa writes files \
+                 named after the scene, and a file name holds 255 bytes; shorten it)",
+                name.len()
+            ),
+            false,
+        ));
+    }
+    if name.chars().any(char::is_control) {
+        return Some((
+            "the folder name holds a control character (a newline, a tab; rename it)".to_owned(),
+            false,
+        ));
+    }
+    None
+}
+
+/// Lists the scenes of a dataset and the folders under `scenes/` that cannot be scenes (a name
+/// that is not UTF-8, too long, with a control character, or hidden). Plain files are ignored.
+pub fn discover_all(dataset: &Path) -> Result<Discovery, RunError> {
     let root = dataset.join(mesa_stages::paths::dataset::SCENES);
     if !root.is_dir() {
         return Err(RunError::NotADataset(dataset.to_owned()));
@@ -235,17 +303,35 @@ pub fn discover_scenes(dataset: &Path) -> Result<Vec<Scene>, RunError> {
         let path = path.to_owned();
         move |source| RunError::Io { path, source }
     };
+    let mut found = Discovery::default();
+    let mut skip = |key: String, (problem, hidden): (String, bool)| {
+        found.skipped.push(SkippedFolder {
+            key,
+            problem,
+            hidden,
+        })
+    };
     let mut scenes = Vec::new();
     for table in std::fs::read_dir(&root).map_err(io(&root))? {
         let table = table.map_err(io(&root))?;
-        let table_name = table.file_name().to_string_lossy().into_owned();
-        if table_name.starts_with('.') || !table.path().is_dir() {
+        if !table.path().is_dir() {
+            continue;
+        }
+        let table_os = table.file_name();
+        let table_name = table_os.to_string_lossy().into_owned();
+        if let Some(problem) = folder_name_problem(&table_os) {
+            skip(table_name, problem);
             continue;
         }
         for scene in std::fs::read_dir(table.path()).map_err(io(&table.path()))? {
             let scene = scene.map_err(io(&table.path()))?;
-            let scene_name = scene.file_name().to_string_lossy().into_owned();
-            if scene_name.starts_with('.') || !scene.path().is_dir() {
+            if !scene.path().is_dir() {
+                continue;
+            }
+            let scene_os = scene.file_name();
+            let scene_name = scene_os.to_string_lossy().into_owned();
+            if let Some(problem) = folder_name_problem(&scene_os) {
+                skip(format!("{table_name}/{scene_name}"), problem);
                 continue;
             }
             scenes.push(Scene {
@@ -256,7 +342,9 @@ pub fn discover_scenes(dataset: &Path) -> Result<Vec<Scene>, RunError> {
         }
     }
     scenes.sort();
-    Ok(scenes)
+    found.scenes = scenes;
+    found.skipped.sort_by(|a, b| a.key.cmp(&b.key));
+    Ok(found)
 }
 
 /// Filters scenes by glob, then keeps this shard's share of the sorted list.

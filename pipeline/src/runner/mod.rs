@@ -29,8 +29,8 @@ pub mod lock;
 mod scene;
 
 pub use self::core::{
-    digest_of, discover_scenes, progress, read_marker, select_scenes, thread_pool, RunError,
-    RunOptions, Scene, Shard, StageContext, RUN_DIR,
+    digest_of, discover_all, discover_scenes, progress, read_marker, select_scenes, thread_pool,
+    RunError, RunOptions, Scene, Shard, SkippedFolder, StageContext, MAX_SCENE_NAME_BYTES, RUN_DIR,
 };
 pub use self::dataset::{run_dataset_stage, DatasetReport, DatasetStage, Executor};
 pub use self::scene::{

@@ -13,7 +13,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::core::{
-    discover_scenes, progress, read_marker, select_scenes, thread_pool, write_run_record, RunError,
+    discover_all, progress, read_marker, select_scenes, thread_pool, write_run_record, RunError,
     RunOptions, Scene, StageContext, RUN_DIR,
 };
 use crate::exit::UsageError;
@@ -201,11 +201,7 @@ fn prepare(
         let shared = !rel.starts_with(&scene_prefix);
         let digest = cache.digest(&path, shared).map_err(|e| {
             if e.kind() == std::io::ErrorKind::NotFound {
-                anyhow::anyhow!(
-                    "{}: missing input of `mesa {}` (run the stage that writes it first)",
-                    path.display(),
-                    stage.name()
-                )
+                missing_input(&path, &rel, stage.name())
             } else {
                 anyhow::anyhow!("{}: cannot read input: {e}", path.display())
             }
@@ -213,6 +209,29 @@ fn prepare(
         inputs.insert(rel, digest);
     }
     Ok(Prepared { inputs, previous })
+}
+
+/// The error for a declared input that does not exist, with who writes it.
+fn missing_input(path: &Path, rel: &str, stage: &str) -> anyhow::Error {
+    use mesa_stages::paths::Writer;
+    let fix = match mesa_stages::paths::writer_of(rel) {
+        Some(Writer::User) => {
+            "a raw input: no stage writes it; put it in place (docs/demo.md, \"The inputs, in every form\", lists the \
+             inputs of a scene)"
+                .to_owned()
+        }
+        Some(Writer::Annotator) => {
+            "the annotator's edited scene: save it from Blender there (`mesa pack` wrote the \
+             original)"
+                .to_owned()
+        }
+        Some(Writer::Stage(writer)) => format!("run `mesa {writer}` first"),
+        None => "run the stage that writes it first".to_owned(),
+    };
+    anyhow::anyhow!(
+        "{}: missing input of `mesa {stage}` ({fix})",
+        path.display()
+    )
 }
 
 /// Why a done marker no longer holds, or `None` when it does.
@@ -452,12 +471,17 @@ pub fn run_stage(
     options: &RunOptions,
 ) -> anyhow::Result<StageSummary> {
     let started = Instant::now();
-    let mut scenes = select_scenes(
-        discover_scenes(ctx.dataset).map_err(RunError::into_anyhow)?,
-        options.scenes.as_deref(),
-        options.shard,
-    )
-    .map_err(RunError::into_anyhow)?;
+    let discovery = discover_all(ctx.dataset).map_err(RunError::into_anyhow)?;
+    let mut scenes = select_scenes(discovery.scenes, options.scenes.as_deref(), options.shard)
+        .map_err(RunError::into_anyhow)?;
+    // Folders that cannot be scenes are reported once, by the first shard of an unfiltered run:
+    // a failure (a name mesa cannot carry), or a warning for a hidden folder.
+    let skipped = if options.shard.index == 0 && options.scenes.is_none() && options.only.is_none()
+    {
+        discovery.skipped
+    } else {
+        Vec::new()
+    };
     if let Some(only) = &options.only {
         scenes.retain(|s| only.contains(&s.key()));
     }
@@ -508,6 +532,15 @@ pub fn run_stage(
             SceneOutcome::Skipped => summary.skipped += 1,
             SceneOutcome::Failed { error } => summary.failed.push((scene.key(), error)),
             SceneOutcome::Waiting { reason } => summary.waiting.push((scene.key(), reason)),
+        }
+    }
+    for folder in skipped {
+        let message = format!("scenes/{}: {}", folder.key, folder.problem);
+        if folder.hidden {
+            summary.warnings.push((folder.key, message));
+        } else {
+            summary.scenes += 1;
+            summary.failed.push((folder.key, vec![message]));
         }
     }
     summary.elapsed_s = started.elapsed().as_secs_f64();

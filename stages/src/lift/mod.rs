@@ -110,6 +110,11 @@ pub struct LiftConfig {
     /// there is no table plane). A plane fitted after a cabinet front was set aside needs
     /// `plane_min_points` inliers instead: a far counter top may be a small share of the rest.
     pub plane_min_inlier_fraction: f64,
+    /// For that share a point counts as on the plane within plane_threshold_m times
+    /// max(1, (depth / plane_share_depth_m)²): depth noise grows with the square of the
+    /// distance (structured light, stereo, time of flight), so a far counter top seen at a
+    /// grazing angle is still recognised as a plane. 0 keeps plane_threshold_m at every depth.
+    pub plane_share_depth_m: f64,
     /// Fewest table (or background) points with valid depth to fit a plane on.
     pub plane_min_points: u32,
     /// The table is the plane with at least this fraction of the objects' points on its camera
@@ -140,6 +145,7 @@ impl Default for LiftConfig {
             plane_iterations: 400,
             plane_max_points: 20_000,
             plane_min_inlier_fraction: 0.3,
+            plane_share_depth_m: 1.5,
             plane_min_points: 500,
             plane_min_objects_above: 0.8,
             zone_percentile: 1.0,
@@ -780,19 +786,26 @@ pub fn fit_plane(
             .collect();
         let fraction = residuals.len() as f64 / remaining.len() as f64;
         // The first plane must explain a share of the support's points (is there a plane at
-        // all?). A later one is what is left once a cabinet front is set aside: a far counter
-        // top seen at a grazing angle may be a small share of it, so it needs enough points,
-        // and objects standing on it, rather than a share.
-        if attempt == 0 && fraction < config.plane_min_inlier_fraction {
-            return Err(LiftError::NoPlane(format!(
-                "the best plane explains {:.0}% of {} {source} points within {} mm \
-                 (expected at least {:.0}%: check the depth scale, or mark the table with \
-                 \"support\": true)",
-                fraction * 100.0,
-                remaining.len(),
-                threshold * 1000.0,
-                config.plane_min_inlier_fraction * 100.0
-            )));
+        // all?), counted with a tolerance that grows with the depth as the sensor's noise does.
+        // A later one is what is left once a cabinet front is set aside: a far counter top seen
+        // at a grazing angle may be a small share of it, so it needs enough points, and objects
+        // standing on it, rather than a share.
+        if attempt == 0 {
+            let share = share_near_plane(&remaining, &n, d, config);
+            if share < config.plane_min_inlier_fraction {
+                return Err(LiftError::NoPlane(format!(
+                    "the best plane explains {:.0}% of {} {source} points within {} mm and \
+                     {:.0}% within the depth-scaled tolerance (plane_share_depth_m = {}; \
+                     expected at least {:.0}%: check the depth scale, or mark the table with \
+                     \"support\": true)",
+                    fraction * 100.0,
+                    remaining.len(),
+                    threshold * 1000.0,
+                    share * 100.0,
+                    config.plane_share_depth_m,
+                    config.plane_min_inlier_fraction * 100.0
+                )));
+            }
         }
         if residuals.len() < (config.plane_min_points as usize).max(3) {
             rejected.push(format!(
@@ -839,6 +852,27 @@ pub fn fit_plane(
         rejected.join("; "),
         config.plane_min_objects_above * 100.0
     )))
+}
+
+/// The share of `points` within the depth-scaled tolerance of the plane n·p + d = 0:
+/// `plane_threshold_m · max(1, (depth / plane_share_depth_m)²)`.
+fn share_near_plane(points: &[Vector3<f64>], n: &Vector3<f64>, d: f64, config: &LiftConfig) -> f64 {
+    if points.is_empty() {
+        return 0.0;
+    }
+    let threshold = config.plane_threshold_m;
+    let near = points
+        .iter()
+        .filter(|p| {
+            let scale = if config.plane_share_depth_m > 0.0 {
+                (p.z.abs() / config.plane_share_depth_m).powi(2).max(1.0)
+            } else {
+                1.0
+            };
+            (n.dot(p) + d).abs() < threshold * scale
+        })
+        .count();
+    near as f64 / points.len() as f64
 }
 
 /// One RANSAC plane with two least-squares refinements, oriented toward the camera.
@@ -1056,6 +1090,54 @@ mod tests {
         assert!(plane.normal.dot(&n) > 0.9999, "{:?}", plane.normal);
         assert!((plane.offset_m - d).abs() < 1e-3);
         assert!(plane.inlier_fraction > 0.7);
+    }
+
+    /// A counter top 3.5-6 m away under a structured-light sensor's noise (σ = 1.2 mm +
+    /// 1.9 mm/m · (d - 0.4)², as the demo's sensor): fewer than 30% of its points lie within the
+    /// 5 mm inlier distance, yet it is a plane. The depth-scaled share finds it; with the share
+    /// counted at a fixed 5 mm (`plane_share_depth_m = 0`) it is refused with both shares.
+    #[test]
+    fn a_far_counter_top_under_depth_noise_is_a_plane() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let n = Vector3::new(0.0, -0.68, -0.73).normalize();
+        let d = 1.9;
+        let mut points = Vec::new();
+        while points.len() < 6000 {
+            let ray: Vector3<f64> = Vector3::new(
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.6..-0.27),
+                1.0,
+            );
+            let p = ray * (-d / n.dot(&ray));
+            let sigma = 0.0012 + 0.0019 * (p.z - 0.4).powi(2);
+            // Box-Muller.
+            let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random_range(0.0..1.0));
+            let noise = sigma * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+            points.push(p * ((p.z + noise) / p.z));
+        }
+        let config = LiftConfig::default();
+        let plane = fit_plane(&points, &[], "s", 0, &config, "support").expect("plane");
+        assert!(plane.normal.dot(&n) > 0.999, "{:?}", plane.normal);
+        assert!(
+            plane.inlier_fraction < config.plane_min_inlier_fraction,
+            "the fixed 5 mm share is {}: the scene is not hard enough",
+            plane.inlier_fraction
+        );
+        let fixed = LiftConfig {
+            plane_share_depth_m: 0.0,
+            ..LiftConfig::default()
+        };
+        match fit_plane(&points, &[], "s", 0, &fixed, "support") {
+            Err(LiftError::NoPlane(message)) => {
+                assert!(message.contains("within 5 mm and"), "{message}");
+                assert!(
+                    message.contains("within the depth-scaled tolerance"),
+                    "{message}"
+                );
+                assert!(message.contains("expected at least 30%"), "{message}");
+            }
+            other => panic!("expected no plane at a fixed tolerance, got {other:?}"),
+        }
     }
 
     /// A long counter seen from afar: its mask covers the cabinet front (the largest plane) and
