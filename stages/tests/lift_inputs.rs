@@ -572,3 +572,113 @@ fn a_scene_whose_every_object_is_dropped_fails_naming_the_setting() {
         ],
     );
 }
+
+/// A PNG of only a header (IHDR, an empty IDAT, IEND) claiming `width`×`height` 16-bit gray
+/// pixels: a 77-byte file a decoder would allocate gigabytes for.
+fn png_header_only(width: u32, height: u32) -> Vec<u8> {
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for b in bytes {
+            crc ^= u32::from(*b);
+            for _ in 0..8 {
+                crc = if crc & 1 == 1 {
+                    (crc >> 1) ^ 0xEDB8_8320
+                } else {
+                    crc >> 1
+                };
+            }
+        }
+        !crc
+    }
+    fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
+        out.extend((data.len() as u32).to_be_bytes());
+        let mut body = kind.to_vec();
+        body.extend(data);
+        out.extend(&body);
+        out.extend(crc32(&body).to_be_bytes());
+    }
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = width.to_be_bytes().to_vec();
+    ihdr.extend(height.to_be_bytes());
+    ihdr.extend([16, 0, 0, 0, 0]);
+    chunk(&mut out, b"IHDR", &ihdr);
+    // An empty zlib stream: decoders read up to the first IDAT for the header.
+    chunk(
+        &mut out,
+        b"IDAT",
+        &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01],
+    );
+    chunk(&mut out, b"IEND", &[]);
+    out
+}
+
+#[test]
+fn an_oversized_png_is_refused_on_its_header() {
+    // The depth map: over max_image_pixels, named with the key and the fix.
+    let scene = Scene::new();
+    std::fs::write(scene.path("depth.png"), png_header_only(100_000, 100_000)).expect("write");
+    let message = scene.error();
+    assert_mentions(
+        &message,
+        &[
+            "depth.png",
+            "is 100000×100000 = 10000000000 pixels, more than [lift] max_image_pixels = 100000000",
+            "downscale the image",
+        ],
+    );
+    assert!(!message.contains("Memory limit"), "{message}");
+
+    // A mask: its size is compared with the depth map's before it is decoded.
+    let scene = Scene::new();
+    std::fs::write(scene.path("masks.png"), png_header_only(100_000, 100_000)).expect("write");
+    assert_mentions(
+        &scene.error(),
+        &["masks.png", "is 100000×100000 but the depth map is 96×72"],
+    );
+
+    // Control: the same header with the depth map's size passes the size check and fails
+    // only in decoding (it has no pixels); and the intact scene fails once the limit is set
+    // just below its own size.
+    let scene = Scene::new();
+    std::fs::write(scene.path("masks.png"), png_header_only(W, H)).expect("write");
+    assert_mentions(&scene.error(), &["masks.png", "cannot decode the image"]);
+    let scene = Scene::new();
+    scene.lift().expect("the intact scene lifts");
+    let tight = LiftConfig {
+        plane_min_points: 100,
+        min_points: 5,
+        max_image_pixels: u64::from(W * H) - 1,
+        ..LiftConfig::default()
+    };
+    match scene.lift_with(&tight) {
+        Err(e) => assert_mentions(
+            &e.to_string(),
+            &["more than [lift] max_image_pixels = 6911"],
+        ),
+        Ok(_) => panic!("a depth map above the limit must fail"),
+    }
+}
+
+#[test]
+fn an_rle_mask_of_another_size_is_refused_before_its_runs_are_read() {
+    let scene = Scene::new();
+    std::fs::remove_file(scene.path("masks.png")).expect("rm");
+    // Counts that do not decode: the size is what the message is about.
+    let instances = |size: [u32; 2]| {
+        json!({"instances": [{"id": 1, "label": "box",
+            "rle": {"size": size, "counts": ["not", "numbers"]}}]})
+    };
+    scene.json("instances.json", &instances([10_000, 10_000]));
+    assert_mentions(
+        &scene.error(),
+        &[
+            "instances.json",
+            "is 10000×10000 but the depth map is 96×72",
+        ],
+    );
+    // Control: at the depth map's size the counts are read, and refused.
+    scene.json("instances.json", &instances([H, W]));
+    let message = scene.error();
+    assert_mentions(&message, &["instances[0].rle"]);
+    assert!(!message.contains("but the depth map is"), "{message}");
+}

@@ -12,7 +12,7 @@ use anyhow::{anyhow, bail, Context as _};
 use mesa_schemas::annotation::PackIndexArtifact;
 use mesa_schemas::artifacts::{AssetIndexArtifact, LiftArtifact};
 use mesa_schemas::layout::DatasetLayout;
-use mesa_stages::lift::inputs::{read_instances, read_masks, read_png};
+use mesa_stages::lift::inputs::{read_instances, read_masks, read_png, PngLimit};
 use mesa_stages::pack::snapshot::Photo;
 use mesa_stages::pack::{pack_scene, AssetSource, PackRequest};
 
@@ -178,7 +178,11 @@ impl SceneStage for PackStage {
         let photo = if photo_path.is_file() {
             let png = std::fs::read(&photo_path)
                 .with_context(|| format!("{}: cannot read", photo_path.display()))?;
-            let image = read_png(&photo_path)?.into_rgb8();
+            let image = read_png(
+                &photo_path,
+                PngLimit::MaxPixels(ctx.config.lift.max_image_pixels),
+            )?
+            .into_rgb8();
             let (width, height) = (image.width() as usize, image.height() as usize);
             Some((
                 png,

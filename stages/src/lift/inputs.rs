@@ -79,12 +79,52 @@ fn image_error(path: &Path, e: impl std::fmt::Display) -> LiftError {
     )
 }
 
-/// Opens a PNG fully (a truncated or corrupt file is an error naming it).
-pub fn read_png(path: &Path) -> Result<DynamicImage, LiftError> {
-    let reader = ImageReader::open(path)
-        .map_err(|e| LiftError::input(path, "$", format!("cannot open: {e}"), "check the path"))?
-        .with_guessed_format()
+/// What a PNG may be, checked on its header before any pixel is decoded.
+#[derive(Debug, Clone, Copy)]
+pub enum PngLimit {
+    /// At most this many pixels (`[lift] max_image_pixels`).
+    MaxPixels(u64),
+    /// Exactly this width and height (a mask or photo of the depth map's size).
+    Size(usize, usize),
+}
+
+/// Opens a PNG fully (a truncated or corrupt file is an error naming it). Its size is read from
+/// the header and checked against `limit` first, so a header claiming a huge image is refused
+/// before anything is allocated; the decoder may then allocate what that size needs.
+pub fn read_png(path: &Path, limit: PngLimit) -> Result<DynamicImage, LiftError> {
+    let open = || {
+        ImageReader::open(path)
+            .map_err(|e| {
+                LiftError::input(path, "$", format!("cannot open: {e}"), "check the path")
+            })?
+            .with_guessed_format()
+            .map_err(|e| image_error(path, e))
+    };
+    let (w, h) = open()?
+        .into_dimensions()
         .map_err(|e| image_error(path, e))?;
+    match limit {
+        PngLimit::MaxPixels(max) if u64::from(w) * u64::from(h) > max => {
+            return Err(LiftError::input(
+                path,
+                "size",
+                format!(
+                    "is {w}×{h} = {} pixels, more than [lift] max_image_pixels = {max}",
+                    u64::from(w) * u64::from(h)
+                ),
+                "downscale the image (and the other inputs of the scene with it), or raise \
+                 max_image_pixels in mesa.toml",
+            ));
+        }
+        PngLimit::Size(width, height) => check_size(path, w as usize, h as usize, width, height)?,
+        PngLimit::MaxPixels(_) => {}
+    }
+    let mut reader = open()?;
+    let mut limits = image::Limits::default();
+    // 16-bit RGBA is 8 bytes a pixel; the decoder's own default (512 MiB) would refuse an
+    // image the check above allowed, with a message about memory.
+    limits.max_alloc = Some((u64::from(w) * u64::from(h)).saturating_mul(8) + (1 << 20));
+    reader.limits(limits);
     reader.decode().map_err(|e| image_error(path, e))
 }
 
@@ -117,7 +157,7 @@ pub fn read_depth(
             ))
         }
         (true, false) => {
-            let image = read_png(&png)?;
+            let image = read_png(&png, PngLimit::MaxPixels(config.max_image_pixels))?;
             let DynamicImage::ImageLuma16(buffer) = image else {
                 return Err(LiftError::input(
                     &png,
@@ -537,7 +577,7 @@ pub fn read_masks(
     let source;
     if label.exists() {
         source = label.display().to_string();
-        let image = read_png(&label)?;
+        let image = read_png(&label, PngLimit::Size(width, height))?;
         check_size(
             &label,
             image.width() as usize,
@@ -602,7 +642,7 @@ pub fn read_masks(
                     "add it to instances.json or remove the file",
                 ));
             }
-            let image = read_png(&file)?;
+            let image = read_png(&file, PngLimit::Size(width, height))?;
             check_size(
                 &file,
                 image.width() as usize,
@@ -631,15 +671,18 @@ pub fn read_masks(
                     "an RLE mask for every instance",
                 ));
             };
-            let mask = super::rle::decode(rle).map_err(|e| {
+            let rle_error = |e: super::rle::RleError| {
                 LiftError::input(
                     &instances_path,
                     &format!("instances[{i}].rle"),
                     e.to_string(),
                     "COCO RLE: {\"size\": [h, w], \"counts\": [...] or \"...\"}",
                 )
-            })?;
-            check_size(&instances_path, mask.width, mask.height, width, height)?;
+            };
+            // The size first: a mask of another size is refused before its runs are decoded.
+            let (h, w) = super::rle::size(rle).map_err(rle_error)?;
+            check_size(&instances_path, w, h, width, height)?;
+            let mask = super::rle::decode(rle).map_err(rle_error)?;
             pixels.insert(entry.id, mask.pixels);
         }
     } else {
@@ -724,7 +767,7 @@ pub fn read_photo(
     if !path.exists() {
         return Ok(None);
     }
-    let image = read_png(&path)?;
+    let image = read_png(&path, PngLimit::Size(width, height))?;
     check_size(
         &path,
         image.width() as usize,

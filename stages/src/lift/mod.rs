@@ -125,6 +125,9 @@ pub struct LiftConfig {
     pub zone_percentile: f64,
     /// Fewest points an instance may keep after filtering.
     pub min_points: u32,
+    /// The most pixels an input image (depth map, photo) may have; its header is checked
+    /// before it is decoded.
+    pub max_image_pixels: u64,
 }
 
 impl Default for LiftConfig {
@@ -150,6 +153,7 @@ impl Default for LiftConfig {
             plane_min_objects_above: 0.8,
             zone_percentile: 1.0,
             min_points: 10,
+            max_image_pixels: 100_000_000,
         }
     }
 }

@@ -83,8 +83,9 @@ pub enum RleError {
     NegativeRun(i64),
 }
 
-/// Decodes a COCO RLE object.
-pub fn decode(value: &Value) -> Result<RleMask, RleError> {
+/// The `[height, width]` of a COCO RLE object, checked against the pixel limit, without
+/// reading its counts.
+pub fn size(value: &Value) -> Result<(usize, usize), RleError> {
     let size = value
         .get("size")
         .and_then(Value::as_array)
@@ -96,7 +97,12 @@ pub fn decode(value: &Value) -> Result<RleMask, RleError> {
     if height.checked_mul(width).is_none_or(|n| n > MAX_PIXELS) {
         return Err(RleError::SizeTooLarge { height, width });
     }
-    let (height, width) = (height as usize, width as usize);
+    Ok((height as usize, width as usize))
+}
+
+/// Decodes a COCO RLE object.
+pub fn decode(value: &Value) -> Result<RleMask, RleError> {
+    let (height, width) = size(value)?;
     let counts: Vec<u64> = match value.get("counts") {
         Some(Value::Array(list)) => list
             .iter()
