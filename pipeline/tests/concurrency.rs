@@ -130,3 +130,52 @@ fn only_temporary_files_of_dead_writers_are_swept() {
     assert!(!dead.exists(), "a dead writer's leftover is swept");
     assert!(live.exists(), "a running writer's file is left alone");
 }
+
+#[test]
+fn with_lock_wait_a_second_run_waits_for_the_holder_then_runs() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    gallery_dataset(dir.path());
+    std::fs::write(dir.path().join("mesa.toml"), "[run]\nlock = \"wait\"\n").expect("config");
+    // A live process (not this test's: it must be able to go away) holds the lock.
+    let mut holder = std::process::Command::new("sleep")
+        .arg("60")
+        .spawn()
+        .expect("spawn sleep");
+    hold_lock(dir.path(), holder.id());
+
+    let mut waiting = std::process::Command::new(assert_cmd::cargo::cargo_bin("mesa"))
+        .args(["graph", "--progress", "off"])
+        .arg(dir.path())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn mesa");
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    // It waits: still running, and nothing written yet.
+    assert!(
+        waiting.try_wait().expect("poll").is_none(),
+        "with lock = \"wait\" the run must wait for the holder"
+    );
+    assert!(
+        !all_files(dir.path())
+            .keys()
+            .any(|k| k.ends_with("graph/graph.json")),
+        "nothing is written while the lock is held"
+    );
+
+    // The holder ends (killed: its lock stays behind, as after a crash) and the run goes on.
+    holder.kill().expect("kill");
+    holder.wait().expect("reap");
+    let out = waiting.wait_with_output().expect("wait");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    for part in [
+        "graph: waiting for",
+        ".mesa/locks/graph.lock",
+        "to be released",
+        "no longer runs",
+    ] {
+        assert!(stderr.contains(part), "{part:?} not in: {stderr}");
+    }
+    assert!(first_graph_json(dir.path()).is_file());
+    assert!(!lock_file(dir.path()).exists(), "its own lock is released");
+}
