@@ -456,13 +456,21 @@ fn a_truncated_or_corrupt_image() {
 /// The synthetic scene with a third instance: 9 scattered table pixels, a mask too
 /// thin and broken to keep [lift] min_points = 10 points (isolated pixels: filtering keeps none).
 fn scene_with_a_thin_mask() -> Scene {
+    scene_with_a_pen_mask(false)
+}
+
+/// The scene with a pen on the table: nine single pixels along a row (`solid` false: too few
+/// points survive filtering), or a solid 36×8 block over the same pixels (`solid` true).
+fn scene_with_a_pen_mask(solid: bool) -> Scene {
     let scene = Scene::new();
     let (_, mut labels) = render();
-    let row = H - 3;
-    for u in (4..40).step_by(4) {
-        let i = (row * W + u) as usize;
-        assert_eq!(labels[i], 0, "the thin mask lies on the table");
-        labels[i] = 3;
+    let (rows, step) = if solid { (H - 10..H - 2, 1) } else { (H - 3..H - 2, 4) };
+    for row in rows {
+        for u in (4..40).step_by(step) {
+            let i = (row * W + u) as usize;
+            assert_eq!(labels[i], 0, "the pen's mask lies on the table");
+            labels[i] = 3;
+        }
     }
     GrayImage::from_raw(W, H, labels)
         .expect("labels")
@@ -523,12 +531,18 @@ fn an_object_with_too_few_points_is_dropped_with_a_warning_and_the_scene_goes_on
             "lower [lift] min_points",
         ],
     );
-    // The control (the scene as before, without the thin mask) keeps both boxes and drops
-    // nothing. (Lowering min_points cannot keep this mask: filtering leaves it no point.)
+    // The controls: the scene without the thin mask keeps both boxes and drops nothing, and a
+    // solid mask of the pen over the same pixels keeps enough points to be lifted (so it is
+    // the thinness that drops it, not the place or the label).
     let out = Scene::new().lift_with(&config).expect("the scene lifts");
     assert_eq!(names(&out), ["box_0", "box_1"]);
     assert!(out.artifact.dropped.is_empty());
     assert!(!out.warnings.iter().any(|w| w.contains("dropped")));
+    let out = scene_with_a_pen_mask(true)
+        .lift_with(&config)
+        .expect("the scene lifts");
+    assert_eq!(names(&out), ["box_0", "box_1", "pen_0"]);
+    assert!(out.artifact.dropped.is_empty(), "{:?}", out.artifact.dropped);
 }
 
 #[test]
