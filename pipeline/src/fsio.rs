@@ -226,6 +226,21 @@ pub const CONFIG_LIMIT: SizeLimit = SizeLimit {
     name: "CONFIG_LIMIT",
 };
 
+/// An image read whole (a render, a photo: 256 MiB; a 100-megapixel 16-bit RGBA PNG is
+/// under 800 MiB raw, but mesa's own renders are a few hundred KiB).
+pub const IMAGE_LIMIT: SizeLimit = SizeLimit {
+    bytes: 256 << 20,
+    what: "an image",
+    name: "IMAGE_LIMIT",
+};
+
+/// An asset GLB read whole to be drawn (2 GiB).
+pub const GLB_LIMIT: SizeLimit = SizeLimit {
+    bytes: 2 << 30,
+    what: "a GLB file",
+    name: "GLB_LIMIT",
+};
+
 /// What kind of non-regular file `meta` describes, for messages.
 fn special_kind(meta: &fs::Metadata) -> &'static str {
     let kind = meta.file_type();
@@ -315,6 +330,16 @@ pub fn read_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
         ));
     }
     Ok(bytes)
+}
+
+/// [`read_bounded`] as UTF-8 text (`InvalidData` when it is not).
+pub fn read_text_bounded(path: &Path, limit: SizeLimit) -> io::Result<String> {
+    String::from_utf8(read_bounded(path, limit)?).map_err(|_| {
+        io::Error::new(
+            io::ErrorKind::InvalidData,
+            "not UTF-8 text (expected a JSON or text file)",
+        )
+    })
 }
 
 /// SHA-256 of a file's content, streamed. Only a regular file of at most

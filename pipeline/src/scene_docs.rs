@@ -12,6 +12,7 @@ use mesa_stages::paths::scene::{
     pack_glb, refined_glb, COARSE_LAYOUT, GRAPH_JSON, GRAPH_TXT, LAYOUT_CANDIDATES,
 };
 
+use crate::fsio::{read_text_bounded, JSON_LIMIT};
 use crate::layouts::{chosen_layout, read_layout_file};
 use crate::runner::Scene;
 
@@ -127,7 +128,7 @@ pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
     }
 
     let graph_path = scene.path(GRAPH_JSON);
-    let graph_text = std::fs::read_to_string(&graph_path).with_context(|| {
+    let graph_text = read_text_bounded(&graph_path, JSON_LIMIT).with_context(|| {
         format!(
             "{}: cannot read (run `mesa graph` first)",
             graph_path.display()
@@ -151,7 +152,7 @@ pub fn read_scene_docs(scene: &Scene) -> anyhow::Result<SceneDocs> {
         );
     }
     let txt_path = scene.path(GRAPH_TXT);
-    let graph_lines: Vec<String> = std::fs::read_to_string(&txt_path)
+    let graph_lines: Vec<String> = read_text_bounded(&txt_path, JSON_LIMIT)
         .with_context(|| {
             format!(
                 "{}: cannot read (run `mesa graph` first)",

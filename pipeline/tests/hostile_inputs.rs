@@ -537,3 +537,47 @@ fn a_missing_raw_input_says_no_stage_writes_it() {
         "{stderr}"
     );
 }
+
+#[test]
+fn fifos_among_the_files_report_and_release_read_never_hang_them() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (ws, scenes) = demo(dir.path());
+    let scene = ws.join("scenes").join(&scenes[0]);
+    for rel in [
+        "graph/graph.json",
+        "qa/check.json",
+        "render/front.png",
+        "render/front_camera.json",
+        "tasks/tasks.jsonl",
+    ] {
+        std::fs::create_dir_all(scene.join(rel).parent().expect("parent")).expect("mkdir");
+        mkfifo(&scene.join(rel));
+    }
+    // A layout to release: the demo's truth, as if ingested.
+    std::fs::create_dir_all(scene.join("refined")).expect("mkdir");
+    std::fs::copy(
+        scene.join("truth/layout.json"),
+        scene.join("refined/layout.json"),
+    )
+    .expect("copy");
+    // Under the deadline of run_mesa: a read of any FIFO would block forever.
+    let out = run_mesa(&[os("report"), ws.as_os_str(), os("-q")]);
+    assert!(!stderr_of(&out).contains("panicked"), "{}", stderr_of(&out));
+    assert!(
+        ws.join("report/index.html").is_file(),
+        "{}",
+        stderr_of(&out)
+    );
+    let out = run_mesa(&[
+        os("release"),
+        ws.as_os_str(),
+        dir.path().join("release").as_os_str(),
+        os("-q"),
+    ]);
+    let stderr = stderr_of(&out);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        stderr.contains("front_camera.json") && stderr.contains("not a regular file (a FIFO)"),
+        "{stderr}"
+    );
+}

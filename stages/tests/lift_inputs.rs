@@ -464,7 +464,11 @@ fn scene_with_a_thin_mask() -> Scene {
 fn scene_with_a_pen_mask(solid: bool) -> Scene {
     let scene = Scene::new();
     let (_, mut labels) = render();
-    let (rows, step) = if solid { (H - 10..H - 2, 1) } else { (H - 3..H - 2, 4) };
+    let (rows, step) = if solid {
+        (H - 10..H - 2, 1)
+    } else {
+        (H - 3..H - 2, 4)
+    };
     for row in rows {
         for u in (4..40).step_by(step) {
             let i = (row * W + u) as usize;
@@ -542,7 +546,11 @@ fn an_object_with_too_few_points_is_dropped_with_a_warning_and_the_scene_goes_on
         .lift_with(&config)
         .expect("the scene lifts");
     assert_eq!(names(&out), ["box_0", "box_1", "pen_0"]);
-    assert!(out.artifact.dropped.is_empty(), "{:?}", out.artifact.dropped);
+    assert!(
+        out.artifact.dropped.is_empty(),
+        "{:?}",
+        out.artifact.dropped
+    );
 }
 
 #[test]

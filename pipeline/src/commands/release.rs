@@ -32,7 +32,9 @@ use super::render::{no_layout, present_layouts};
 use crate::cli::{DatasetArgs, Global, LayoutArg};
 use crate::config::Config;
 use crate::exit::UsageError;
-use crate::fsio::{sweep_tmp_for, write_atomic};
+use crate::fsio::{
+    read_bounded, read_text_bounded, sweep_tmp_for, write_atomic, IMAGE_LIMIT, JSON_LIMIT,
+};
 use crate::layouts::read_dataset_layout;
 use crate::runner::{
     discover_scenes, select_scenes, DatasetReport, DatasetStage, Executor, RunError, Scene, Shard,
@@ -185,15 +187,20 @@ fn release_scene(config: &Config, scene: &Scene, out: &Path) -> anyhow::Result<B
     let bytes = release_layout(&layout).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let camera_path = scene.path(&format!("{RENDER_DIR}/front_camera.json"));
     let png_path = scene.path(&format!("{RENDER_DIR}/front.png"));
-    let camera: RenderCameraArtifact = std::fs::read_to_string(&camera_path)
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok())
-        .ok_or_else(|| {
-            anyhow!(
-                "{}: no front view (run `mesa render` first)",
-                camera_path.display()
-            )
-        })?;
+    let camera_text = match read_text_bounded(&camera_path, JSON_LIMIT) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
+            "{}: no front view (run `mesa render` first)",
+            camera_path.display()
+        ),
+        Err(e) => bail!("{}: cannot read: {e}", camera_path.display()),
+    };
+    let camera: RenderCameraArtifact = serde_json::from_str(&camera_text).map_err(|e| {
+        anyhow!(
+            "{}: not a render camera file: {e} (run `mesa render --force` to draw it again)",
+            camera_path.display()
+        )
+    })?;
     if camera.layout_sha256.as_deref() != Some(sha.as_str()) {
         bail!(
             "{}: drawn from {} as it was before, not from the released {rel} (run `mesa render` \
@@ -207,7 +214,7 @@ fn release_scene(config: &Config, scene: &Scene, out: &Path) -> anyhow::Result<B
             }
         );
     }
-    let png = std::fs::read(&png_path).with_context(|| {
+    let png = read_bounded(&png_path, IMAGE_LIMIT).with_context(|| {
         format!(
             "{}: cannot read (run `mesa render` first)",
             png_path.display()
@@ -243,7 +250,7 @@ pub fn write_release(
     )
     .map_err(RunError::into_anyhow)?;
     let annotations_path = dataset.join(ANNOTATIONS);
-    let annotations = std::fs::read_to_string(&annotations_path)
+    let annotations = read_text_bounded(&annotations_path, JSON_LIMIT)
         .map_err(|e| {
             UsageError(format!(
                 "{}: {e} (a release needs the asset annotations)",

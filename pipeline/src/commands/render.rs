@@ -32,7 +32,10 @@ use crate::cli::{Global, LayoutArg, SceneArgs};
 use crate::config::Config;
 use crate::dataset_cache::DatasetCache;
 use crate::exit::UsageError;
-use crate::fsio::{read_json, sha256_hex, sweep_tmp_for, write_atomic};
+use crate::fsio::{
+    read_bounded, read_json, read_text_bounded, sha256_hex, sweep_tmp_for, write_atomic, GLB_LIMIT,
+    JSON_LIMIT,
+};
 use crate::layouts::read_dataset_layout;
 use crate::progress::Tick;
 use crate::runner::{
@@ -250,7 +253,8 @@ impl RenderStage {
             usize::try_from(config.asset_cache_mb.saturating_mul(1 << 20)).unwrap_or(usize::MAX);
         self.cache.get(uid, budget, || {
             let path = dataset.join(asset_glb(uid));
-            let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+            let bytes =
+                read_bounded(&path, GLB_LIMIT).map_err(|e| format!("{}: {e}", path.display()))?;
             if sha256_hex(&bytes) != record.glb_sha256 {
                 return Err(format!(
                     "{} changed since it was indexed (run `mesa assets` again)",
@@ -523,7 +527,7 @@ fn render_one_asset(
         views: names.clone(),
     };
     if !force {
-        let current = std::fs::read_to_string(&manifest_path)
+        let current = read_text_bounded(&manifest_path, JSON_LIMIT)
             .ok()
             .and_then(|t| serde_json::from_str::<AssetViewsRecord>(&t).ok());
         let complete = names.iter().all(|n| {

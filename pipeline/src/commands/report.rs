@@ -33,7 +33,10 @@ use serde::Serialize;
 use serde_json::Value;
 
 use crate::cli::{DatasetArgs, Global};
-use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic};
+use crate::fsio::{
+    read_bounded, read_text_bounded, sha256_hex, sweep_tmp_for, write_atomic, IMAGE_LIMIT,
+    JSON_LIMIT, RECORDS_LIMIT,
+};
 use crate::layouts::chosen_layout;
 use crate::runner::{
     discover_scenes, read_marker, DatasetReport, DatasetStage, Executor, RunError, Scene,
@@ -132,7 +135,7 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
             label: "layout".into(),
             path: scene.rel(rel),
         });
-        match std::fs::read(scene.path(rel)) {
+        match read_bounded(&scene.path(rel), JSON_LIMIT) {
             Ok(bytes) => {
                 layout_sha = Some(sha256_hex(&bytes));
                 let text = String::from_utf8_lossy(&bytes);
@@ -168,7 +171,7 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
             Err(e) => facts.failed.push(("layout".into(), format!("{rel}: {e}"))),
         }
     }
-    if let Ok(text) = std::fs::read_to_string(scene.path(GRAPH_JSON)) {
+    if let Ok(text) = read_text_bounded(&scene.path(GRAPH_JSON), JSON_LIMIT) {
         if let Ok(graph) = serde_json::from_str::<GraphArtifact>(&text) {
             facts.has_graph = true;
             let nodes = graph.nodes.len() as u64;
@@ -185,7 +188,7 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
             }
         }
     }
-    if let Ok(text) = std::fs::read_to_string(scene.path(CHECK)) {
+    if let Ok(text) = read_text_bounded(&scene.path(CHECK), JSON_LIMIT) {
         match check_facts(&text) {
             Some((before, after, tried)) => {
                 facts.check_before = Some(before);
@@ -205,9 +208,10 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
             facts.rendered.push(view.name().to_owned());
         }
     }
-    if let Ok(text) =
-        std::fs::read_to_string(scene.path(&format!("{RENDER_DIR}/front_camera.json")))
-    {
+    if let Ok(text) = read_text_bounded(
+        &scene.path(&format!("{RENDER_DIR}/front_camera.json")),
+        JSON_LIMIT,
+    ) {
         if let Ok(camera) = serde_json::from_str::<RenderCameraArtifact>(&text) {
             facts.hidden_in_front = camera
                 .visible_px
@@ -219,7 +223,7 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
                 || camera.layout_sha256 != layout_sha;
         }
     }
-    if let Ok(png) = std::fs::read(scene.path(&format!("{RENDER_DIR}/front.png"))) {
+    if let Ok(png) = read_bounded(&scene.path(&format!("{RENDER_DIR}/front.png")), IMAGE_LIMIT) {
         match thumbnail(&png) {
             Ok(bytes) => {
                 facts.thumbnail = Some(format!(
@@ -234,7 +238,7 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
             )),
         }
     }
-    if let Ok(text) = std::fs::read_to_string(scene.path(TASKS)) {
+    if let Ok(text) = read_text_bounded(&scene.path(TASKS), RECORDS_LIMIT) {
         facts.tasks = text.lines().filter(|l| !l.trim().is_empty()).count() as u64;
     }
     for stage in stages {
