@@ -125,6 +125,45 @@ fn two_interpenetrating_boxes_collide_by_their_overlap() {
 }
 
 #[test]
+fn a_thin_object_buried_inside_another_collides_by_the_way_out() {
+    // A 1.7 mm phone inside a 6 cm thick towel stack, its middle 27 mm below the top: thinner
+    // than the tolerance along z, yet 27 mm deep (the way out is up, through the top).
+    let towel = cuboid([0.3, 0.2, 0.06]);
+    let phone = cuboid([0.15, 0.07, 0.0017]);
+    let (_, f) = check(&[
+        at("towel_0", &towel, [0.5, 0.3, 0.03]),
+        at("phone_0", &phone, [0.5, 0.3, 0.06 - 0.027]),
+    ]);
+    assert_eq!(f.collisions.len(), 1, "{:?}", f.collisions);
+    let depth = f.collisions[0].depth_m;
+    // The least way out: up by 27 mm + half the phone (0.85 mm).
+    assert_abs_diff_eq!(depth, 0.027 + 0.00085, epsilon = 1e-4);
+    // Control: the phone lying on the towel is no collision.
+    let (_, f) = check(&[
+        at("towel_0", &towel, [0.5, 0.3, 0.03]),
+        at("phone_0", &phone, [0.5, 0.3, 0.06 + 0.00085]),
+    ]);
+    assert!(f.collisions.is_empty(), "{:?}", f.collisions);
+}
+
+#[test]
+fn the_depth_of_parts_whose_boxes_nest_is_measured_not_pruned() {
+    // Part boxes that nest along x (a 1 mm slab across a 10 cm cube): the overlap length along
+    // x (1 mm) is under the tolerance, the way out is not.
+    let cube = cuboid([0.1, 0.1, 0.1]);
+    let slab = cuboid([0.001, 0.06, 0.06]);
+    let contact = pair_contact_deeper_than(
+        &Body::new(cube.place(&at("a", &cube, [0.3, 0.3, 0.05]).pose)).expect("body"),
+        &Body::new(slab.place(&at("b", &slab, [0.3, 0.3, 0.05]).pose)).expect("body"),
+        0.0,
+        0.002,
+    )
+    .expect("contact");
+    // Centred: the way out is 5 cm + 0.5 mm along x, or 5 cm + 3 cm along y and z.
+    assert_abs_diff_eq!(contact.depth_m, 0.0505, epsilon = 1e-4);
+}
+
+#[test]
 fn touching_boxes_do_not_collide() {
     let cube = cuboid([0.1, 0.1, 0.1]);
     for gap in [0.0, 0.0005, -0.001] {
