@@ -314,9 +314,24 @@ fn coarse_layouts_are_checked_and_settled() {
         dpo.len()
     );
 
-    // Settling off again: the settled layouts go, the reports stay.
-    ok(&["check", "--layout", "coarse", "--progress", "off"], &dir);
+    // Settling off again: the settled layouts go, each named in a warning (the later stages
+    // read them), the reports stay.
+    let settled = scenes
+        .iter()
+        .filter(|s| s.join("qa/layout.json").is_file())
+        .count();
+    assert!(settled > 0);
+    let stderr = ok(&["check", "--layout", "coarse", "--progress", "off"], &dir);
     assert!(scenes.iter().all(|s| !s.join("qa/layout.json").exists()));
+    assert!(stderr.contains(&format!("{settled} warnings")), "{stderr}");
+    assert!(
+        stderr.contains("qa/layout.json, which the last run wrote and this one does not"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("the later stages now read refined/layout.json"),
+        "{stderr}"
+    );
 }
 
 #[test]

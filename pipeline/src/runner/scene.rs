@@ -379,7 +379,11 @@ pub fn process_scene(
         }
     };
     match write_outputs(ctx, scene, &output, prepared.previous.as_ref()) {
-        Ok(outputs) => {
+        Ok((outputs, removed)) => {
+            let mut output = output;
+            for rel in removed {
+                output.warn(removed_warning(&rel));
+            }
             base.status = MarkerStatus::Done;
             base.outputs = outputs;
             base.warnings = output.warnings.clone();
@@ -410,7 +414,7 @@ fn write_outputs(
     scene: &Scene,
     output: &SceneOutput,
     previous: Option<&RunMarker>,
-) -> anyhow::Result<BTreeMap<String, String>> {
+) -> anyhow::Result<(BTreeMap<String, String>, Vec<String>)> {
     let mut written = BTreeMap::new();
     for (rel, bytes) in &output.files {
         check_output_path(rel)?;
@@ -419,15 +423,42 @@ fn write_outputs(
         write_atomic(&path, bytes).with_context(|| format!("{}: cannot write", path.display()))?;
         written.insert(scene.rel(rel), sha256_hex(bytes));
     }
-    // Outputs of an earlier run that this run no longer writes would be stale.
+    // Outputs of an earlier run that this run no longer writes would be stale: removed, and
+    // each named in a warning (a later stage may have read it).
+    let mut removed = Vec::new();
     if let Some(previous) = previous {
         for rel in previous.outputs.keys() {
             if !written.contains_key(rel) {
-                let _ = std::fs::remove_file(ctx.dataset.join(rel));
+                match std::fs::remove_file(ctx.dataset.join(rel)) {
+                    Ok(()) => removed.push(rel.clone()),
+                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                    Err(e) => {
+                        return Err(e).with_context(|| {
+                            format!(
+                                "{}: cannot remove this stale output of the last run",
+                                ctx.dataset.join(rel).display()
+                            )
+                        })
+                    }
+                }
             }
         }
     }
-    Ok(written)
+    Ok((written, removed))
+}
+
+/// The warning for an output of the last run that this run removed.
+fn removed_warning(rel: &str) -> String {
+    let settled = format!("/{}", mesa_stages::paths::scene::SETTLED_LAYOUT);
+    let hint = if rel.ends_with(&settled) {
+        ": the later stages now read refined/layout.json (`mesa check --settle` settles the \
+         scene again)"
+    } else {
+        ""
+    };
+    format!(
+        "removed {rel}, which the last run wrote and this one does not (it would be stale){hint}"
+    )
 }
 
 fn fail(
