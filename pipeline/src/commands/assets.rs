@@ -499,3 +499,31 @@ pub fn format_summary(summary: &AssetsSummary) -> String {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_default_budget_leaves_the_assets_digest_as_it_was() {
+        // The digest of the default [assets] section before [assets.budget] existed: indexes
+        // written then stay valid, and `mesa assets` on the demo gives the same bytes.
+        let config = AssetsConfig::default();
+        assert_eq!(
+            assets_config_digest(&config),
+            "1d6314fc44f0c11e6c16a526f518565fba41ca48a8eac0ce87ea6277db961b43"
+        );
+        let tighter = AssetsConfig {
+            budget: AssetBudget {
+                triangles: 1000,
+                ..AssetBudget::default()
+            },
+            ..AssetsConfig::default()
+        };
+        assert_eq!(assets_config_digest(&tighter), digest_of(&tighter));
+        assert_ne!(
+            assets_config_digest(&tighter),
+            assets_config_digest(&config)
+        );
+    }
+}

@@ -52,6 +52,27 @@ impl Default for AssetBudget {
     }
 }
 
+impl AssetBudget {
+    /// Values that parse but cannot work, each naming its key.
+    pub fn problems(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if !(self.seconds >= 0.0 && self.seconds.is_finite()) {
+            out.push(format!(
+                "[assets.budget] seconds = {}: expected a finite number of seconds >= 0",
+                self.seconds
+            ));
+        }
+        if self.simplified_triangles < 8 {
+            out.push(format!(
+                "[assets.budget] simplified_triangles = {}: expected at least 8 (a decimated \
+                 mesh needs a few triangles)",
+                self.simplified_triangles
+            ));
+        }
+        out
+    }
+}
+
 /// What indexing a GLB will cost, from its JSON alone.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct GlbCost {
