@@ -163,6 +163,7 @@ impl Config {
             .chain(config.ingest.problems())
             .chain(config.check.problems())
             .chain(config.render.problems())
+            .chain(config.assets.budget.problems())
             .collect();
         if !problems.is_empty() {
             return Err(format!("{} ", problems.join("; ")));
@@ -278,6 +279,25 @@ mod tests {
         assert!(err.contains("[check.settling] max_rounds is 0"), "{err}");
         let err = Config::from_toml("[check]\nlayout = \"truth\"\n").expect_err("bad");
         assert!(err.contains("layout"), "{err}");
+    }
+
+    #[test]
+    fn asset_budget_keys_are_documented_and_checked() {
+        let text = annotated_toml(&Config::default()).expect("toml");
+        assert!(text.contains("[assets.budget]\n"), "{text}");
+        for key in [
+            "triangles = 200000",
+            "instances = 100",
+            "max_triangles = 50000000",
+            "simplified_triangles = 20000",
+            "seconds = 20.0",
+        ] {
+            assert!(text.contains(&format!("\n{key}\n")), "{key}");
+        }
+        let config = Config::from_toml("[assets.budget]\ntriangles = 5\n").expect("valid");
+        assert_eq!(config.assets.budget.triangles, 5);
+        let err = Config::from_toml("[assets.budget]\nseconds = -1\n").expect_err("bad");
+        assert!(err.contains("[assets.budget] seconds = -1"), "{err}");
     }
 
     #[test]

@@ -427,6 +427,33 @@ pub struct Decomposition {
     /// V-HACD: maximum concavity of a part.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub concavity: Option<f64>,
+    /// Adaptive: true when the time budget (`[assets.budget] seconds`) stopped the cutting
+    /// with some part still beyond `tolerance_m` (`max_deviation_m` says how far; the parts
+    /// then depend on the machine's speed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub out_of_time: Option<bool>,
+    /// Set when the asset was over its cost budget (`[assets.budget]`): the parts were made
+    /// from a decimated copy of the mesh, and how far they reach outside the original.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simplified: Option<Simplification>,
+}
+
+/// How an asset over its cost budget was simplified for its collision shape.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Simplification {
+    /// `vertex_clustering`: the vertices in each cell of a uniform grid merged into their mean.
+    pub method: String,
+    /// The grid's cell size, metres.
+    pub cell_m: f64,
+    /// Triangles of the original mesh (placed).
+    pub triangles: u64,
+    /// Triangles of the decimated mesh the parts were made from.
+    pub simplified_triangles: u64,
+    /// How far the parts reach outside the original mesh, metres: sampled on the parts'
+    /// faces, an upper bound by at most one cell of the measuring grid (1/128 of the asset's
+    /// longest side) where they meet the surface.
+    pub reach_m: f64,
 }
 
 /// `assets/index/text.json`: the asset texts and their features for the built-in lexical

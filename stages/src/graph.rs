@@ -38,6 +38,16 @@
 //! order" is the order of `objects` in the layout file. Geometry is computed in `f64` relative
 //! to the subject's centre, so that translating a whole scene together with its zone changes
 //! no decision.
+//!
+//! ## Cost
+//!
+//! The rules are stated over all pairs, but `in` and `above` need the two footprints to
+//! overlap and a horizontal pair needs the object among the subject's 5 nearest: a uniform grid
+//! over the footprints' boxes ([`BoxGrid`]) and one over the centres ([`CentreGrid`], searched
+//! ring by ring outward) test only pairs that can be related, so a table-like layout of n
+//! objects costs about n log n. The all-pairs versions are kept as the test oracle (a property
+//! test checks the output is identical). `are equally spaced along` (off by default) is about
+//! triples: its output alone can grow with n², and its search stays quadratic in n.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -1159,6 +1169,25 @@ pub fn extract_graph(
     containers: &[bool],
     options: &GraphOptions,
 ) -> Result<SceneGraph, GraphError> {
+    extract(scene, containers, options, PairSearch::Grid)
+}
+
+/// How the pairs that may be related are found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PairSearch {
+    /// Grids over footprints and centres: only pairs that can be related are tested.
+    Grid,
+    /// Every pair, as the rules state them: the test oracle.
+    #[cfg(test)]
+    AllPairs,
+}
+
+fn extract(
+    scene: &GraphScene,
+    containers: &[bool],
+    options: &GraphOptions,
+    search: PairSearch,
+) -> Result<SceneGraph, GraphError> {
     scene.check()?;
     if containers.len() != scene.objects.len() {
         return Err(GraphError::ContainerFlags {
@@ -1189,7 +1218,15 @@ pub fn extract_graph(
         .collect();
 
     let mut edges = Vec::new();
-    let container_of = containment(&solids, containers);
+    let boxes = BoxGrid::new(&solids);
+    let near = |s: usize| -> Vec<usize> {
+        match search {
+            PairSearch::Grid => boxes.overlapping(&solids, s),
+            #[cfg(test)]
+            PairSearch::AllPairs => (0..solids.len()).collect(),
+        }
+    };
+    let container_of = containment(&solids, containers, &near);
     for (s, found) in container_of.iter().enumerate() {
         if let Some((c, evidence)) = found {
             edges.push(Edge {
@@ -1204,8 +1241,10 @@ pub fn extract_graph(
     let free: Vec<usize> = (0..solids.len())
         .filter(|&i| container_of[i].is_none())
         .collect();
+    let is_free: Vec<bool> = container_of.iter().map(Option::is_none).collect();
     for &s in &free {
-        if let Some((o, evidence)) = support_of(s, &solids, &free) {
+        let near: Vec<usize> = near(s).into_iter().filter(|&o| is_free[o]).collect();
+        if let Some((o, evidence)) = support_of(s, &solids, &near) {
             edges.push(Edge {
                 subject: names[s].to_owned(),
                 relation: Relation::Above,
@@ -1215,7 +1254,12 @@ pub fn extract_graph(
         }
     }
     let max_distance_cm = NEIGHBOUR_MAX_DISTANCE_SHARE * width.max(depth);
-    for (s, o, relation, evidence) in horizontal_pairs(&solids, &free, max_distance_cm) {
+    let pairs = match search {
+        PairSearch::Grid => nearest_pairs(&solids, &free, max_distance_cm),
+        #[cfg(test)]
+        PairSearch::AllPairs => horizontal_pairs(&solids, &free, max_distance_cm),
+    };
+    for (s, o, relation, evidence) in pairs {
         edges.push(Edge {
             subject: names[s].to_owned(),
             relation,
@@ -1269,11 +1313,18 @@ fn containment_evidence(
 /// the other's container (two identical cups stacked), which would write the pair twice. Then
 /// only the upper one (higher centre; on equal centres the later in layout order) is in the
 /// lower one. This also rules out longer cycles, so containment is a forest.
-fn containment(solids: &[Solid], containers: &[bool]) -> Vec<Option<(usize, Evidence)>> {
+///
+/// `candidates(s)` lists, in layout order, every object that may contain `s` (a superset of
+/// those whose footprint overlaps it; all objects for the oracle).
+fn containment(
+    solids: &[Solid],
+    containers: &[bool],
+    candidates: &dyn Fn(usize) -> Vec<usize>,
+) -> Vec<Option<(usize, Evidence)>> {
     (0..solids.len())
         .map(|s| {
             let mut best: Option<(usize, Evidence)> = None;
-            for c in 0..solids.len() {
+            for c in candidates(s) {
                 let Some(evidence) = containment_evidence(s, c, solids, containers) else {
                     continue;
                 };
@@ -1292,7 +1343,8 @@ fn containment(solids: &[Solid], containers: &[bool]) -> Vec<Option<(usize, Evid
 }
 
 /// What `s` is above, if anything: of the qualifying objects, the one with the highest top
-/// (ties: earlier in layout order).
+/// (ties: earlier in layout order). `free` is in layout order and holds at least every free
+/// object whose footprint overlaps that of `s`.
 fn support_of(s: usize, solids: &[Solid], free: &[usize]) -> Option<(usize, Evidence)> {
     let ss = &solids[s];
     let mut best: Option<(usize, Evidence)> = None;
@@ -1319,7 +1371,9 @@ fn support_of(s: usize, solids: &[Solid], free: &[usize]) -> Option<(usize, Evid
 }
 
 /// The horizontal pairs ("keep closest pairs, remove duals"), grouped by subject in layout
-/// order, each group in the order its pairs were chosen.
+/// order, each group in the order its pairs were chosen: each subject ranks every other
+/// object. The test oracle of [`nearest_pairs`].
+#[cfg(test)]
 fn horizontal_pairs(
     solids: &[Solid],
     free: &[usize],
@@ -1370,6 +1424,269 @@ fn horizontal_pairs(
         }
     }
     blocks.into_iter().flatten().collect()
+}
+
+/// [`horizontal_pairs`] without ranking every object: each subject's neighbours are searched
+/// ring by ring outward in a grid of the centres until the 5 nearest within the distance limit
+/// are certain (no unseen centre can come before them), or the rings pass the limit.
+fn nearest_pairs(
+    solids: &[Solid],
+    free: &[usize],
+    max_distance_cm: f64,
+) -> Vec<(usize, usize, Relation, Evidence)> {
+    let n = solids.len();
+    let raised: Vec<bool> = solids.iter().map(|s| s.z_min > RAISED_Z_MIN_CM).collect();
+    let visit = free
+        .iter()
+        .filter(|&&i| !raised[i])
+        .chain(free.iter().filter(|&&i| raised[i]));
+    let grid = CentreGrid::new(solids, free);
+    let mut emitted: std::collections::HashSet<(usize, usize)> = std::collections::HashSet::new();
+    let mut blocks: Vec<Vec<(usize, usize, Relation, Evidence)>> = vec![Vec::new(); n];
+    let mut found: Vec<(f64, usize)> = Vec::new();
+    for &s in visit {
+        let ss = &solids[s];
+        found.clear();
+        let (cx, cy) = grid.cell_of(ss.x, ss.y);
+        for ring in 0.. {
+            grid.ring(cx, cy, ring, |cell| {
+                for &o in cell {
+                    let o = o as usize;
+                    if o == s || distance_3d(ss, &solids[o]) > max_distance_cm {
+                        continue;
+                    }
+                    let (dx, dy) = (ss.x - solids[o].x, ss.y - solids[o].y);
+                    found.push((dx * dx + dy * dy, o));
+                }
+            });
+            // Ties on distance go to layout order, as in the oracle's stable sort.
+            found.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            // Every centre not yet seen is at least this far (one ring of margin for the
+            // subject's own place in its cell, and a hair for rounding).
+            let unseen_cm = ring as f64 * grid.cell_cm * (1.0 - 1e-9);
+            let certain = found.len() >= NEIGHBOURS_PER_SUBJECT
+                && found[NEIGHBOURS_PER_SUBJECT - 1].0.sqrt() < unseen_cm;
+            if certain || unseen_cm > max_distance_cm || ring + 1 >= grid.rings() {
+                break;
+            }
+        }
+        for (rank, &(d2_squared, o)) in found.iter().take(NEIGHBOURS_PER_SUBJECT).enumerate() {
+            if (raised[s] && !raised[o]) || !emitted.insert((s.min(o), s.max(o))) {
+                continue;
+            }
+            let (dx_cm, dy_cm) = (ss.x - solids[o].x, ss.y - solids[o].y);
+            blocks[s].push((
+                s,
+                o,
+                Relation::horizontal(dx_cm, dy_cm),
+                Evidence::Proximity {
+                    dx_cm,
+                    dy_cm,
+                    distance_2d_cm: d2_squared.sqrt(),
+                    distance_3d_cm: distance_3d(ss, &solids[o]),
+                    max_distance_cm,
+                    rank: rank + 1,
+                },
+            ));
+        }
+    }
+    blocks.into_iter().flatten().collect()
+}
+
+/// The bounds of a set of 2-D boxes and a uniform grid over them of about `cells_per_item`
+/// cells per item, no cell smaller than `min_cell_cm`.
+fn grid_shape(
+    lo: [f64; 2],
+    hi: [f64; 2],
+    items: usize,
+    cells_per_item: f64,
+    min_cell_cm: f64,
+) -> (f64, [usize; 2]) {
+    let extent = [(hi[0] - lo[0]).max(0.0), (hi[1] - lo[1]).max(0.0)];
+    let wanted = (items as f64 * cells_per_item).max(1.0);
+    let mut cell = (extent[0] * extent[1] / wanted).sqrt().max(min_cell_cm);
+    // A long thin spread: cells as wide as the spread is thin would be too many.
+    cell = cell.max(extent[0].max(extent[1]) / wanted);
+    if !(cell.is_finite() && cell > 0.0) {
+        cell = 1.0;
+    }
+    let dims = extent.map(|e| ((e / cell).floor() as usize + 1).min(1 << 20));
+    (cell, dims)
+}
+
+/// A uniform grid over the footprints' axis-aligned boxes: the objects whose boxes overlap a
+/// given one share a cell with it.
+struct BoxGrid {
+    lo: [f64; 2],
+    cell_cm: f64,
+    dims: [usize; 2],
+    cells: Vec<Vec<u32>>,
+}
+
+impl BoxGrid {
+    /// The box of an object, a hair larger, so that rounding never loses an overlap.
+    fn bounds(solid: &Solid) -> ([f64; 2], [f64; 2]) {
+        let [hx, hy] = solid.footprint.half_extent_cm;
+        let pad = |c: f64, h: f64| h + 1e-9 * (c.abs() + h) + 1e-12;
+        let (px, py) = (pad(solid.x, hx), pad(solid.y, hy));
+        ([solid.x - px, solid.y - py], [solid.x + px, solid.y + py])
+    }
+
+    fn new(solids: &[Solid]) -> Self {
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        let mut side_sum = 0.0;
+        for solid in solids {
+            let (a, b) = Self::bounds(solid);
+            for k in 0..2 {
+                lo[k] = lo[k].min(a[k]);
+                hi[k] = hi[k].max(b[k]);
+                side_sum += b[k] - a[k];
+            }
+        }
+        if solids.is_empty() {
+            lo = [0.0; 2];
+            hi = [0.0; 2];
+        }
+        // Cells about as large as a typical box: each box in a few cells.
+        let mean_side = side_sum / (2 * solids.len()).max(1) as f64;
+        let (cell_cm, dims) = grid_shape(lo, hi, solids.len(), 4.0, mean_side);
+        let mut grid = Self {
+            lo,
+            cell_cm,
+            dims,
+            cells: vec![Vec::new(); dims[0] * dims[1]],
+        };
+        for (i, solid) in solids.iter().enumerate() {
+            let ([x0, y0], [x1, y1]) = grid.cell_range(solid);
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    grid.cells[y * dims[0] + x].push(i as u32);
+                }
+            }
+        }
+        grid
+    }
+
+    fn index(&self, v: f64, axis: usize) -> usize {
+        let i = ((v - self.lo[axis]) / self.cell_cm).floor();
+        if i.is_nan() || i < 0.0 {
+            0
+        } else {
+            (i as usize).min(self.dims[axis] - 1)
+        }
+    }
+
+    fn cell_range(&self, solid: &Solid) -> ([usize; 2], [usize; 2]) {
+        let (a, b) = Self::bounds(solid);
+        (
+            [self.index(a[0], 0), self.index(a[1], 1)],
+            [self.index(b[0], 0), self.index(b[1], 1)],
+        )
+    }
+
+    /// The objects (other than `s`) whose boxes overlap that of `s`, in layout order.
+    fn overlapping(&self, solids: &[Solid], s: usize) -> Vec<usize> {
+        let ([x0, y0], [x1, y1]) = self.cell_range(&solids[s]);
+        let (a, b) = Self::bounds(&solids[s]);
+        let mut out: Vec<usize> = Vec::new();
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                for &o in &self.cells[y * self.dims[0] + x] {
+                    let o = o as usize;
+                    if o == s {
+                        continue;
+                    }
+                    let (c, d) = Self::bounds(&solids[o]);
+                    if a[0] <= d[0] && c[0] <= b[0] && a[1] <= d[1] && c[1] <= b[1] {
+                        out.push(o);
+                    }
+                }
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
+}
+
+/// A uniform grid over the centres of the free objects, about two to a cell.
+struct CentreGrid {
+    lo: [f64; 2],
+    cell_cm: f64,
+    dims: [usize; 2],
+    cells: Vec<Vec<u32>>,
+}
+
+impl CentreGrid {
+    fn new(solids: &[Solid], free: &[usize]) -> Self {
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for &i in free {
+            let p = [solids[i].x, solids[i].y];
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        if free.is_empty() {
+            lo = [0.0; 2];
+            hi = [0.0; 2];
+        }
+        let spread = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let (cell_cm, dims) = grid_shape(lo, hi, free.len(), 0.5, spread * 1e-9);
+        let mut grid = Self {
+            lo,
+            cell_cm,
+            dims,
+            cells: vec![Vec::new(); dims[0] * dims[1]],
+        };
+        for &i in free {
+            let (x, y) = grid.cell_of(solids[i].x, solids[i].y);
+            grid.cells[y * dims[0] + x].push(i as u32);
+        }
+        grid
+    }
+
+    fn cell_of(&self, x: f64, y: f64) -> (usize, usize) {
+        let index = |v: f64, axis: usize| {
+            let i = ((v - self.lo[axis]) / self.cell_cm).floor();
+            if i.is_nan() || i < 0.0 {
+                0
+            } else {
+                (i as usize).min(self.dims[axis] - 1)
+            }
+        };
+        (index(x, 0), index(y, 1))
+    }
+
+    /// Rings 0 to this minus one from any cell cover every cell.
+    fn rings(&self) -> usize {
+        self.dims[0].max(self.dims[1])
+    }
+
+    /// Calls `f` with each cell at Chebyshev distance `ring` from `(cx, cy)`.
+    fn ring(&self, cx: usize, cy: usize, ring: usize, mut f: impl FnMut(&[u32])) {
+        let [w, h] = self.dims.map(|d| d as i64);
+        let (cx, cy, r) = (cx as i64, cy as i64, ring as i64);
+        let mut visit = |x: i64, y: i64| {
+            if (0..w).contains(&x) && (0..h).contains(&y) {
+                f(&self.cells[(y * w + x) as usize]);
+            }
+        };
+        if r == 0 {
+            visit(cx, cy);
+            return;
+        }
+        for x in (cx - r).max(-1)..=(cx + r).min(w) {
+            visit(x, cy - r);
+            visit(x, cy + r);
+        }
+        for y in (cy - r + 1).max(-1)..=(cy + r - 1).min(h) {
+            visit(cx - r, y);
+            visit(cx + r, y);
+        }
+    }
 }
 
 fn distance_3d(a: &Solid, b: &Solid) -> f64 {
@@ -2291,6 +2608,58 @@ mod tests {
     }
 
     #[test]
+    fn a_large_random_layout_gives_the_all_pairs_output() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(20);
+        let count = 3000;
+        // A table-like density: 15 objects per 120 × 70 cm, a fifth stacked on another one.
+        let scale = (count as f64 / 15.0).sqrt();
+        let (width, depth) = (120.0 * scale, 70.0 * scale);
+        let mut objects: Vec<SceneObject> = Vec::with_capacity(count);
+        for i in 0..count {
+            let size = [
+                rng.random_range(3.0..40.0),
+                rng.random_range(3.0..40.0),
+                rng.random_range(1.0..30.0),
+            ];
+            let yaw = if rng.random_bool(0.3) {
+                rng.random_range(-180.0..180.0)
+            } else {
+                0.0
+            };
+            let mut position = [
+                rng.random_range(0.0..width),
+                rng.random_range(0.0..depth),
+                size[2] / 2.0,
+            ];
+            if i > 0 && rng.random_bool(0.2) {
+                let base = &objects[rng.random_range(0..i)];
+                position = [
+                    base.position_cm[0] + rng.random_range(-3.0..3.0),
+                    base.position_cm[1] + rng.random_range(-3.0..3.0),
+                    base.position_cm[2] + rng.random_range(0.0..base.size_cm[2]),
+                ];
+            }
+            let category = CATEGORIES[rng.random_range(0..CATEGORIES.len())];
+            objects.push(SceneObject::new(
+                format!("{category}_{i}"),
+                position,
+                size,
+                yaw,
+            ));
+        }
+        let s = scene([0.0, width, 0.0, depth], objects);
+        let options = GraphOptions::default();
+        let flags = keyword_containers(&s, &options);
+        let fast = extract(&s, &flags, &options, PairSearch::Grid).expect("valid");
+        let oracle = extract(&s, &flags, &options, PairSearch::AllPairs).expect("valid");
+        assert!(fast.edges.len() > count, "{}", fast.edges.len());
+        assert!(fast.edges.iter().any(|e| e.relation == Relation::In));
+        assert!(fast.edges.iter().any(|e| e.relation == Relation::Above));
+        assert_eq!(fast, oracle);
+    }
+
+    #[test]
     fn equally_spaced_along_y_skips_contained_objects() {
         let s = scene(
             [0.0, 100.0, 0.0, 100.0],
@@ -2489,14 +2858,36 @@ mod tests {
     /// third of the objects, a place on or in an earlier object (to exercise `in` and
     /// `above`).
     fn arb_scene() -> impl Strategy<Value = GraphScene> {
+        arb_scene_of(14, [400, 240], [100.0, 60.0])
+    }
+
+    /// Larger layouts for the grid-versus-oracle test: many objects, spread over a zone or
+    /// crowded into a corner (ties of distance), the zone as large as the spread or smaller
+    /// (the distance limit then cuts).
+    fn arb_large_scene() -> impl Strategy<Value = GraphScene> {
+        prop_oneof![
+            arb_scene_of(160, [4000, 2400], [1000.0, 600.0]),
+            arb_scene_of(160, [4000, 2400], [100.0, 60.0]),
+            arb_scene_of(160, [40, 24], [100.0, 60.0]),
+            arb_scene_of(60, [400, 8], [100.0, 60.0]),
+        ]
+    }
+
+    /// Up to `max_objects` objects, centres on a quarter-centimetre lattice of `span`
+    /// quarters, in a zone of `zone` cm.
+    fn arb_scene_of(
+        max_objects: usize,
+        span: [i32; 2],
+        zone: [f64; 2],
+    ) -> impl Strategy<Value = GraphScene> {
         let object = (
             0usize..CATEGORIES.len(),
-            (0i32..=400, 0i32..=240, 0i32..=20),
+            (0i32..=span[0], 0i32..=span[1], 0i32..=20),
             prop::array::uniform3(1i32..=120),
             prop_oneof![Just(0.0), Just(90.0), Just(45.0), -180.0f64..180.0],
             prop_oneof![2 => Just(None), 1 => (any::<prop::sample::Index>(), -8i32..=8, -8i32..=8, 0i32..=16).prop_map(Some)],
         );
-        prop::collection::vec(object, 0..14).prop_map(|objects| {
+        prop::collection::vec(object, 0..max_objects).prop_map(move |objects| {
             let mut out: Vec<SceneObject> = Vec::with_capacity(objects.len());
             for (i, (category, (x, y, lift), size, yaw, stack)) in objects.into_iter().enumerate() {
                 let size = size.map(|s| f64::from(s) / 4.0);
@@ -2523,7 +2914,7 @@ mod tests {
                 fb.total_cmp(&fa).then_with(|| a.instance.cmp(&b.instance))
             });
             GraphScene {
-                zone_cm: [0.0, 100.0, 0.0, 60.0],
+                zone_cm: [0.0, zone[0], 0.0, zone[1]],
                 objects: out,
             }
         })
@@ -2539,6 +2930,18 @@ mod tests {
 
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(512))]
+
+        #[test]
+        fn the_grid_search_gives_the_all_pairs_output(
+            s in arb_large_scene(),
+            equally_spaced in any::<bool>(),
+        ) {
+            let options = GraphOptions::default().with_equally_spaced(equally_spaced);
+            let flags = keyword_containers(&s, &options);
+            let fast = extract(&s, &flags, &options, PairSearch::Grid).expect("valid");
+            let oracle = extract(&s, &flags, &options, PairSearch::AllPairs).expect("valid");
+            prop_assert_eq!(fast, oracle);
+        }
 
         #[test]
         fn translating_scene_and_zone_changes_nothing(

@@ -24,7 +24,8 @@ use clap::Args as ClapArgs;
 use mesa_schemas::artifacts::{AssetIndexArtifact, AssetRecord, ShapesRef, ASSET_INDEX_SCHEMA};
 use mesa_schemas::json::{parse_lenient, to_sorted_pretty};
 use mesa_stages::annotations::Annotations;
-use mesa_stages::assets::{build_text_index, index_asset, INDEX_VERSION};
+use mesa_stages::assets::budget::AssetBudget;
+use mesa_stages::assets::{build_text_index, index_asset, AssetsConfig, INDEX_VERSION};
 use mesa_stages::paths::dataset::{
     asset_glb, shapes as shapes_rel, ANNOTATIONS, INDEX, LIBRARY, SHAPES_DIR, TEXT_INDEX,
 };
@@ -325,7 +326,7 @@ pub fn index_library(
     };
     let raw = raw_annotations(&annotations_path)?;
     let previous = if force { None } else { read_previous(dataset) };
-    let config_digest = digest_of(&config.assets);
+    let config_digest = assets_config_digest(&config.assets);
     let outcomes: Vec<anyhow::Result<Outcome>> = exec.map("assets", &uids, |uid| {
         index_one(
             dataset,
@@ -398,6 +399,23 @@ fn write_json<T: Serialize>(dataset: &Path, rel: &str, value: &T) -> anyhow::Res
     let bytes = to_sorted_pretty(value).with_context(|| format!("serialising {rel}"))?;
     sweep_tmp_for(&path).with_context(|| format!("{}: sweeping", path.display()))?;
     write_atomic(&path, &bytes).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// The digest of the `[assets]` settings. `[assets.budget]` joined the section after indexes
+/// were written: at its defaults it is left out (the JSON ends `,"budget":{..}}`, the last
+/// field), so that those indexes, whose assets were all within it unless they stalled, stay
+/// valid and a default run gives the bytes it gave before. Any other budget changes the digest.
+pub fn assets_config_digest(assets: &AssetsConfig) -> String {
+    if assets.budget != AssetBudget::default() {
+        return digest_of(assets);
+    }
+    let full = serde_json::to_vec(assets).unwrap_or_default();
+    let budget = serde_json::to_vec(&assets.budget).unwrap_or_default();
+    let tail = [b",\"budget\":".as_slice(), &budget, b"}"].concat();
+    match full.strip_suffix(tail.as_slice()) {
+        Some(head) => sha256_hex(&[head, b"}"].concat()),
+        None => digest_of(assets),
+    }
 }
 
 /// Removes shapes files of assets that are gone or no longer have shapes.
@@ -480,4 +498,32 @@ pub fn format_summary(summary: &AssetsSummary) -> String {
         );
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_default_budget_leaves_the_assets_digest_as_it_was() {
+        // The digest of the default [assets] section before [assets.budget] existed: indexes
+        // written then stay valid, and `mesa assets` on the demo gives the same bytes.
+        let config = AssetsConfig::default();
+        assert_eq!(
+            assets_config_digest(&config),
+            "1d6314fc44f0c11e6c16a526f518565fba41ca48a8eac0ce87ea6277db961b43"
+        );
+        let tighter = AssetsConfig {
+            budget: AssetBudget {
+                triangles: 1000,
+                ..AssetBudget::default()
+            },
+            ..AssetsConfig::default()
+        };
+        assert_eq!(assets_config_digest(&tighter), digest_of(&tighter));
+        assert_ne!(
+            assets_config_digest(&tighter),
+            assets_config_digest(&config)
+        );
+    }
 }

@@ -17,9 +17,13 @@
 //!    its content, and each half is treated the same way (breadth first, so that a part budget
 //!    runs out evenly); otherwise it is a part.
 //!
-//! Every step is deterministic: the same mesh gives the same parts.
+//! Every step is deterministic: the same mesh gives the same parts, unless the time budget
+//! ([`AdaptiveParams::deadline`]) runs out: cutting then stops (checked before each cut and
+//! between the trial cuts of a piece, never by stopping a thread) and the pieces left are
+//! kept as parts, their deviation measured as any part's.
 
 use std::collections::{BinaryHeap, HashMap};
+use std::time::Instant;
 
 use parry3d::math::Point;
 use parry3d::query::PointQuery;
@@ -35,6 +39,14 @@ pub struct AdaptiveParams {
     pub max_parts: usize,
     /// Pieces smaller than this along every side are not cut again, metres.
     pub min_size_m: f64,
+    /// When cutting stops whatever the deviation (the time budget of one asset).
+    pub deadline: Option<Instant>,
+}
+
+impl AdaptiveParams {
+    fn out_of_time(&self) -> bool {
+        self.deadline.is_some_and(|d| Instant::now() >= d)
+    }
 }
 
 /// One part: its hull's vertices and volume.
@@ -55,8 +67,11 @@ pub struct Decomposed {
     /// the other pieces are surfaces.
     pub solid: bool,
     /// The largest deviation of a part (sampled), metres: at most the tolerance unless the
-    /// part budget ran out.
+    /// part budget or the time ran out.
     pub max_deviation_m: f64,
+    /// Whether the deadline stopped the cutting while some piece was still beyond the
+    /// tolerance.
+    pub out_of_time: bool,
 }
 
 /// A mesh welded, split into connected pieces; each closed, consistently oriented piece is a
@@ -610,6 +625,7 @@ pub fn decompose(
     }
     let mut parts = Vec::new();
     let mut max_deviation: f64 = 0.0;
+    let mut out_of_time = false;
     // The worst piece first, so that a part budget goes where the deviation is.
     while let Some(worst) = pending.pop() {
         let room = parts.len() + pending.len() + 2 <= params.max_parts;
@@ -619,6 +635,16 @@ pub fn decompose(
             .iter()
             .any(|e| *e > params.min_size_m);
         if worst.deviation > params.tolerance_m && room && large {
+            if out_of_time || params.out_of_time() {
+                out_of_time = true;
+                max_deviation = max_deviation.max(worst.deviation);
+                let volume_m3 = worst.candidate.volume();
+                parts.push(Part {
+                    points_m: worst.candidate.hull_points,
+                    volume_m3,
+                });
+                continue;
+            }
             let halves = split(&mesh, &worst, params, &mut sequence);
             if !halves.is_empty() {
                 pending.extend(halves);
@@ -636,6 +662,7 @@ pub fn decompose(
         parts,
         solid: mesh.has_solids(),
         max_deviation_m: max_deviation,
+        out_of_time,
     })
 }
 
@@ -735,6 +762,10 @@ fn split(
 ) -> Vec<Pending> {
     let mut best: Option<(f64, usize, f64)> = None;
     for axis in 0..3 {
+        if params.out_of_time() {
+            // The best cut so far, or the middle one below.
+            break;
+        }
         for cut in cut_positions(piece, axis, !mesh.all_solid, params.min_size_m.max(1e-6)) {
             let (low, high) =
                 split_piece(&piece.piece, axis, cut, on_plane(mesh, piece, axis, cut));
@@ -782,6 +813,7 @@ mod tests {
             tolerance_m: 0.001,
             max_parts: 256,
             min_size_m: 0.002,
+            deadline: None,
         }
     }
 

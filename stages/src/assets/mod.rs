@@ -13,20 +13,32 @@
 //!    box); implausible sizes and an annotation bbox that disagrees with the mesh are warnings;
 //! 4. its collision shapes ([`shapes`]).
 //!
+//! Before step 1 expands any mesh, its cost is judged from the GLB's JSON ([`budget`]): an
+//! asset over `[assets.budget]` gets its collision shape from a decimated mesh
+//! ([`simplify`], vertex clustering) with the reach that costs measured ([`reach`]) and
+//! reported; one over the hard cap is rejected with the reason; the decomposition stops at
+//! the time budget. No asset stalls the run.
+//!
 //! [`build_text_index`] makes the text index of the lexical encoder from the annotations.
 
+pub mod budget;
 pub mod decompose;
+pub mod reach;
 pub mod shapes;
+pub mod simplify;
 pub mod synthetic;
 
+use std::time::{Duration, Instant};
+
 use mesa_schemas::artifacts::{AssetGeometry, ShapesArtifact, TextDocument, TextIndexArtifact};
-use mesa_schemas::artifacts::{SHAPES_SCHEMA, TEXT_INDEX_SCHEMA};
+use mesa_schemas::artifacts::{Simplification, SHAPES_SCHEMA, TEXT_INDEX_SCHEMA};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::annotations::{Annotations, AssetAnnotation};
-use crate::glb_read::read_glb;
+use crate::glb_read::{open_glb, read_glb};
 use crate::text::{document_frequency, features, LEXICAL_ENCODER};
+use budget::{glb_cost, AssetBudget, Verdict};
 
 /// Bumped when the indexing of an unchanged asset would give another record: every asset is
 /// then re-indexed.
@@ -92,6 +104,9 @@ pub struct AssetsConfig {
     pub shape_precision_m: f64,
     /// The lexical encoder's asset text starts with the annotation's category.
     pub text_includes_category: bool,
+    /// What indexing one asset may cost (`[assets.budget]`): above it the collision shape is
+    /// made from a decimated mesh, far above it the asset is rejected.
+    pub budget: AssetBudget,
 }
 
 impl Default for AssetsConfig {
@@ -109,6 +124,7 @@ impl Default for AssetsConfig {
             vhacd_max_parts: 32,
             shape_precision_m: 1e-4,
             text_includes_category: true,
+            budget: AssetBudget::default(),
         }
     }
 }
@@ -164,7 +180,21 @@ pub fn index_asset(
     annotation: Option<&AssetAnnotation>,
     config: &AssetsConfig,
 ) -> IndexedAsset {
+    let started = Instant::now();
     let mut warnings = Vec::new();
+    // Judged from the JSON before any mesh is expanded; a file that cannot be opened gets
+    // the reader's own error below.
+    let verdict = open_glb(bytes)
+        .and_then(|document| glb_cost(&document))
+        .map_or(Verdict::Within, |cost| budget::judge(cost, &config.budget));
+    if let Verdict::Reject(reason) = verdict {
+        return IndexedAsset {
+            geometry: None,
+            invalid: Some(("over_budget".to_owned(), reason)),
+            shapes: None,
+            warnings,
+        };
+    }
     let mesh = match read_glb(bytes) {
         Ok(mesh) => mesh,
         Err(e) => {
@@ -276,7 +306,20 @@ pub fn index_asset(
         }
     }
 
-    let shapes = shapes::collision_shapes(&aligned, &mesh.triangles, config);
+    let deadline = Duration::try_from_secs_f64(config.budget.seconds)
+        .ok()
+        .and_then(|d| started.checked_add(d));
+    let shapes = match &verdict {
+        Verdict::Simplify(why) => simplified_shapes(
+            &aligned,
+            &mesh.triangles,
+            config,
+            deadline,
+            why,
+            &mut warnings,
+        ),
+        _ => shapes::collision_shapes_until(&aligned, &mesh.triangles, config, deadline),
+    };
     let shapes = match shapes {
         Some(s) => {
             warnings.extend(s.warning.clone());
@@ -307,6 +350,45 @@ pub fn index_asset(
         shapes,
         warnings,
     }
+}
+
+/// The collision shapes of an asset over its budget: made from its decimated mesh, with how
+/// far they reach outside the original measured, recorded and warned about.
+fn simplified_shapes(
+    aligned: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    config: &AssetsConfig,
+    deadline: Option<Instant>,
+    why: &str,
+    warnings: &mut Vec<String>,
+) -> Option<shapes::Shapes> {
+    let simplified = simplify::decimate(aligned, triangles, config.budget.simplified_triangles);
+    let mut shapes = shapes::collision_shapes_until(
+        &simplified.positions,
+        &simplified.triangles,
+        config,
+        deadline,
+    )?;
+    let parts: Vec<Vec<[f64; 3]>> = shapes.parts.iter().map(|p| p.points_m.clone()).collect();
+    let reach_m = reach::reach_outside(aligned, triangles, &parts);
+    warnings.push(format!(
+        "the asset is {why}: its collision shape was made from a decimated mesh (vertex \
+         clustering on a {:.1} mm grid, {} of its {} triangles); its {} convex parts reach up to \
+         {:.1} mm outside the original mesh",
+        simplified.cell_m * 1000.0,
+        simplified.triangles.len(),
+        triangles.len(),
+        shapes.parts.len(),
+        reach_m * 1000.0
+    ));
+    shapes.decomposition.simplified = Some(Simplification {
+        method: "vertex_clustering".to_owned(),
+        cell_m: shapes::round_m(simplified.cell_m, config.shape_precision_m / 10.0),
+        triangles: triangles.len() as u64,
+        simplified_triangles: simplified.triangles.len() as u64,
+        reach_m: shapes::round_m(reach_m, config.shape_precision_m / 10.0),
+    });
+    Some(shapes)
 }
 
 /// The text the lexical encoder sees for an asset: its category (underscores as spaces), then

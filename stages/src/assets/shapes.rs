@@ -3,6 +3,8 @@
 //! the mesh; or parry3d's V-HACD), so that a bowl's or a cup's inside stays empty instead of
 //! being filled by one hull.
 
+use std::time::Instant;
+
 use mesa_schemas::artifacts::{ConvexPart, Decomposition};
 use parry3d::math::Point;
 use parry3d::transformation::try_convex_hull;
@@ -44,6 +46,16 @@ fn volume(points: &[Point<f32>], triangles: &[[u32; 3]]) -> f64 {
 /// 0.40430000000000005).
 fn round(v: f32, precision_m: f64) -> f64 {
     let v = f64::from(v);
+    if precision_m > 0.0 {
+        let scale = (1.0 / precision_m).round();
+        (v * scale).round() / scale
+    } else {
+        v
+    }
+}
+
+/// `v` metres rounded to a multiple of `precision_m`, printing short.
+pub fn round_m(v: f64, precision_m: f64) -> f64 {
     if precision_m > 0.0 {
         let scale = (1.0 / precision_m).round();
         (v * scale).round() / scale
@@ -116,6 +128,17 @@ pub fn collision_shapes(
     triangles: &[[u32; 3]],
     config: &AssetsConfig,
 ) -> Option<Shapes> {
+    collision_shapes_until(positions_m, triangles, config, None)
+}
+
+/// [`collision_shapes`], the adaptive decomposition stopping at `deadline` (V-HACD cannot be
+/// stopped: an asset over its budget reaches it decimated).
+pub fn collision_shapes_until(
+    positions_m: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    config: &AssetsConfig,
+    deadline: Option<Instant>,
+) -> Option<Shapes> {
     // f32 is parry3d's precision: 0.1 µm at a metre, far below the collision tolerances.
     let points: Vec<Point<f32>> = positions_m
         .iter()
@@ -127,7 +150,13 @@ pub fn collision_shapes(
     }
     let hull = part(&hull_points, &hull_triangles, config.shape_precision_m);
     if config.decomposition == DecompositionMethod::Adaptive {
-        return Some(adaptive_shapes(positions_m, triangles, hull, config));
+        return Some(adaptive_shapes(
+            positions_m,
+            triangles,
+            hull,
+            config,
+            deadline,
+        ));
     }
     let decomposition = Decomposition {
         method: "vhacd".to_owned(),
@@ -138,6 +167,8 @@ pub fn collision_shapes(
         resolution: Some(config.vhacd_resolution),
         convex_hull_approximation: Some(true),
         concavity: Some(config.vhacd_concavity),
+        out_of_time: None,
+        simplified: None,
     };
     if hull.volume_m3 > 0.0
         && closed_volume(positions_m, triangles).is_some_and(|v| v >= CONVEX_FILL * hull.volume_m3)
@@ -230,12 +261,14 @@ fn adaptive_shapes(
     triangles: &[[u32; 3]],
     hull: ConvexPart,
     config: &AssetsConfig,
+    deadline: Option<Instant>,
 ) -> Shapes {
     let params = AdaptiveParams {
         tolerance_m: config.decomposition_tolerance_m,
         max_parts: config.decomposition_max_parts.max(1) as usize,
         // Below a fifth of the tolerance, cutting again cannot help.
         min_size_m: config.decomposition_tolerance_m / 5.0,
+        deadline,
     };
     let mut decomposition = Decomposition {
         method: "adaptive".to_owned(),
@@ -246,6 +279,8 @@ fn adaptive_shapes(
         resolution: None,
         convex_hull_approximation: None,
         concavity: None,
+        out_of_time: None,
+        simplified: None,
     };
     let decomposed = decompose(positions_m, triangles, &params);
     let Some(decomposed) = decomposed.filter(|d| !d.parts.is_empty()) else {
@@ -263,7 +298,7 @@ fn adaptive_shapes(
             ),
         };
     };
-    let parts = decomposed
+    let parts: Vec<ConvexPart> = decomposed
         .parts
         .iter()
         .map(|p| ConvexPart {
@@ -280,6 +315,25 @@ fn adaptive_shapes(
         config.shape_precision_m / 10.0,
     ));
     decomposition.solid = Some(decomposed.solid);
+    if decomposed.out_of_time {
+        decomposition.out_of_time = Some(true);
+        let warning = format!(
+            "the convex decomposition ran out of its time budget ([assets.budget] seconds = \
+             {} s) and kept the {} parts it had: they reach up to {:.1} mm outside the mesh, \
+             more than decomposition_tolerance_m ({:.1} mm) (raise seconds, or decimate the \
+             asset)",
+            config.budget.seconds,
+            parts.len(),
+            decomposed.max_deviation_m * 1000.0,
+            config.decomposition_tolerance_m * 1000.0
+        );
+        return Shapes {
+            hull,
+            parts,
+            decomposition,
+            warning: Some(warning),
+        };
+    }
     let warning = (decomposed.max_deviation_m > config.decomposition_tolerance_m).then(|| {
         format!(
             "the collision shape's {} convex parts (decomposition_max_parts) reach up to {:.1} \

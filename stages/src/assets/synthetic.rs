@@ -104,6 +104,23 @@ impl Mesh {
         )
     }
 
+    /// A UV sphere of `radius_m` resting on y = 0 with `rings` × `segments` quads (about
+    /// 2 · rings · segments triangles), closed.
+    pub fn sphere(radius_m: f64, rings: usize, segments: usize) -> Self {
+        let profile: Vec<[f64; 2]> = (0..=rings)
+            .map(|i| {
+                let a = std::f64::consts::PI * i as f64 / rings as f64;
+                let r = if i == 0 || i == rings {
+                    0.0
+                } else {
+                    radius_m * a.sin()
+                };
+                [r, radius_m * (1.0 - a.cos())]
+            })
+            .collect();
+        Self::lathe(&profile, segments)
+    }
+
     /// This mesh moved by `offset`.
     pub fn translated(mut self, offset: [f64; 3]) -> Self {
         for p in &mut self.positions {
@@ -126,6 +143,22 @@ impl Mesh {
     /// A GLB holding this mesh in one node with the given scale (1 for a model in metres,
     /// 0.01 for one in centimetres).
     pub fn to_glb(&self, node_scale: f64) -> Vec<u8> {
+        let nodes = json!([{"mesh": 0, "scale": [node_scale, node_scale, node_scale]}]);
+        self.glb_with_nodes(nodes, json!([0]))
+    }
+
+    /// A GLB placing this mesh (stored once) by one node per translation: GPU-free
+    /// instancing, as a scene of many copies is exported.
+    pub fn to_instanced_glb(&self, translations: &[[f64; 3]]) -> Vec<u8> {
+        let nodes: Vec<serde_json::Value> = translations
+            .iter()
+            .map(|t| json!({"mesh": 0, "translation": t}))
+            .collect();
+        let roots: Vec<usize> = (0..translations.len()).collect();
+        self.glb_with_nodes(json!(nodes), json!(roots))
+    }
+
+    fn glb_with_nodes(&self, nodes: serde_json::Value, roots: serde_json::Value) -> Vec<u8> {
         let mut bin: Vec<u8> = Vec::new();
         for p in &self.positions {
             for v in p {
@@ -161,8 +194,8 @@ impl Mesh {
             ],
             "materials": [{"name": "surface"}],
             "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
-            "nodes": [{"mesh": 0, "scale": [node_scale, node_scale, node_scale]}],
-            "scenes": [{"nodes": [0]}],
+            "nodes": nodes,
+            "scenes": [{"nodes": roots}],
             "scene": 0
         });
         // Serialising a json! value cannot fail.

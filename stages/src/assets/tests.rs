@@ -315,3 +315,258 @@ fn only_closed_meshes_have_a_volume() {
     let v = shapes::closed_volume(&seamed.positions, &seamed.triangles).expect("welded");
     assert_abs_diff_eq!(v, 6.0, epsilon = 1e-9);
 }
+
+/// A config whose budget nothing reaches.
+fn unbounded() -> AssetsConfig {
+    AssetsConfig {
+        budget: budget::AssetBudget {
+            triangles: u64::MAX,
+            instances: u64::MAX,
+            max_triangles: u64::MAX,
+            simplified_triangles: u64::MAX,
+            seconds: 1e9,
+        },
+        ..AssetsConfig::default()
+    }
+}
+
+/// 150 small spheres, 3 cm apart on a 10 × 15 grid: one mesh placed by 150 nodes.
+fn instanced_spheres() -> (Mesh, Vec<[f64; 3]>) {
+    let sphere = Mesh::sphere(0.01, 12, 12);
+    let translations = (0..150)
+        .map(|i| [0.03 * f64::from(i % 10), 0.0, 0.03 * f64::from(i / 10)])
+        .collect();
+    (sphere, translations)
+}
+
+#[test]
+fn the_cost_is_read_from_accessor_counts_and_instancing() {
+    let (sphere, translations) = instanced_spheres();
+    let glb = sphere.to_instanced_glb(&translations);
+    let document = crate::glb_read::open_glb(&glb).expect("opens");
+    let cost = budget::glb_cost(&document).expect("cost");
+    assert_eq!(cost.instances, 150);
+    assert_eq!(cost.triangles, 150 * sphere.triangles.len() as u64);
+}
+
+#[test]
+fn an_asset_over_the_triangle_budget_is_decimated_with_its_reach_reported() {
+    let sphere = Mesh::sphere(0.05, 100, 100);
+    assert_eq!(sphere.triangles.len(), 19_800);
+    let config = AssetsConfig {
+        budget: budget::AssetBudget {
+            triangles: 5_000,
+            simplified_triangles: 1_000,
+            ..budget::AssetBudget::default()
+        },
+        ..AssetsConfig::default()
+    };
+    let indexed = index(&sphere, None, &config);
+    assert_eq!(indexed.invalid, None);
+    assert_eq!(
+        indexed.geometry.as_ref().expect("geometry").triangles,
+        19_800
+    );
+    let shapes = indexed.shapes.expect("shapes");
+    let simplified = shapes.decomposition.simplified.expect("simplified");
+    assert_eq!(simplified.method, "vertex_clustering");
+    assert_eq!(simplified.triangles, 19_800);
+    assert!(simplified.simplified_triangles <= 1_000);
+    assert!(simplified.simplified_triangles > 100);
+    // Cluster means of a convex surface lie inside it: the parts reach out by rounding only.
+    assert!(
+        (0.0..0.001).contains(&simplified.reach_m),
+        "{}",
+        simplified.reach_m
+    );
+    let warning = indexed
+        .warnings
+        .iter()
+        .find(|w| w.contains("decimated mesh"))
+        .expect("a warning");
+    assert!(
+        warning.starts_with(
+            "the asset is over [assets.budget] (19800 triangles > triangles = 5000): its \
+             collision shape was made from a decimated mesh (vertex clustering on a "
+        ),
+        "{warning}"
+    );
+    assert!(
+        warning.ends_with(&format!(
+            "convex parts reach up to {:.1} mm outside the original mesh",
+            simplified.reach_m * 1000.0
+        )),
+        "{warning}"
+    );
+}
+
+#[test]
+fn a_decimated_bowl_reports_how_far_its_parts_reach_outside_it() {
+    // Clustering on a grid coarser than the wall merges the inner and outer walls: the parts
+    // then bulge out of the original by a measurable amount.
+    let bowl = Mesh::vessel(0.08, 0.06, 0.006, 0.008);
+    let config = AssetsConfig {
+        budget: budget::AssetBudget {
+            triangles: 100,
+            simplified_triangles: 200,
+            ..budget::AssetBudget::default()
+        },
+        ..AssetsConfig::default()
+    };
+    let indexed = index(&bowl, None, &config);
+    assert_eq!(indexed.invalid, None);
+    let shapes = indexed.shapes.expect("shapes");
+    let simplified = shapes.decomposition.simplified.expect("simplified");
+    assert!(simplified.simplified_triangles <= 200);
+    // Measured against the original: the parts stay within a couple of grid cells of it.
+    let bound = 2.0 * simplified.cell_m * 3f64.sqrt() + 0.002;
+    assert!(
+        simplified.reach_m > 0.0 && simplified.reach_m < bound,
+        "reach {} (bound {bound})",
+        simplified.reach_m
+    );
+    // Every part vertex is within the reported reach of the original bowl (plus rounding).
+    let parts: Vec<Vec<[f64; 3]>> = shapes.parts.iter().map(|p| p.points_m.clone()).collect();
+    let aligned: Vec<[f64; 3]> = bowl
+        .positions
+        .iter()
+        .map(|p| table_aligned_from_gltf(*p, 0.0))
+        .collect();
+    let again = reach::reach_outside(&aligned, &bowl.triangles, &parts);
+    assert_abs_diff_eq!(again, simplified.reach_m, epsilon = 1e-4);
+}
+
+#[test]
+fn an_asset_over_the_instance_budget_is_decimated() {
+    let (sphere, translations) = instanced_spheres();
+    let glb = sphere.to_instanced_glb(&translations);
+    let indexed = index_asset("uid", "digest", &glb, None, &AssetsConfig::default());
+    assert_eq!(indexed.invalid, None);
+    let geometry = indexed.geometry.expect("geometry");
+    assert_eq!(geometry.mesh_instances, 150);
+    let shapes = indexed.shapes.expect("shapes");
+    let simplified = shapes.decomposition.simplified.expect("simplified");
+    assert_eq!(simplified.triangles, 150 * sphere.triangles.len() as u64);
+    assert!(simplified.reach_m.is_finite() && simplified.reach_m >= 0.0);
+    assert!(
+        indexed.warnings.iter().any(|w| w
+            .contains("the asset is over [assets.budget] (150 mesh instances > instances = 100)")
+            && w.contains("mm outside the original mesh")),
+        "{:?}",
+        indexed.warnings
+    );
+}
+
+#[test]
+fn an_asset_over_the_hard_cap_is_rejected_before_its_meshes_are_read() {
+    let sphere = Mesh::sphere(0.05, 30, 30);
+    let config = AssetsConfig {
+        budget: budget::AssetBudget {
+            max_triangles: 1_000,
+            ..budget::AssetBudget::default()
+        },
+        ..AssetsConfig::default()
+    };
+    let indexed = index(&sphere, None, &config);
+    let (code, reason) = indexed.invalid.expect("rejected");
+    assert_eq!(code, "over_budget");
+    assert_eq!(
+        reason,
+        "the asset places 1740 triangles (1 mesh instances), over [assets.budget] \
+         max_triangles = 1000: indexing it would take gigabytes of memory (decimate it, e.g. \
+         Blender's Decimate modifier, or raise max_triangles)"
+    );
+    assert_eq!(indexed.geometry, None);
+    assert_eq!(indexed.shapes, None);
+}
+
+#[test]
+fn the_time_budget_stops_the_decomposition_and_reports_the_reach() {
+    let bowl = Mesh::vessel(0.08, 0.06, 0.006, 0.008);
+    let config = AssetsConfig {
+        budget: budget::AssetBudget {
+            seconds: 0.0,
+            ..budget::AssetBudget::default()
+        },
+        ..AssetsConfig::default()
+    };
+    let indexed = index(&bowl, None, &config);
+    assert_eq!(indexed.invalid, None);
+    let shapes = indexed.shapes.expect("shapes");
+    assert_eq!(shapes.decomposition.out_of_time, Some(true));
+    assert_eq!(shapes.decomposition.simplified, None);
+    // No time for a single cut: the bowl's hull, which bridges its cavity.
+    assert_eq!(shapes.parts.len(), 1);
+    let reach = shapes.decomposition.max_deviation_m.expect("reach");
+    assert!(reach > 0.01, "{reach}");
+    let warning = indexed
+        .warnings
+        .iter()
+        .find(|w| w.contains("time budget"))
+        .expect("a warning");
+    assert_eq!(
+        warning,
+        &format!(
+            "the convex decomposition ran out of its time budget ([assets.budget] seconds = 0 \
+             s) and kept the 1 parts it had: they reach up to {:.1} mm outside the mesh, more \
+             than decomposition_tolerance_m (1.0 mm) (raise seconds, or decimate the asset)",
+            reach * 1000.0
+        )
+    );
+}
+
+#[test]
+fn an_asset_within_the_budget_is_indexed_as_without_one() {
+    for mesh in [
+        Mesh::vessel(0.08, 0.06, 0.006, 0.008),
+        Mesh::sphere(0.05, 30, 30),
+        Mesh::cuboid([0.1, 0.2, 0.3]),
+    ] {
+        let within = index(&mesh, None, &AssetsConfig::default());
+        let shapes = within.shapes.as_ref().expect("shapes");
+        assert_eq!(shapes.decomposition.simplified, None);
+        assert_eq!(shapes.decomposition.out_of_time, None);
+        assert_eq!(within, index(&mesh, None, &unbounded()));
+    }
+}
+
+/// The worst assets of issue 20 at full size: a 2M-triangle sphere, and a 20k-triangle sphere
+/// placed by 200 nodes. Slow in a debug build: run with
+/// `cargo test --release -p mesa-stages worst_assets -- --ignored --nocapture`; with
+/// `MESA_WORST_ASSETS_DIR` set, the GLBs are also written there (for `mesa assets --jobs 1`).
+#[test]
+#[ignore]
+fn the_worst_assets_are_indexed_within_the_default_budget() {
+    let dense = Mesh::sphere(0.1, 1000, 1000);
+    assert!(dense.triangles.len() >= 1_998_000);
+    let sphere = Mesh::sphere(0.05, 100, 101);
+    let translations: Vec<[f64; 3]> = (0..200)
+        .map(|i| [0.12 * f64::from(i % 20), 0.0, 0.12 * f64::from(i / 20)])
+        .collect();
+    let assets = [
+        ("dense_sphere_2m", dense.to_glb(1.0)),
+        ("sphere_20k_x200", sphere.to_instanced_glb(&translations)),
+    ];
+    for (name, glb) in &assets {
+        if let Some(dir) = std::env::var_os("MESA_WORST_ASSETS_DIR") {
+            let path = std::path::Path::new(&dir).join(format!("{name}.glb"));
+            std::fs::write(&path, glb).expect("write");
+        }
+        let started = std::time::Instant::now();
+        let indexed = index_asset(name, "digest", glb, None, &AssetsConfig::default());
+        println!(
+            "{name}: {} bytes, indexed in {:.1} s: {:?}",
+            glb.len(),
+            started.elapsed().as_secs_f64(),
+            indexed.warnings
+        );
+        assert_eq!(indexed.invalid, None);
+        let simplified = indexed
+            .shapes
+            .expect("shapes")
+            .decomposition
+            .simplified
+            .expect("simplified");
+        assert!(simplified.reach_m.is_finite());
+    }
+}
