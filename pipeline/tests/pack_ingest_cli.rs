@@ -364,10 +364,62 @@ fn a_damaged_edited_file_fails_its_scene_alone_with_no_output() {
     assert!(stderr.contains("1 done, 0 skipped, 1 failed"), "{stderr}");
     let bad = scene_id(&scenes[0]);
     assert!(
-        stderr.contains(&format!("refined/{bad}.glb: GLB_LENGTH_MISMATCH")),
+        stderr.contains(&format!("refined/{bad}.glb: GLB_UNEXPECTED_END_OF_CHUNK_DATA")),
         "{stderr}"
     );
     assert!(!scenes[0].join("refined/layout.json").exists());
     assert!(!scenes[0].join("refined/diff.json").exists());
     assert!(scenes[1].join("refined/layout.json").is_file());
+}
+
+#[test]
+fn a_failed_ingest_is_reported_by_later_stages_as_failed_not_as_not_ingested_yet() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ws = human_workspace(dir.path());
+    let (code, stderr) = run(&["run", "--progress", "off"], &ws);
+    assert_eq!(code, Some(0), "{stderr}");
+    let scenes = scene_dirs(&ws);
+    for (k, scene) in scenes.iter().enumerate() {
+        let id = scene_id(scene);
+        let pack = std::fs::read(scene.join(format!("pack/{id}.glb"))).expect("pack");
+        let refined = if k == 0 {
+            pack[..pack.len() - 100].to_vec()
+        } else {
+            pack
+        };
+        std::fs::create_dir_all(scene.join("refined")).expect("mkdir");
+        std::fs::write(scene.join(format!("refined/{id}.glb")), refined).expect("write");
+    }
+    let bad = scene_id(&scenes[0]);
+    // Control: an edit that was never ingested is "not ingested yet".
+    let (code, stderr) = run(&["graph", "--progress", "off"], &ws);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(
+        stderr.contains(&format!("refined/{bad}.glb is in but not ingested yet")),
+        "{stderr}"
+    );
+    let (code, stderr) = run(&["ingest", "--progress", "off"], &ws);
+    assert_eq!(code, Some(1), "{stderr}");
+    // Once its ingest failed, the later stages say so, with the error and where it is kept;
+    // the other scene goes on.
+    let (code, stderr) = run(&["graph", "--progress", "off"], &ws);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(stderr.contains("graph: 2 scenes: 1 done"), "{stderr}");
+    assert!(!stderr.contains("not ingested yet"), "{stderr}");
+    let marker = format!(".mesa/markers/ingest/{}/{bad}.json", {
+        let table = scenes[0].parent().expect("table folder");
+        table.file_name().expect("name").to_string_lossy().into_owned()
+    });
+    for expected in [
+        "ingest failed: ",
+        &format!("refined/{bad}.glb: GLB_UNEXPECTED_END_OF_CHUNK_DATA"),
+        &marker,
+        &format!("fix the edited scene scenes/"),
+        "and run `mesa ingest` again",
+    ] {
+        assert!(stderr.contains(expected), "{expected}: {stderr}");
+    }
+    let out = mesa().arg("status").arg(&ws).output().expect("runs");
+    let status = String::from_utf8_lossy(&out.stdout);
+    assert!(!status.contains("not ingested yet"), "{status}");
 }

@@ -513,7 +513,7 @@ fn hostile_and_damaged_files_are_clear_errors() {
     // Truncated.
     let e = err(&p, &p.glb[..p.glb.len() / 2]);
     assert!(
-        e.contains("GLB_LENGTH_MISMATCH") && e.contains("truncated"),
+        e.contains("GLB_UNEXPECTED_END_OF_CHUNK_DATA") && e.contains("truncated"),
         "{e}"
     );
     // A buffer whose byteLength claims more than the BIN chunk holds.
