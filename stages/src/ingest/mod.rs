@@ -306,14 +306,14 @@ impl Plausible<'_> {
             return Err(implausible(
                 "scale",
                 format!(
-                    "the object is {} cm ({:.4e} × {:.4e} × {:.4e} cm), {:.3e} times the table \
+                    "the object is {} cm ({:.4e} × {:.4e} × {:.4e} cm), {} times the table \
                      top's longest side ({table:.1} cm) (expected at most {} times: [ingest] \
                      max_size_over_table)",
-                    fmt_cm(longest),
+                    fmt_big(longest),
                     read.size_cm[0],
                     read.size_cm[1],
                     read.size_cm[2],
-                    longest / table,
+                    fmt_big(longest / table),
                     config.max_size_over_table
                 ),
                 format!(
@@ -330,7 +330,7 @@ impl Plausible<'_> {
                 format!(
                     "the object's longest side is {} cm (expected at least {} cm: [ingest] \
                      min_object_side_cm)",
-                    fmt_cm(longest),
+                    fmt_big(longest),
                     config.min_object_side_cm
                 ),
                 "scale the object back up to its size in Blender (S), or clear a wrong scale \
@@ -350,10 +350,10 @@ impl Plausible<'_> {
                     "the object's centre is at ({}, {}, {}) cm in the table frame, {} cm from \
                      the table top (x {x0:.1}..{x1:.1}, y {y0:.1}..{y1:.1}, z 0) (expected at \
                      most {} cm: [ingest] max_distance_from_table_cm)",
-                    fmt_cm(p[0]),
-                    fmt_cm(p[1]),
-                    fmt_cm(p[2]),
-                    fmt_cm(distance),
+                    fmt_big(p[0]),
+                    fmt_big(p[1]),
+                    fmt_big(p[2]),
+                    fmt_big(distance),
                     config.max_distance_from_table_cm
                 ),
                 "move the object back onto the table (or clear a wrong location with Alt+G), \
@@ -365,9 +365,9 @@ impl Plausible<'_> {
     }
 }
 
-/// A length in cm, in plain notation when it is of a table's order, else in scientific
-/// notation (`1.2e31`).
-fn fmt_cm(v: f64) -> String {
+/// A length in cm or a ratio, in plain notation when it is of a table's order, else in
+/// scientific notation (`1.2e31`).
+fn fmt_big(v: f64) -> String {
     if v.abs() < 1e6 {
         format!("{v:.1}")
     } else {
@@ -756,8 +756,8 @@ pub fn ingest_scene(
             problem: format!(
                 "the table top is {} × {} cm (expected a longest side of at most {} cm: \
                  [ingest] max_table_side_cm)",
-                fmt_cm(zone_after.width_cm()),
-                fmt_cm(zone_after.depth_cm()),
+                fmt_big(zone_after.width_cm()),
+                fmt_big(zone_after.depth_cm()),
                 config.max_table_side_cm
             ),
             fix: "scale the table back to its size in Blender (S), or clear a wrong scale \
