@@ -364,7 +364,9 @@ fn a_damaged_edited_file_fails_its_scene_alone_with_no_output() {
     assert!(stderr.contains("1 done, 0 skipped, 1 failed"), "{stderr}");
     let bad = scene_id(&scenes[0]);
     assert!(
-        stderr.contains(&format!("refined/{bad}.glb: GLB_UNEXPECTED_END_OF_CHUNK_DATA")),
+        stderr.contains(&format!(
+            "refined/{bad}.glb: GLB_UNEXPECTED_END_OF_CHUNK_DATA"
+        )),
         "{stderr}"
     );
     assert!(!scenes[0].join("refined/layout.json").exists());
@@ -408,7 +410,11 @@ fn a_failed_ingest_is_reported_by_later_stages_as_failed_not_as_not_ingested_yet
     assert!(!stderr.contains("not ingested yet"), "{stderr}");
     let marker = format!(".mesa/markers/ingest/{}/{bad}.json", {
         let table = scenes[0].parent().expect("table folder");
-        table.file_name().expect("name").to_string_lossy().into_owned()
+        table
+            .file_name()
+            .expect("name")
+            .to_string_lossy()
+            .into_owned()
     });
     for expected in [
         "ingest failed: ",

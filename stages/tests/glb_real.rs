@@ -294,11 +294,23 @@ fn crafted_container_damage_gets_the_validators_codes() {
         ),
         (
             "bin_third",
-            crafted_glb(2, None, &[(n, JSON, j), (4, OTHER, b"xxxx"), (4, BIN, b"abcd")]),
+            crafted_glb(
+                2,
+                None,
+                &[(n, JSON, j), (4, OTHER, b"xxxx"), (4, BIN, b"abcd")],
+            ),
             "GLB_UNEXPECTED_BIN_CHUNK",
         ),
-        ("version_1", crafted_glb(1, None, &[(n, JSON, j)]), "GLB_INVALID_VERSION"),
-        ("version_3", crafted_glb(3, None, &[(n, JSON, j)]), "GLB_INVALID_VERSION"),
+        (
+            "version_1",
+            crafted_glb(1, None, &[(n, JSON, j)]),
+            "GLB_INVALID_VERSION",
+        ),
+        (
+            "version_3",
+            crafted_glb(3, None, &[(n, JSON, j)]),
+            "GLB_INVALID_VERSION",
+        ),
         (
             "chunk_too_big",
             crafted_glb(2, None, &[(n + 8, JSON, j)]),

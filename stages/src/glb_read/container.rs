@@ -78,8 +78,7 @@ pub(crate) fn split<'a>(
         return Err(GlbError::Container {
             code: "GLB_INVALID_VERSION",
             offset: 4,
-            problem: "GLB version 1 is glTF 1.0 (KHR_binary_glTF): mesa reads glTF 2.0"
-                .to_owned(),
+            problem: "GLB version 1 is glTF 1.0 (KHR_binary_glTF): mesa reads glTF 2.0".to_owned(),
             fix: GLTF1_FIX,
         });
     }

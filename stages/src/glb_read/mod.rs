@@ -758,7 +758,10 @@ fn position_indices_out_of_range(root: &Root) -> Vec<String> {
 
 /// The component types glTF 2.0 allows for an attribute mesa reads, as (type, normalized)
 /// pairs: the core table (§3.7.2.1), widened by `KHR_mesh_quantization` when the file uses it.
-fn allowed_formats(semantic: &Semantic, quantized: bool) -> Option<&'static [(ComponentType, bool)]> {
+fn allowed_formats(
+    semantic: &Semantic,
+    quantized: bool,
+) -> Option<&'static [(ComponentType, bool)]> {
     use ComponentType::{F32, I16, I8, U16, U8};
     Some(match (semantic, quantized) {
         (Semantic::Positions, false) | (Semantic::Normals, false) => &[(F32, false)],
@@ -837,8 +840,8 @@ fn attribute_formats(root: &Root) -> Result<(), GlbError> {
                 let name = semantic.to_string();
                 let allowed_names: Vec<String> =
                     allowed.iter().map(|(k, n)| format_name(*k, *n)).collect();
-                let fix = if quantized || allowed_formats(semantic, true)
-                    .is_some_and(|a| !a.contains(&format))
+                let fix = if quantized
+                    || allowed_formats(semantic, true).is_some_and(|a| !a.contains(&format))
                 {
                     format!(
                         "re-export the mesh with {} {name} data",
@@ -1749,5 +1752,7 @@ fn transform(m: &Matrix4<f64>, p: &[f64; 3]) -> [f64; 3] {
     [v[0], v[1], v[2]]
 }
 
+#[cfg(test)]
+mod quantization_tests;
 #[cfg(test)]
 mod tests;

@@ -120,7 +120,10 @@ impl IngestConfig {
         for (key, value) in [
             ("max_size_over_table", self.max_size_over_table),
             ("min_object_side_cm", self.min_object_side_cm),
-            ("max_distance_from_table_cm", self.max_distance_from_table_cm),
+            (
+                "max_distance_from_table_cm",
+                self.max_distance_from_table_cm,
+            ),
             ("max_table_side_cm", self.max_table_side_cm),
         ] {
             if !(value > 0.0 && value.is_finite()) {
@@ -271,19 +274,35 @@ impl Plausible<'_> {
         self.zone.width_cm().max(self.zone.depth_cm())
     }
 
+    /// How far a point (table frame, cm) is from the table top: from the zone's rectangle at
+    /// z = 0.
+    fn distance_cm(&self, p: [f64; 3]) -> f64 {
+        let [x0, x1, y0, y1] = self.zone.0;
+        let dx = (x0 - p[0]).max(p[0] - x1).max(0.0);
+        let dy = (y0 - p[1]).max(p[1] - y1).max(0.0);
+        (dx * dx + dy * dy + p[2] * p[2]).sqrt()
+    }
+
     /// An error when an object read from `node` is absurd: not finite, larger than the table
-    /// by more than the factor, near zero, or far from the table top.
-    fn check(&self, node: usize, name: &str, read: &ReadObject) -> Result<(), IngestError> {
+    /// by more than the factor, near zero, or far from the table top. Only what the edit made
+    /// absurd counts: an object beyond a bound that its baseline entry (`before`) was already
+    /// beyond, and that the edit did not take further out, is left as the layout had it.
+    fn check(
+        &self,
+        node: usize,
+        name: &str,
+        read: &ReadObject,
+        before: &LayoutObject,
+    ) -> Result<(), IngestError> {
         let config = self.config;
-        let implausible = |field: &'static str, problem: String, fix: String| {
-            IngestError::Implausible {
+        let implausible =
+            |field: &'static str, problem: String, fix: String| IngestError::Implausible {
                 node,
                 name: name.to_owned(),
                 field,
                 problem,
                 fix,
-            }
-        };
+            };
         let values = read
             .position_cm
             .iter()
@@ -300,9 +319,10 @@ impl Plausible<'_> {
             ));
         }
         let longest = read.size_cm.iter().copied().fold(0.0, f64::max);
+        let longest_before = before.size_cm.0.iter().copied().fold(0.0, f64::max);
         let table = self.table_side_cm();
         let limit = config.max_size_over_table * table;
-        if longest > limit {
+        if longest > limit && longest > longest_before + UNCHANGED_CM {
             return Err(implausible(
                 "scale",
                 format!(
@@ -324,7 +344,7 @@ impl Plausible<'_> {
                 ),
             ));
         }
-        if longest < config.min_object_side_cm {
+        if longest < config.min_object_side_cm && longest < longest_before - UNCHANGED_CM {
             return Err(implausible(
                 "scale",
                 format!(
@@ -340,10 +360,10 @@ impl Plausible<'_> {
         }
         let [x0, x1, y0, y1] = self.zone.0;
         let p = read.position_cm;
-        let dx = (x0 - p[0]).max(p[0] - x1).max(0.0);
-        let dy = (y0 - p[1]).max(p[1] - y1).max(0.0);
-        let distance = (dx * dx + dy * dy + p[2] * p[2]).sqrt();
-        if distance > config.max_distance_from_table_cm {
+        let distance = self.distance_cm(p);
+        if distance > config.max_distance_from_table_cm
+            && distance > self.distance_cm(before.position_cm.0) + UNCHANGED_CM
+        {
             return Err(implausible(
                 "translation",
                 format!(
@@ -748,7 +768,11 @@ pub fn ingest_scene(
         snap_zone(measured, Some(&baseline.zone_cm))
     };
     let table_side_cm = zone_after.width_cm().max(zone_after.depth_cm());
-    if !(table_side_cm.is_finite() && table_side_cm <= config.max_table_side_cm) {
+    let table_side_before_cm = baseline.zone_cm.width_cm().max(baseline.zone_cm.depth_cm());
+    if !table_side_cm.is_finite()
+        || (table_side_cm > config.max_table_side_cm
+            && table_side_cm > table_side_before_cm + UNCHANGED_CM)
+    {
         return Err(IngestError::Implausible {
             node: table_node,
             name: TABLE_NODE.to_owned(),
@@ -869,7 +893,12 @@ pub fn ingest_scene(
             &mut mesh_boxes,
             &world,
         )?;
-        plausible.check(node, root.nodes[node].name.as_deref().unwrap_or("unnamed"), &read)?;
+        plausible.check(
+            node,
+            root.nodes[node].name.as_deref().unwrap_or("unnamed"),
+            &read,
+            object,
+        )?;
         let mesh_status = mesh_status(
             &document,
             node,
@@ -916,7 +945,12 @@ pub fn ingest_scene(
             &mut mesh_boxes,
             &world,
         )?;
-        plausible.check(node, root.nodes[node].name.as_deref().unwrap_or("unnamed"), &read)?;
+        plausible.check(
+            node,
+            root.nodes[node].name.as_deref().unwrap_or("unnamed"),
+            &read,
+            object,
+        )?;
         let mesh_status = mesh_status(
             &document,
             node,

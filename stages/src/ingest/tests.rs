@@ -691,7 +691,10 @@ fn absurd_sizes_and_positions_are_errors_naming_the_node_the_field_and_the_fix()
     let mug = crate::pack::testing::node(&root, "mug_0");
     let table = crate::pack::testing::node(&root, "table");
     // A node scale of 1e30: the mug would be ~1e31 cm wide.
-    let e = err(&p, &with_node_field(&p, "mug_0", "scale", json!([1e30, 1e30, 1e30])));
+    let e = err(
+        &p,
+        &with_node_field(&p, "mug_0", "scale", json!([1e30, 1e30, 1e30])),
+    );
     for expected in [
         &format!("nodes[{mug}] \"mug_0\".scale: the object is "),
         "e31 cm",
@@ -702,7 +705,10 @@ fn absurd_sizes_and_positions_are_errors_naming_the_node_the_field_and_the_fix()
         assert!(e.contains(expected), "{expected}: {e}");
     }
     // Control: a plausible scale passes; a large one passes once the factor allows it.
-    ok(&p, &with_node_field(&p, "mug_0", "scale", json!([1.5, 1.5, 1.5])));
+    ok(
+        &p,
+        &with_node_field(&p, "mug_0", "scale", json!([1.5, 1.5, 1.5])),
+    );
     let big = with_node_field(&p, "mug_0", "scale", json!([30.0, 30.0, 30.0]));
     assert!(err(&p, &big).contains("max_size_over_table"));
     let roomy = IngestConfig {
@@ -721,7 +727,10 @@ fn absurd_sizes_and_positions_are_errors_naming_the_node_the_field_and_the_fix()
     );
 
     // A translation of 3e38 m: a position of 3e40 cm.
-    let e = err(&p, &with_node_field(&p, "mug_0", "translation", json!([3e38, 0.0, 0.0])));
+    let e = err(
+        &p,
+        &with_node_field(&p, "mug_0", "translation", json!([3e38, 0.0, 0.0])),
+    );
     for expected in [
         &format!("nodes[{mug}] \"mug_0\".translation: the object's centre is at (3.000e40, "),
         "from the table top (x 0.0..120.0, y 0.0..60.0, z 0)",
@@ -736,8 +745,7 @@ fn absurd_sizes_and_positions_are_errors_naming_the_node_the_field_and_the_fix()
         edit_glb(&p.glb, |j, _| {
             let n = node_at(j, "mug_0");
             let t = j["nodes"][n]["translation"].clone();
-            j["nodes"][n]["translation"] =
-                json!([t[0].as_f64().unwrap_or(0.0) + dx, t[1], t[2]]);
+            j["nodes"][n]["translation"] = json!([t[0].as_f64().unwrap_or(0.0) + dx, t[1], t[2]]);
         })
     };
     ok(&p, &moved(1.5));
@@ -750,13 +758,29 @@ fn absurd_sizes_and_positions_are_errors_naming_the_node_the_field_and_the_fix()
     ingest(&p, &far, &wide).expect("allowed by the configured distance");
 
     // The table scaled by 1e30.
-    let e = err(&p, &with_node_field(&p, "table", "scale", json!([1e30, 1.0, 1e30])));
+    let e = err(
+        &p,
+        &with_node_field(&p, "table", "scale", json!([1e30, 1.0, 1e30])),
+    );
     assert!(
-        e.contains(&format!("nodes[{table}] \"table\".scale: the table top is "))
-            && e.contains("[ingest] max_table_side_cm")
+        e.contains(&format!(
+            "nodes[{table}] \"table\".scale: the table top is "
+        )) && e.contains("[ingest] max_table_side_cm")
             && e.contains("(fix: scale the table back"),
         "{e}"
     );
+    // Only what the edit made absurd counts: with a factor the packed mugs already exceed,
+    // the unedited pack passes, and a mug scaled further does not.
+    let strict = IngestConfig {
+        max_size_over_table: 0.01,
+        ..IngestConfig::default()
+    };
+    ingest(&p, &p.glb, &strict).expect("the baseline is left as it is");
+    let scaled = with_node_field(&p, "mug_0", "scale", json!([1.5, 1.5, 1.5]));
+    let e = ingest(&p, &scaled, &strict)
+        .map(|_| ())
+        .expect_err("scaled up");
+    assert!(e.to_string().contains("\"mug_0\".scale"), "{e}");
     // Every bound is a key that a bad value of fails before any work.
     let bad = IngestConfig {
         max_size_over_table: f64::NAN,
@@ -784,8 +808,14 @@ fn an_integer_position_accessor_needs_khr_mesh_quantization() {
         edit_glb(&p.glb, |j, _| {
             // The float bytes read as UNSIGNED_BYTE: values up to 255 (metres).
             j["accessors"][position]["componentType"] = json!(5121);
-            j["accessors"][position].as_object_mut().expect("accessor").remove("min");
-            j["accessors"][position].as_object_mut().expect("accessor").remove("max");
+            j["accessors"][position]
+                .as_object_mut()
+                .expect("accessor")
+                .remove("min");
+            j["accessors"][position]
+                .as_object_mut()
+                .expect("accessor")
+                .remove("max");
             if quantization {
                 j["extensionsUsed"] = json!(["KHR_mesh_quantization"]);
                 j["extensionsRequired"] = json!(["KHR_mesh_quantization"]);
