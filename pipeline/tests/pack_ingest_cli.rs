@@ -420,7 +420,7 @@ fn a_failed_ingest_is_reported_by_later_stages_as_failed_not_as_not_ingested_yet
         "ingest failed: ",
         &format!("refined/{bad}.glb: GLB_UNEXPECTED_END_OF_CHUNK_DATA"),
         &marker,
-        &format!("fix the edited scene scenes/"),
+        "fix the edited scene scenes/",
         "and run `mesa ingest` again",
     ] {
         assert!(stderr.contains(expected), "{expected}: {stderr}");

@@ -20,8 +20,8 @@ use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context as _};
 use mesa_schemas::artifacts::{
-    CheckArtifact, MarkerStatus, RunMarker, SettleStatus, SplitArtifact, TaskRecord,
-    MARKER_SCHEMA, SPLIT_SCHEMA,
+    CheckArtifact, MarkerStatus, RunMarker, SettleStatus, SplitArtifact, TaskRecord, MARKER_SCHEMA,
+    SPLIT_SCHEMA,
 };
 use mesa_schemas::json::to_sorted_pretty;
 use mesa_stages::graph::GraphOptions;
