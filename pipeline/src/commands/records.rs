@@ -158,20 +158,11 @@ struct Planned {
     failed_check: Option<String>,
 }
 
-/// Why a scene's `mesa check` failed, or `None` when it passed or never ran: its marker
-/// records a failed run, or `qa/check.json` (of the layout as it is now) finds it not clean
-/// and no settled layout replaced it.
-fn failed_check(dataset: &Path, scene: &Scene) -> Option<String> {
-    let marker_file = crate::runner::marker_path(dataset, "check", scene);
-    if let Some(marker) = crate::runner::read_marker(&marker_file) {
-        if marker.status == MarkerStatus::Failed {
-            return Some(format!(
-                "`mesa check` failed: {} (recorded in {})",
-                marker.error.join(": "),
-                marker_file.display()
-            ));
-        }
-    }
+/// Why a scene failed its `mesa check`, or `None` when it passed or was never checked:
+/// `qa/check.json` (of the layout as it is now) finds it not clean and no settled layout
+/// replaced it. A check that could not run (a dataset without assets fails it for want of an
+/// asset index) wrote no verdict: the scene is kept, as an unchecked one.
+fn failed_check(scene: &Scene) -> Option<String> {
     let bytes = std::fs::read(scene.path(CHECK_FILE)).ok()?;
     let check: CheckArtifact = match serde_json::from_slice(&bytes) {
         Ok(check) => check,
@@ -213,7 +204,7 @@ fn failed_check(dataset: &Path, scene: &Scene) -> Option<String> {
     ))
 }
 
-fn plan_scene(dataset: &Path, keep_failed_check: bool, scene: Scene) -> Planned {
+fn plan_scene(keep_failed_check: bool, scene: Scene) -> Planned {
     if let Some(reason) = crate::scene_docs::awaiting_annotation(&scene) {
         return Planned {
             scene,
@@ -223,7 +214,7 @@ fn plan_scene(dataset: &Path, keep_failed_check: bool, scene: Scene) -> Planned 
         };
     }
     if !keep_failed_check {
-        if let Some(why) = failed_check(dataset, &scene) {
+        if let Some(why) = failed_check(&scene) {
             return Planned {
                 scene,
                 inputs: Err(why.clone()),
@@ -493,7 +484,7 @@ pub fn run_records(ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Resul
         let keep = config.records.keep_failed_check;
         scenes
             .into_par_iter()
-            .map(|scene| plan_scene(dataset, keep, scene))
+            .map(|scene| plan_scene(keep, scene))
             .collect()
     });
     let mut summary = RecordsSummary::default();

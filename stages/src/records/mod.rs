@@ -56,11 +56,11 @@ pub struct RecordsConfig {
     pub missing_object: corrupt::MissingObjectConfig,
     /// The share of scenes in each split.
     pub split: split::SplitRatios,
-    /// Keep the scenes whose `mesa check` failed: its run failed (its marker says so), or
-    /// qa/check.json finds the layout not clean (a collision, a floating object, a zone
-    /// violation, an object it could not check) and no settled layout replaced it. By default
-    /// they are left out of the records, listed in records/split.json and counted in the
-    /// summary. Scenes never checked are kept.
+    /// Keep the scenes that failed `mesa check`: qa/check.json finds the layout not clean (a
+    /// collision, a floating object, a zone violation, an object it could not check) and no
+    /// settled layout replaced it. By default they are left out of the records, listed in
+    /// records/split.json and counted in the summary. Scenes never checked (or whose check
+    /// could not run, e.g. without an asset index) are kept.
     pub keep_failed_check: bool,
 }
 
