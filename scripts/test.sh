@@ -3,7 +3,8 @@
 #   - a Python virtualenv with trimesh (PLY files are checked with it) and datasets (the
 #     training records are loaded with it, as LLaMA-Factory and TRL do): .venv-tools/
 #   - Blender 4.3 as a Python module (bpy, numpy<2) in its own virtualenv: .venv-blender/
-#   - the Khronos glTF validator from npm (every GLB we write is validated): scripts/node_modules/
+#   - from npm, the Khronos glTF validator (every GLB we write is validated) and gltf-transform
+#     (KHR_mesh_quantization and Draco test files): scripts/node_modules/
 # Extra arguments go to `cargo test`.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -4,7 +4,7 @@
 //! still awaits its annotator.
 
 use anyhow::{anyhow, bail, Context as _};
-use mesa_schemas::artifacts::GraphArtifact;
+use mesa_schemas::artifacts::{GraphArtifact, MarkerStatus};
 use mesa_schemas::convert::llm_from_dataset;
 use mesa_schemas::layout_file::AnyLayout;
 use mesa_schemas::LlmLayout;
@@ -14,7 +14,7 @@ use mesa_stages::paths::scene::{
 
 use crate::fsio::{read_text_bounded, JSON_LIMIT};
 use crate::layouts::{chosen_layout, read_layout_file};
-use crate::runner::Scene;
+use crate::runner::{marker_path, read_marker, Scene};
 
 /// A scene's layout and scene graph.
 #[derive(Debug, Clone, PartialEq)]
@@ -34,7 +34,8 @@ pub struct SceneDocs {
 }
 
 /// Why a scene cannot go past `ingest` yet: it has no refined (or settled) layout because its
-/// annotator has not returned the edited scene, or it was not ingested yet. `None` when it has
+/// annotator has not returned the edited scene, it was not ingested yet, or its ingest failed
+/// (the error, and the marker that keeps it). `None` when it has
 /// one, or when it is not that far (no coarse layout: the stages before fail instead).
 pub fn awaiting_annotation(scene: &Scene) -> Option<String> {
     if chosen_layout(scene).is_some() || !scene.path(COARSE_LAYOUT).is_file() {
@@ -42,11 +43,38 @@ pub fn awaiting_annotation(scene: &Scene) -> Option<String> {
     }
     let refined = refined_glb(&scene.scene_id);
     if scene.path(&refined).is_file() {
+        if let Some(failure) = failed_ingest(scene) {
+            return Some(failure);
+        }
         return Some(format!(
             "{refined} is in but not ingested yet (run `mesa ingest`)"
         ));
     }
     Some(awaiting_edit(scene))
+}
+
+/// The failure of the scene's last `mesa ingest`, when its marker records one: the error and
+/// where it is kept, so a later stage does not call an edit that could not be read "not
+/// ingested yet".
+fn failed_ingest(scene: &Scene) -> Option<String> {
+    // The scene folder is `<dataset>/scenes/<table_type>/<scene_id>`.
+    let dataset = scene.dir.ancestors().nth(3)?;
+    let marker_file = marker_path(dataset, "ingest", scene);
+    let marker = read_marker(&marker_file)?;
+    if marker.status != MarkerStatus::Failed {
+        return None;
+    }
+    let error = if marker.error.is_empty() {
+        "no error recorded".to_owned()
+    } else {
+        marker.error.join(": ")
+    };
+    Some(format!(
+        "ingest failed: {error} (recorded in {}; fix the edited scene {} and run `mesa ingest` \
+         again)",
+        marker_file.display(),
+        scene.rel(&refined_glb(&scene.scene_id))
+    ))
 }
 
 /// What a scene without the annotator's edited GLB waits for: the pack to send and where the

@@ -63,7 +63,7 @@ fn the_real_library_is_indexed_with_a_verdict_for_every_glb() {
         [
             ("BoxMeshopt", "unsupported_extension"),
             ("box-textured-binary-separate", "external_uri"),
-            ("box-textured-binary_gltf1", "gltf1"),
+            ("box-textured-binary_gltf1", "GLB_INVALID_VERSION"),
             ("empty_nodes", "no_mesh"),
             ("quad_skin", "zero_size_axis"),
         ]

@@ -364,10 +364,137 @@ fn a_damaged_edited_file_fails_its_scene_alone_with_no_output() {
     assert!(stderr.contains("1 done, 0 skipped, 1 failed"), "{stderr}");
     let bad = scene_id(&scenes[0]);
     assert!(
-        stderr.contains(&format!("refined/{bad}.glb: GLB_LENGTH_MISMATCH")),
+        stderr.contains(&format!(
+            "refined/{bad}.glb: GLB_UNEXPECTED_END_OF_CHUNK_DATA"
+        )),
         "{stderr}"
     );
     assert!(!scenes[0].join("refined/layout.json").exists());
     assert!(!scenes[0].join("refined/diff.json").exists());
+    assert!(scenes[1].join("refined/layout.json").is_file());
+}
+
+#[test]
+fn a_failed_ingest_is_reported_by_later_stages_as_failed_not_as_not_ingested_yet() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ws = human_workspace(dir.path());
+    let (code, stderr) = run(&["run", "--progress", "off"], &ws);
+    assert_eq!(code, Some(0), "{stderr}");
+    let scenes = scene_dirs(&ws);
+    for (k, scene) in scenes.iter().enumerate() {
+        let id = scene_id(scene);
+        let pack = std::fs::read(scene.join(format!("pack/{id}.glb"))).expect("pack");
+        let refined = if k == 0 {
+            pack[..pack.len() - 100].to_vec()
+        } else {
+            pack
+        };
+        std::fs::create_dir_all(scene.join("refined")).expect("mkdir");
+        std::fs::write(scene.join(format!("refined/{id}.glb")), refined).expect("write");
+    }
+    let bad = scene_id(&scenes[0]);
+    // Control: an edit that was never ingested is "not ingested yet".
+    let (code, stderr) = run(&["graph", "--progress", "off"], &ws);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(
+        stderr.contains(&format!("refined/{bad}.glb is in but not ingested yet")),
+        "{stderr}"
+    );
+    let (code, stderr) = run(&["ingest", "--progress", "off"], &ws);
+    assert_eq!(code, Some(1), "{stderr}");
+    // Once its ingest failed, the later stages say so, with the error and where it is kept;
+    // the other scene goes on.
+    let (code, stderr) = run(&["graph", "--progress", "off"], &ws);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(stderr.contains("graph: 2 scenes: 1 done"), "{stderr}");
+    assert!(!stderr.contains("not ingested yet"), "{stderr}");
+    let marker = format!(".mesa/markers/ingest/{}/{bad}.json", {
+        let table = scenes[0].parent().expect("table folder");
+        table
+            .file_name()
+            .expect("name")
+            .to_string_lossy()
+            .into_owned()
+    });
+    for expected in [
+        "ingest failed: ",
+        &format!("refined/{bad}.glb: GLB_UNEXPECTED_END_OF_CHUNK_DATA"),
+        &marker,
+        "fix the edited scene scenes/",
+        "and run `mesa ingest` again",
+    ] {
+        assert!(stderr.contains(expected), "{expected}: {stderr}");
+    }
+    let out = mesa().arg("status").arg(&ws).output().expect("runs");
+    let status = String::from_utf8_lossy(&out.stdout);
+    assert!(!status.contains("not ingested yet"), "{status}");
+}
+
+/// A GLB with its JSON chunk edited by `edit` (the BIN chunk kept as it is).
+fn edit_glb_json(glb: &[u8], edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().expect("4 bytes")) as usize;
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&glb[20..20 + json_len]).expect("JSON chunk");
+    edit(&mut json);
+    let rest = &glb[20 + json_len..];
+    let mut text = serde_json::to_vec(&json).expect("json");
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    let mut out = b"glTF".to_vec();
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&((12 + 8 + text.len() + rest.len()) as u32).to_le_bytes());
+    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&text);
+    out.extend_from_slice(rest);
+    out
+}
+
+#[test]
+fn an_absurd_scale_fails_its_scene_alone_naming_the_file_the_node_and_the_fix() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ws = human_workspace(dir.path());
+    let (code, stderr) = run(&["run", "--progress", "off"], &ws);
+    assert_eq!(code, Some(0), "{stderr}");
+    let scenes = scene_dirs(&ws);
+    let mut scaled = String::new();
+    for (k, scene) in scenes.iter().enumerate() {
+        let id = scene_id(scene);
+        let pack = std::fs::read(scene.join(format!("pack/{id}.glb"))).expect("pack");
+        let refined = if k == 0 {
+            edit_glb_json(&pack, |j| {
+                // The first object node of the pack (not the table, the zone or the figure).
+                let nodes = j["nodes"].as_array_mut().expect("nodes");
+                let node = nodes
+                    .iter_mut()
+                    .find(|n| {
+                        n["mesh"].is_u64()
+                            && !["table", "restricted_zone", "H1_reference"]
+                                .contains(&n["name"].as_str().unwrap_or(""))
+                    })
+                    .expect("an object node");
+                scaled = node["name"].as_str().expect("name").to_owned();
+                node["scale"] = serde_json::json!([1e30, 1e30, 1e30]);
+            })
+        } else {
+            pack
+        };
+        std::fs::create_dir_all(scene.join("refined")).expect("mkdir");
+        std::fs::write(scene.join(format!("refined/{id}.glb")), refined).expect("write");
+    }
+    let (code, stderr) = run(&["ingest", "--progress", "off"], &ws);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("1 done, 0 skipped, 1 failed"), "{stderr}");
+    let bad = scene_id(&scenes[0]);
+    for expected in [
+        format!("refined/{bad}.glb: nodes["),
+        format!("\"{scaled}\".scale: the object is "),
+        "[ingest] max_size_over_table".to_owned(),
+        "(fix: scale the object back".to_owned(),
+    ] {
+        assert!(stderr.contains(&expected), "{expected}: {stderr}");
+    }
+    assert!(!scenes[0].join("refined/layout.json").exists());
     assert!(scenes[1].join("refined/layout.json").is_file());
 }

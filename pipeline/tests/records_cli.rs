@@ -597,3 +597,92 @@ fn on_the_demo_mesa_run_writes_sft_and_dpo_records() {
     assert_eq!(kinds.values().sum::<usize>(), 10);
     assert!(per_prompt.values().all(|k| k.len() == 2), "{per_prompt:?}");
 }
+
+/// Writes `qa/check.json` for a scene's refined layout: `clean`, with one collision when not;
+/// `stale` gives it the digest of another layout.
+fn write_check(scene: &Path, clean: bool, stale: bool) {
+    use mesa_schemas::artifacts::{CheckArtifact, CollisionPair};
+    let layout = std::fs::read(scene.join("refined/layout.json")).expect("layout");
+    let digest = mesa_pipeline::fsio::sha256_hex(if stale { b"another layout" } else { &layout });
+    let check = CheckArtifact {
+        schema: "mesa.check/1".to_owned(),
+        scene_id: scene
+            .file_name()
+            .expect("name")
+            .to_string_lossy()
+            .into_owned(),
+        layout: "refined/layout.json".to_owned(),
+        layout_sha256: digest,
+        penetration_tolerance_mm: 2.0,
+        floating_tolerance_mm: 5.0,
+        zone_tolerance_mm: 5.0,
+        mesatask_rule_distance_cm: 5.0,
+        objects: 2,
+        unchecked: Vec::new(),
+        collisions: if clean {
+            Vec::new()
+        } else {
+            vec![CollisionPair {
+                a: "a_0".to_owned(),
+                b: "b_0".to_owned(),
+                depth_mm: 12.0,
+            }]
+        },
+        floating: Vec::new(),
+        zone_violations: Vec::new(),
+        pairs_total: 1,
+        collision_rate: if clean { 0.0 } else { 1.0 },
+        mesatask_rule_pairs: 0,
+        clean,
+        settle: None,
+    };
+    std::fs::create_dir_all(scene.join("qa")).expect("mkdir");
+    std::fs::write(
+        scene.join("qa/check.json"),
+        mesa_schemas::json::to_sorted_pretty(&check).expect("json"),
+    )
+    .expect("write check");
+}
+
+#[test]
+fn scenes_whose_check_failed_are_left_out_and_counted_unless_kept() {
+    let dir = built();
+    let scenes = dir.path().join("scenes");
+    let failed = scenes.join("dining_table/dining_table_0001");
+    // Controls: a clean check, and a failed check of another version of the layout.
+    write_check(&failed, false, false);
+    write_check(&scenes.join("office_table/office_table_0002"), true, false);
+    write_check(&scenes.join("coffee_table/coffee_table_0007"), false, true);
+    let stderr = ok(&["records", "--progress", "off"], dir.path());
+    assert!(stderr.contains("records: 6 scenes"), "{stderr}");
+    for expected in [
+        "left out 1 scenes whose check failed ([records] keep_failed_check = true keeps them",
+        "dining_table/dining_table_0001: qa/check.json: refined/layout.json is not clean: 1 \
+         collisions, 0 floating objects, 0 zone violations, 0 objects unchecked",
+    ] {
+        assert!(stderr.contains(expected), "{expected}: {stderr}");
+    }
+    let split: SplitArtifact = read(&dir.path().join("records/split.json"));
+    assert!(!split.scenes.contains_key("dining_table/dining_table_0001"));
+    assert!(split.scenes.contains_key("office_table/office_table_0002"));
+    assert!(split.scenes.contains_key("coffee_table/coffee_table_0007"));
+    assert!(
+        split.excluded["dining_table/dining_table_0001"].contains("is not clean"),
+        "{:?}",
+        split.excluded
+    );
+    // The run's record counts it.
+    let run: Value = read(&dir.path().join(".mesa/runs/records/run.json"));
+    assert!(run.to_string().contains("failed_check"), "{run}");
+
+    // Kept when configured: every scene has records again.
+    std::fs::write(
+        dir.path().join("mesa.toml"),
+        "[records]\nkeep_failed_check = true\n[records.split]\ntrain = 0.6\ndpo = 0.25\ntest = \
+         0.15\n",
+    )
+    .expect("config");
+    let stderr = ok(&["records", "--progress", "off"], dir.path());
+    assert!(stderr.contains("records: 7 scenes"), "{stderr}");
+    assert!(!stderr.contains("left out"), "{stderr}");
+}

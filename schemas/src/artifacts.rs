@@ -288,7 +288,9 @@ pub struct AssetRecord {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
     /// A short code for the reason: a glTF-Validator code for a damaged container
-    /// (`GLB_LENGTH_MISMATCH`, ...), else `not_glb`, `gltf1`, `json`, `version`, `invalid_gltf`,
+    /// (`GLB_LENGTH_MISMATCH`, ...; a GLB of version 1 is `GLB_INVALID_VERSION`, bytes that are
+    /// not a GLB `GLB_INVALID_MAGIC`), else `not_glb` (a glTF JSON file), `gltf1`, `json`,
+    /// `version`, `invalid_gltf`,
     /// `unsupported_extension`, `external_uri`, `data`, `draco`, `no_mesh`, `zero_size_axis`,
     /// `io` (the file cannot be read), `internal`.
     #[serde(default, skip_serializing_if = "Option::is_none")]

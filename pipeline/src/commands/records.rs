@@ -20,7 +20,8 @@ use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context as _};
 use mesa_schemas::artifacts::{
-    MarkerStatus, RunMarker, SplitArtifact, TaskRecord, MARKER_SCHEMA, SPLIT_SCHEMA,
+    CheckArtifact, MarkerStatus, RunMarker, SettleStatus, SplitArtifact, TaskRecord, MARKER_SCHEMA,
+    SPLIT_SCHEMA,
 };
 use mesa_schemas::json::to_sorted_pretty;
 use mesa_stages::graph::GraphOptions;
@@ -37,7 +38,7 @@ use serde::Serialize;
 use sha2::{Digest as _, Sha256};
 
 use mesa_stages::paths::dataset::INDEX;
-use mesa_stages::paths::scene::{GRAPH_JSON, GRAPH_TXT, TASKS as TASKS_FILE};
+use mesa_stages::paths::scene::{CHECK as CHECK_FILE, GRAPH_JSON, GRAPH_TXT, TASKS as TASKS_FILE};
 use mesa_stages::records::collide::Collider;
 
 use crate::cli::{DatasetStageArgs, Global};
@@ -109,6 +110,9 @@ pub struct RecordsSummary {
     pub excluded: BTreeMap<String, String>,
     /// Scenes left out because they await their annotator (not a failure).
     pub waiting: BTreeMap<String, String>,
+    /// Scenes left out because their `mesa check` failed, with what it found (not a failure
+    /// of the records: `[records] keep_failed_check` keeps them).
+    pub failed_check: BTreeMap<String, String>,
     /// Scenes per split.
     pub splits: BTreeMap<String, usize>,
     /// Records per file.
@@ -150,15 +154,74 @@ struct Planned {
     inputs: Result<String, String>,
     /// Why the scene has no records yet, when it awaits its annotator.
     waiting: Option<String>,
+    /// What its check found, when the scene is left out for it.
+    failed_check: Option<String>,
 }
 
-fn plan_scene(scene: Scene) -> Planned {
+/// Why a scene failed its `mesa check`, or `None` when it passed or was never checked:
+/// `qa/check.json` (of the layout as it is now) finds it not clean and no settled layout
+/// replaced it. A check that could not run (a dataset without assets fails it for want of an
+/// asset index) wrote no verdict: the scene is kept, as an unchecked one.
+fn failed_check(scene: &Scene) -> Option<String> {
+    let bytes = std::fs::read(scene.path(CHECK_FILE)).ok()?;
+    let check: CheckArtifact = match serde_json::from_slice(&bytes) {
+        Ok(check) => check,
+        Err(e) => {
+            return Some(format!(
+                "{CHECK_FILE}: cannot be read: {e} (rerun `mesa check --force`)"
+            ))
+        }
+    };
+    // A check of another version of the layout says nothing of this one (and a layout path
+    // that leaves the scene folder names none of its layouts).
+    let inside = std::path::Path::new(&check.layout)
+        .components()
+        .all(|c| matches!(c, std::path::Component::Normal(_)));
+    if !inside {
+        return None;
+    }
+    let checked = std::fs::read(scene.path(&check.layout)).ok()?;
+    if sha256_hex(&checked) != check.layout_sha256 {
+        return None;
+    }
+    if check.clean
+        || check
+            .settle
+            .as_ref()
+            .is_some_and(|s| s.status == SettleStatus::Settled)
+    {
+        return None;
+    }
+    Some(format!(
+        "{CHECK_FILE}: {} is not clean: {} collisions, {} floating objects, {} zone violations, \
+         {} objects unchecked (fix the layout, or settle it with `mesa check --settle`; \
+         [records] keep_failed_check = true keeps it)",
+        check.layout,
+        check.collisions.len(),
+        check.floating.len(),
+        check.zone_violations.len(),
+        check.unchecked.len()
+    ))
+}
+
+fn plan_scene(keep_failed_check: bool, scene: Scene) -> Planned {
     if let Some(reason) = crate::scene_docs::awaiting_annotation(&scene) {
         return Planned {
             scene,
             inputs: Err(reason.clone()),
             waiting: Some(reason),
+            failed_check: None,
         };
+    }
+    if !keep_failed_check {
+        if let Some(why) = failed_check(&scene) {
+            return Planned {
+                scene,
+                inputs: Err(why.clone()),
+                waiting: None,
+                failed_check: Some(why),
+            };
+        }
     }
     let inputs = (|| -> Result<String, String> {
         let tasks_path = scene.path(TASKS_FILE);
@@ -198,6 +261,7 @@ fn plan_scene(scene: Scene) -> Planned {
         scene,
         inputs,
         waiting: None,
+        failed_check: None,
     }
 }
 
@@ -417,7 +481,11 @@ pub fn run_records(ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Resul
     // 1. Which scenes have current tasks, and the digests of what their records read.
     let planned: Vec<Planned> = exec.install(|| {
         use rayon::prelude::*;
-        scenes.into_par_iter().map(plan_scene).collect()
+        let keep = config.records.keep_failed_check;
+        scenes
+            .into_par_iter()
+            .map(|scene| plan_scene(keep, scene))
+            .collect()
     });
     let mut summary = RecordsSummary::default();
     // One line per scene, in scene order, into one digest: nothing per scene stays in memory.
@@ -434,6 +502,8 @@ pub fn run_records(ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Resul
                 inputs.update(format!("{key} excluded: {why}\n"));
                 if plan.waiting.is_some() {
                     summary.waiting.insert(key, why);
+                } else if plan.failed_check.is_some() {
+                    summary.failed_check.insert(key, why);
                 } else {
                     summary.excluded.insert(key, why);
                 }
@@ -466,6 +536,20 @@ pub fn run_records(ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Resul
         summary.nothing_ready = true;
         summary.elapsed_s = started.elapsed().as_secs_f64();
         return Ok(summary);
+    }
+    if included.is_empty() && summary.excluded.is_empty() && !summary.failed_check.is_empty() {
+        bail!(
+            "{}: every scene that has tasks failed its check ({} scenes; {}): no records (fix \
+             the layouts, or set [records] keep_failed_check = true to keep them)",
+            dataset.display(),
+            summary.failed_check.len(),
+            summary
+                .failed_check
+                .iter()
+                .next()
+                .map(|(scene, why)| format!("{scene}: {why}"))
+                .unwrap_or_default()
+        );
     }
     if included.is_empty() {
         bail!(
@@ -591,6 +675,7 @@ pub fn run_records(ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Resul
             .excluded
             .iter()
             .chain(&summary.waiting)
+            .chain(&summary.failed_check)
             .map(|(k, v)| (k.clone(), v.clone()))
             .collect(),
     };
@@ -642,8 +727,16 @@ pub fn format_records_summary(summary: &RecordsSummary) -> String {
         let _ = writeln!(
             out,
             "records: up to date (nothing they read changed; --force rebuilds them), {} scenes \
-             without records",
-            summary.excluded.len()
+             without records{}",
+            summary.excluded.len(),
+            if summary.failed_check.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    ", {} left out because their check failed",
+                    summary.failed_check.len()
+                )
+            }
         );
         return out;
     }
@@ -663,6 +756,25 @@ pub fn format_records_summary(summary: &RecordsSummary) -> String {
         summary.elapsed_s,
         total as f64 / summary.elapsed_s.max(1e-9)
     );
+    if !summary.failed_check.is_empty() {
+        let _ = writeln!(
+            out,
+            "  left out {} scenes whose check failed ([records] keep_failed_check = true keeps \
+             them; records/split.json lists them):",
+            summary.failed_check.len()
+        );
+        const SHOWN: usize = 10;
+        for (scene, why) in summary.failed_check.iter().take(SHOWN) {
+            let _ = writeln!(out, "    {scene}: {why}");
+        }
+        if summary.failed_check.len() > SHOWN {
+            let _ = writeln!(
+                out,
+                "    ... and {} more",
+                summary.failed_check.len() - SHOWN
+            );
+        }
+    }
     for file in [
         SFT_FILE,
         TEST_FILE,

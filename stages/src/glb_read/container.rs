@@ -22,11 +22,16 @@ fn u32_at(bytes: &[u8], offset: usize) -> Option<u32> {
     Some(u32::from_le_bytes([slice[0], slice[1], slice[2], slice[3]]))
 }
 
+/// The fix of a damaged container.
+const DAMAGED_FIX: &str =
+    "the file is damaged or was not written completely: re-export or re-download it";
+
 fn container(code: &'static str, offset: usize, problem: String) -> GlbError {
     GlbError::Container {
         code,
         offset,
         problem,
+        fix: DAMAGED_FIX,
     }
 }
 
@@ -40,6 +45,13 @@ fn chunk_name(kind: u32) -> String {
 
 /// Splits a GLB file into its chunks; `warnings` receives what the validator reports as
 /// warnings or infos (trailing bytes, unknown chunks, an empty BIN chunk).
+///
+/// The file is read as the validator reads it, as a stream: chunk headers and data from the
+/// bytes present, each chunk's length checked against the declared total length
+/// (`GLB_CHUNK_TOO_BIG`) and then against the bytes present
+/// (`GLB_UNEXPECTED_END_OF_CHUNK_DATA`); a file that ends at a chunk boundary before its
+/// declared length is `GLB_LENGTH_MISMATCH`. The first error the validator reports is the
+/// one returned.
 pub(crate) fn split<'a>(
     bytes: &'a [u8],
     warnings: &mut Vec<String>,
@@ -63,32 +75,21 @@ pub(crate) fn split<'a>(
     // Checked above: at least 12 bytes.
     let version = u32_at(bytes, 4).unwrap_or(0);
     if version == 1 {
-        return Err(GlbError::Gltf1);
+        return Err(GlbError::Container {
+            code: "GLB_INVALID_VERSION",
+            offset: 4,
+            problem: "GLB version 1 is glTF 1.0 (KHR_binary_glTF): mesa reads glTF 2.0".to_owned(),
+            fix: GLTF1_FIX,
+        });
     }
     if version != 2 {
         return Err(container(
-            "GLB_UNKNOWN_VERSION",
+            "GLB_INVALID_VERSION",
             4,
             format!("GLB version {version} (expected 2, glTF 2.0)"),
         ));
     }
     let declared = u32_at(bytes, 8).unwrap_or(0) as usize;
-    if declared > bytes.len() {
-        return Err(container(
-            "GLB_LENGTH_MISMATCH",
-            8,
-            format!(
-                "the header declares {declared} bytes but the file has {} (it is truncated)",
-                bytes.len()
-            ),
-        ));
-    }
-    if declared < bytes.len() {
-        warnings.push(format!(
-            "GLB_EXTRA_DATA: {} bytes after the declared end of the GLB ({declared} bytes) are ignored",
-            bytes.len() - declared
-        ));
-    }
     if declared <= 12 {
         return Err(container(
             "GLB_LENGTH_TOO_SMALL",
@@ -96,48 +97,37 @@ pub(crate) fn split<'a>(
             format!("the header declares {declared} bytes: no room for a JSON chunk"),
         ));
     }
-    let data = &bytes[..declared];
     let mut json: Option<&[u8]> = None;
     let mut bin: Option<&[u8]> = None;
     let mut offset = 12;
-    let mut first = true;
-    while offset < data.len() {
-        if data.len() - offset < 8 {
+    let mut index = 0usize;
+    while offset < declared {
+        if bytes.len() < offset + 8 {
+            if bytes.len() == offset {
+                return Err(container(
+                    "GLB_LENGTH_MISMATCH",
+                    offset,
+                    format!(
+                        "the header declares {declared} bytes but the file has {} (it is \
+                         truncated)",
+                        bytes.len()
+                    ),
+                ));
+            }
             return Err(container(
                 "GLB_UNEXPECTED_END_OF_CHUNK_HEADER",
                 offset,
                 format!(
                     "{} bytes left where an 8-byte chunk header should be",
-                    data.len() - offset
+                    bytes.len() - offset
                 ),
             ));
         }
         // Both read within the 8 bytes checked just above.
-        let length = u32_at(data, offset).unwrap_or(0) as usize;
-        let kind = u32_at(data, offset + 4).unwrap_or(0);
+        let length = u32_at(bytes, offset).unwrap_or(0) as usize;
+        let kind = u32_at(bytes, offset + 4).unwrap_or(0);
         let start = offset + 8;
-        let end = start
-            .checked_add(length)
-            .filter(|end| *end <= data.len())
-            .ok_or_else(|| {
-                container(
-                    "GLB_CHUNK_TOO_BIG",
-                    offset,
-                    format!(
-                        "the {} chunk declares {length} bytes but only {} remain",
-                        chunk_name(kind),
-                        data.len() - start
-                    ),
-                )
-            })?;
-        if length % 4 != 0 {
-            warnings.push(format!(
-                "GLB_CHUNK_LENGTH_UNALIGNED: the {} chunk at byte {offset} has {length} bytes, \
-                 not a multiple of 4",
-                chunk_name(kind)
-            ));
-        }
-        if first && kind != CHUNK_JSON {
+        if index == 0 && kind != CHUNK_JSON {
             return Err(container(
                 "GLB_UNEXPECTED_FIRST_CHUNK",
                 offset,
@@ -147,7 +137,42 @@ pub(crate) fn split<'a>(
                 ),
             ));
         }
-        let body = &data[start..end];
+        if length % 4 != 0 {
+            return Err(container(
+                "GLB_CHUNK_LENGTH_UNALIGNED",
+                offset,
+                format!(
+                    "the {} chunk has {length} bytes, not a multiple of 4 (glTF 2.0 pads every \
+                     chunk to 4 bytes)",
+                    chunk_name(kind)
+                ),
+            ));
+        }
+        let end = start.saturating_add(length);
+        if end > declared {
+            return Err(container(
+                "GLB_CHUNK_TOO_BIG",
+                offset,
+                format!(
+                    "the {} chunk declares {length} bytes, which do not fit the {declared} \
+                     bytes the header declares",
+                    chunk_name(kind)
+                ),
+            ));
+        }
+        if end > bytes.len() {
+            return Err(container(
+                "GLB_UNEXPECTED_END_OF_CHUNK_DATA",
+                bytes.len(),
+                format!(
+                    "the {} chunk declares {length} bytes but the file ends after {} (it is \
+                     truncated)",
+                    chunk_name(kind),
+                    bytes.len() - start
+                ),
+            ));
+        }
+        let body = &bytes[start..end];
         match kind {
             CHUNK_JSON => {
                 if json.is_some() {
@@ -174,6 +199,17 @@ pub(crate) fn split<'a>(
                         "a second BIN chunk (expected at most one)".to_owned(),
                     ));
                 }
+                if index != 1 {
+                    return Err(container(
+                        "GLB_UNEXPECTED_BIN_CHUNK",
+                        offset,
+                        format!(
+                            "the BIN chunk is chunk {} (expected it second, right after the \
+                             JSON chunk)",
+                            index + 1
+                        ),
+                    ));
+                }
                 if body.is_empty() {
                     warnings.push(format!(
                         "GLB_EMPTY_BIN_CHUNK: the BIN chunk at byte {offset} is empty"
@@ -185,8 +221,14 @@ pub(crate) fn split<'a>(
                 "GLB_UNKNOWN_CHUNK_TYPE: chunk of type 0x{other:08x} at byte {offset} is ignored"
             )),
         }
-        first = false;
+        index += 1;
         offset = end;
+    }
+    if declared < bytes.len() {
+        warnings.push(format!(
+            "GLB_EXTRA_DATA: {} bytes after the declared end of the GLB ({declared} bytes) are ignored",
+            bytes.len() - declared
+        ));
     }
     let json = json.ok_or_else(|| {
         container(
@@ -198,18 +240,26 @@ pub(crate) fn split<'a>(
     Ok(Chunks { json, bin })
 }
 
+/// How to read a glTF 1.0 file.
+const GLTF1_FIX: &str = "convert it with gltf-pipeline, `npx gltf-pipeline -i in.glb -o \
+     out.glb`, or re-export it from its source as glTF 2.0 Binary";
+
 fn not_glb(bytes: &[u8]) -> GlbError {
     let start = bytes.iter().copied().find(|b| !b.is_ascii_whitespace());
-    let problem = if start == Some(b'{') {
-        "this is a glTF JSON file (.gltf), not a binary GLB".to_owned()
-    } else {
-        let shown: Vec<String> = bytes.iter().take(4).map(|b| format!("{b:02x}")).collect();
-        format!(
+    if start == Some(b'{') {
+        return GlbError::NotGlb {
+            code: "not_glb",
+            problem: "this is a glTF JSON file (.gltf), not a binary GLB".to_owned(),
+        };
+    }
+    let shown: Vec<String> = bytes.iter().take(4).map(|b| format!("{b:02x}")).collect();
+    GlbError::NotGlb {
+        code: "GLB_INVALID_MAGIC",
+        problem: format!(
             "GLB_INVALID_MAGIC: the file starts with {} (expected \"glTF\")",
             shown.join(" ")
-        )
-    };
-    GlbError::NotGlb { problem }
+        ),
+    }
 }
 
 #[cfg(test)]
@@ -252,7 +302,10 @@ mod tests {
         assert_eq!(code(b"{\"asset\": {}}"), "not_glb");
         let mut v1 = glb(&[(CHUNK_JSON, b"{}  ")]);
         v1[4] = 1;
-        assert_eq!(code(&v1), "gltf1");
+        assert_eq!(code(&v1), "GLB_INVALID_VERSION");
+        let mut v3 = glb(&[(CHUNK_JSON, b"{}  ")]);
+        v3[4] = 3;
+        assert_eq!(code(&v3), "GLB_INVALID_VERSION");
         let mut long = glb(&[(CHUNK_JSON, b"{}  ")]);
         long[8] += 4;
         assert_eq!(code(&long), "GLB_LENGTH_MISMATCH");
@@ -274,6 +327,30 @@ mod tests {
         let mut big = glb(&[(CHUNK_JSON, b"{}  ")]);
         big[12] = 200;
         assert_eq!(code(&big), "GLB_CHUNK_TOO_BIG");
+        assert_eq!(
+            code(&glb(&[(CHUNK_JSON, b"{} ")])),
+            "GLB_CHUNK_LENGTH_UNALIGNED"
+        );
+        assert_eq!(
+            code(&glb(&[
+                (CHUNK_JSON, b"{}  "),
+                (0x1234_5678, b"xxxx"),
+                (CHUNK_BIN, b"abcd")
+            ])),
+            "GLB_UNEXPECTED_BIN_CHUNK"
+        );
+        // The declared length holds the BIN chunk but the file ends inside it.
+        let whole = glb(&[(CHUNK_JSON, b"{}  "), (CHUNK_BIN, b"abcdefgh")]);
+        assert_eq!(
+            code(&whole[..whole.len() - 4]),
+            "GLB_UNEXPECTED_END_OF_CHUNK_DATA"
+        );
+        // ... inside its header, or right before it.
+        assert_eq!(code(&whole[..28]), "GLB_UNEXPECTED_END_OF_CHUNK_HEADER");
+        assert_eq!(code(&whole[..24]), "GLB_LENGTH_MISMATCH");
+        // Controls: the same files without the defect.
+        assert_eq!(code(&whole), "ok");
+        assert_eq!(code(&glb(&[(CHUNK_JSON, b"{}  ")])), "ok");
     }
 
     #[test]
@@ -283,10 +360,10 @@ mod tests {
         let mut warnings = Vec::new();
         split(&bytes, &mut warnings).expect("valid");
         assert_eq!(warnings.len(), 2, "{warnings:?}");
-        assert!(warnings[0].starts_with("GLB_EXTRA_DATA"), "{warnings:?}");
         assert!(
-            warnings[1].starts_with("GLB_UNKNOWN_CHUNK_TYPE"),
+            warnings[0].starts_with("GLB_UNKNOWN_CHUNK_TYPE"),
             "{warnings:?}"
         );
+        assert!(warnings[1].starts_with("GLB_EXTRA_DATA"), "{warnings:?}");
     }
 }

@@ -7,7 +7,6 @@
 //! TRIANGLES and TRIANGLE_STRIP, and a decoded Draco mesh is always a triangle list).
 
 use draco_oxide_core::attribute::ComponentDataType;
-use draco_oxide_core::types::{NdVector, PointIdx, Vector};
 use serde_json::Value;
 
 use super::accessor::Buffers;
@@ -45,17 +44,22 @@ pub(crate) fn decode_primitive(
     extension: &Value,
     path: &str,
 ) -> Result<DracoPrimitive, GlbError> {
-    decode_primitive_with(root, buffers, extension, path, &[])
+    decode_primitive_with(root, buffers, extension, path, &[], &|_| false)
 }
 
 /// [`decode_primitive`], also returning the attributes named in `wanted` (glTF attribute
-/// names) that the stream holds as 32-bit floats; others are left out.
+/// names) that the stream holds as 32-bit floats (and NORMAL and TEXCOORD_n also as 8- or
+/// 16-bit integers, `KHR_mesh_quantization`); others are left out. `normalized(name)` is the
+/// `normalized` flag of the accessor of attribute `name`: the extension's accessors describe
+/// the decoded data, so a normalized integer attribute is mapped to [0, 1] or [-1, 1] as
+/// glTF 2.0 §3.11 says, and the node transform carries the rest of the dequantization.
 pub(crate) fn decode_primitive_with(
     root: &gltf_json::Root,
     buffers: &Buffers<'_>,
     extension: &Value,
     path: &str,
     wanted: &[&str],
+    normalized: &dyn Fn(&str) -> bool,
 ) -> Result<DracoPrimitive, GlbError> {
     let view_index = extension
         .get("bufferView")
@@ -108,29 +112,21 @@ pub(crate) fn decode_primitive_with(
                 format!("the stream has no attribute with the POSITION id {position_id}"),
             )
         })?;
-    if attribute.get_num_components() != 3
-        || attribute.get_component_type() != ComponentDataType::F32
-    {
-        return Err(draco_error(
-            path,
-            format!(
-                "POSITION decodes to {} components of {:?} (expected 3 floats)",
-                attribute.get_num_components(),
-                attribute.get_component_type()
-            ),
-        ));
-    }
-    let points = attribute.len();
-    let positions = (0..points)
-        .map(|i| {
-            let v: NdVector<3, f32> = attribute.get(PointIdx::from(i));
-            [
-                f64::from(*v.get(0)),
-                f64::from(*v.get(1)),
-                f64::from(*v.get(2)),
-            ]
-        })
-        .collect();
+    let positions: Vec<[f64; 3]> = match attribute_values(attribute, normalized("POSITION")) {
+        Some((values, 3)) => values.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        _ => {
+            return Err(draco_error(
+                path,
+                format!(
+                    "POSITION decodes to {} components of {:?} (expected 3 floats, or 3 8- or \
+                     16-bit integers with KHR_mesh_quantization)",
+                    attribute.get_num_components(),
+                    attribute.get_component_type()
+                ),
+            ))
+        }
+    };
+    let points = positions.len();
     let mut triangles = Vec::with_capacity(decoded.faces.len());
     for face in &decoded.faces {
         let mut tri = [0u32; 3];
@@ -163,30 +159,19 @@ pub(crate) fn decode_primitive_with(
         else {
             continue;
         };
-        if attribute.get_component_type() != ComponentDataType::F32 || attribute.len() != points {
+        // Integer NORMAL and TEXCOORD_n are KHR_mesh_quantization's; other integer attributes
+        // (colours, joints) are left to the uncompressed readers, as before.
+        let quantizable = *name == "NORMAL" || name.starts_with("TEXCOORD_");
+        if attribute.get_component_type() != ComponentDataType::F32 && !quantizable {
             continue;
         }
-        let width = attribute.get_num_components();
-        let mut values = Vec::with_capacity(points * width);
-        for i in 0..points {
-            match width {
-                2 => {
-                    let v: NdVector<2, f32> = attribute.get(PointIdx::from(i));
-                    values.extend([f64::from(*v.get(0)), f64::from(*v.get(1))]);
-                }
-                3 => {
-                    let v: NdVector<3, f32> = attribute.get(PointIdx::from(i));
-                    values.extend((0..3).map(|k| f64::from(*v.get(k))));
-                }
-                4 => {
-                    let v: NdVector<4, f32> = attribute.get(PointIdx::from(i));
-                    values.extend((0..4).map(|k| f64::from(*v.get(k))));
-                }
-                _ => break,
-            }
+        if attribute.len() != points {
+            continue;
         }
-        if values.len() == points * width {
-            extra.push(((*name).to_owned(), values, width));
+        if let Some((values, width)) = attribute_values(attribute, normalized(name)) {
+            if (2..=4).contains(&width) && values.len() == points * width {
+                extra.push(((*name).to_owned(), values, width));
+            }
         }
     }
     Ok(DracoPrimitive {
@@ -194,6 +179,63 @@ pub(crate) fn decode_primitive_with(
         triangles,
         extra,
     })
+}
+
+/// An attribute's value at every point as f64, flattened, and its components per point:
+/// floats as they are, integers as their value or, when `normalized`, mapped to [0, 1]
+/// (unsigned) or [-1, 1] (signed, `max(c / (2^(n-1) - 1), -1)`) as glTF 2.0 §3.11 says.
+/// `None` for component types glTF has no attribute of (64-bit) or a point map out of range.
+fn attribute_values(
+    attribute: &draco_oxide_core::attribute::Attribute,
+    normalized: bool,
+) -> Option<(Vec<f64>, usize)> {
+    let width = attribute.get_num_components();
+    let kind = attribute.get_component_type();
+    let (size, max) = match kind {
+        ComponentDataType::F32 => (4, None),
+        ComponentDataType::I8 => (1, Some(127.0)),
+        ComponentDataType::U8 => (1, Some(255.0)),
+        ComponentDataType::I16 => (2, Some(32767.0)),
+        ComponentDataType::U16 => (2, Some(65535.0)),
+        ComponentDataType::U32 | ComponentDataType::I32 => (4, None),
+        _ => return None,
+    };
+    if width == 0 {
+        return None;
+    }
+    let bytes = attribute.get_data_as_bytes();
+    let stride = size * width;
+    let stored = bytes.len() / stride;
+    let map = attribute.point_map_as_slice();
+    let points = attribute.len();
+    let mut out = Vec::with_capacity(points.checked_mul(width)?);
+    for point in 0..points {
+        let value = match map {
+            Some(map) => usize::from(*map.get(point)?),
+            None => point,
+        };
+        if value >= stored {
+            return None;
+        }
+        for c in 0..width {
+            let at = value * stride + c * size;
+            let b = &bytes[at..at + size];
+            let x = match kind {
+                ComponentDataType::F32 => f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                ComponentDataType::U32 => f64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                ComponentDataType::I32 => f64::from(i32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                ComponentDataType::I16 => f64::from(i16::from_le_bytes([b[0], b[1]])),
+                ComponentDataType::U16 => f64::from(u16::from_le_bytes([b[0], b[1]])),
+                ComponentDataType::I8 => f64::from(b[0] as i8),
+                _ => f64::from(b[0]),
+            };
+            out.push(match (normalized, max) {
+                (true, Some(max)) => (x / max).max(-1.0),
+                _ => x,
+            });
+        }
+    }
+    Some((out, width))
 }
 
 #[cfg(test)]

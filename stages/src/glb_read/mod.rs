@@ -31,6 +31,7 @@ use std::collections::{BTreeSet, HashMap};
 use std::rc::Rc;
 
 use base64::Engine as _;
+use gltf_json::accessor::ComponentType;
 use gltf_json::mesh::{Mode, Semantic};
 use gltf_json::validation::{Checked, Validate};
 use gltf_json::Root;
@@ -54,14 +55,14 @@ pub enum GlbError {
          files into one with `npx @gltf-transform/cli copy in.gltf out.glb`)"
     )]
     NotGlb {
+        /// `GLB_INVALID_MAGIC`, the validator's code, or `not_glb` for a glTF JSON file (which
+        /// the validator reads as JSON, not as a GLB container).
+        code: &'static str,
         /// What the bytes are.
         problem: String,
     },
     /// A damaged GLB container.
-    #[error(
-        "{code} at byte {offset}: {problem} (the file is damaged or was not written \
-         completely: re-export or re-download it)"
-    )]
+    #[error("{code} at byte {offset}: {problem} (fix: {fix})")]
     Container {
         /// The glTF-Validator issue code.
         code: &'static str,
@@ -69,6 +70,8 @@ pub enum GlbError {
         offset: usize,
         /// What is wrong.
         problem: String,
+        /// How to fix it.
+        fix: &'static str,
     },
     /// glTF 1.0.
     #[error(
@@ -144,11 +147,12 @@ pub enum GlbError {
 
 impl GlbError {
     /// A short code for the kind of problem: the validator's code for container problems
-    /// (`GLB_LENGTH_MISMATCH`, ...), else one of `not_glb`, `gltf1`, `json`, `version`,
+    /// (`GLB_LENGTH_MISMATCH`, ...; a GLB of version 1 is `GLB_INVALID_VERSION`, bytes that
+    /// are not a GLB `GLB_INVALID_MAGIC`), else one of `not_glb`, `gltf1`, `json`, `version`,
     /// `invalid_gltf`, `unsupported_extension`, `external_uri`, `data`, `draco`, `no_mesh`.
     pub fn code(&self) -> &'static str {
         match self {
-            Self::NotGlb { .. } => "not_glb",
+            Self::NotGlb { code, .. } => code,
             Self::Container { code, .. } => code,
             Self::Gltf1 => "gltf1",
             Self::Json { .. } => "json",
@@ -752,6 +756,129 @@ fn position_indices_out_of_range(root: &Root) -> Vec<String> {
     problems
 }
 
+/// The component types glTF 2.0 allows for an attribute mesa reads, as (type, normalized)
+/// pairs: the core table (§3.7.2.1), widened by `KHR_mesh_quantization` when the file uses it.
+fn allowed_formats(
+    semantic: &Semantic,
+    quantized: bool,
+) -> Option<&'static [(ComponentType, bool)]> {
+    use ComponentType::{F32, I16, I8, U16, U8};
+    Some(match (semantic, quantized) {
+        (Semantic::Positions, false) | (Semantic::Normals, false) => &[(F32, false)],
+        (Semantic::Positions, true) => &[
+            (F32, false),
+            (I8, false),
+            (I8, true),
+            (U8, false),
+            (U8, true),
+            (I16, false),
+            (I16, true),
+            (U16, false),
+            (U16, true),
+        ],
+        (Semantic::Normals, true) => &[(F32, false), (I8, true), (I16, true)],
+        (Semantic::TexCoords(_), false) => &[(F32, false), (U8, true), (U16, true)],
+        (Semantic::TexCoords(_), true) => &[
+            (F32, false),
+            (I8, false),
+            (I8, true),
+            (U8, false),
+            (U8, true),
+            (I16, false),
+            (I16, true),
+            (U16, false),
+            (U16, true),
+        ],
+        _ => return None,
+    })
+}
+
+fn format_name(kind: ComponentType, normalized: bool) -> String {
+    let name = match kind {
+        ComponentType::I8 => "BYTE",
+        ComponentType::U8 => "UNSIGNED_BYTE",
+        ComponentType::I16 => "SHORT",
+        ComponentType::U16 => "UNSIGNED_SHORT",
+        ComponentType::U32 => "UNSIGNED_INT",
+        ComponentType::F32 => "FLOAT",
+    };
+    if normalized {
+        format!("normalized {name}")
+    } else {
+        name.to_owned()
+    }
+}
+
+/// POSITION, NORMAL and TEXCOORD_n accessors of a component type glTF 2.0 does not allow for
+/// them (the validator's MESH_PRIMITIVE_ATTRIBUTES_ACCESSOR_INVALID_FORMAT): read as the
+/// integers they hold, they would give absurd sizes (an UNSIGNED_BYTE position is up to 255
+/// m), so they are errors that say which extension the data would need.
+fn attribute_formats(root: &Root) -> Result<(), GlbError> {
+    let quantized = root
+        .extensions_used
+        .iter()
+        .any(|e| e == "KHR_mesh_quantization");
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &primitive.attributes {
+                let Checked::Valid(semantic) = semantic else {
+                    continue;
+                };
+                let Some(allowed) = allowed_formats(semantic, quantized) else {
+                    continue;
+                };
+                let Some(accessor) = root.accessors.get(index.value()) else {
+                    continue;
+                };
+                let Checked::Valid(kind) = accessor.component_type else {
+                    continue;
+                };
+                let format = (kind.0, accessor.normalized);
+                if allowed.contains(&format) {
+                    continue;
+                }
+                let name = semantic.to_string();
+                let allowed_names: Vec<String> =
+                    allowed.iter().map(|(k, n)| format_name(*k, *n)).collect();
+                let fix = if quantized
+                    || allowed_formats(semantic, true).is_some_and(|a| !a.contains(&format))
+                {
+                    format!(
+                        "re-export the mesh with {} {name} data",
+                        allowed_names.join(" or ")
+                    )
+                } else {
+                    format!(
+                        "re-export the mesh with FLOAT {name} data; if the data is quantized on \
+                         purpose, list KHR_mesh_quantization in extensionsUsed and \
+                         extensionsRequired and put the dequantization in the node transform \
+                         (`gltf-transform quantize` does both)"
+                    )
+                };
+                return Err(data_error(
+                    format!(
+                        "meshes[{m}].primitives[{p}].attributes.{name} (accessor {})",
+                        index.value()
+                    ),
+                    format!(
+                        "MESH_PRIMITIVE_ATTRIBUTES_ACCESSOR_INVALID_FORMAT: componentType {} \
+                         {} (expected {}{}) (fix: {fix})",
+                        format_name(kind.0, accessor.normalized),
+                        if quantized {
+                            "is not allowed for it even with KHR_mesh_quantization"
+                        } else {
+                            "is not allowed for it without KHR_mesh_quantization"
+                        },
+                        allowed_names.join(", "),
+                        if quantized { "" } else { ", as glTF 2.0 says" }
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 fn validate(root: &Root, warnings: &mut Vec<String>) -> Result<(), GlbError> {
     let out_of_range = position_indices_out_of_range(root);
     if !out_of_range.is_empty() {
@@ -791,7 +918,7 @@ fn validate(root: &Root, warnings: &mut Vec<String>) -> Result<(), GlbError> {
         ));
     }
     if problems.is_empty() {
-        Ok(())
+        attribute_formats(root)
     } else {
         Err(GlbError::Invalid { problems })
     }
@@ -1167,12 +1294,21 @@ impl Reader<'_, '_> {
                         }
                     }
                 }
+                let normalized = |name: &str| {
+                    primitive
+                        .attributes
+                        .iter()
+                        .find(|(semantic, _)| semantic.to_string() == name)
+                        .and_then(|(_, a)| self.root.accessors.get(a.value()))
+                        .is_some_and(|a| a.normalized)
+                };
                 let decoded = draco::decode_primitive_with(
                     self.root,
                     self.buffers,
                     extension,
                     &path,
                     &names,
+                    &normalized,
                 )?;
                 let points = decoded.positions.len();
                 let (mut normals, mut uvs) = (None, None);
@@ -1616,5 +1752,7 @@ fn transform(m: &Matrix4<f64>, p: &[f64; 3]) -> [f64; 3] {
     [v[0], v[1], v[2]]
 }
 
+#[cfg(test)]
+mod quantization_tests;
 #[cfg(test)]
 mod tests;

@@ -72,6 +72,19 @@ pub struct IngestConfig {
     pub tilt_threshold_deg: f64,
     /// The H1 figure may differ from 170 cm by this many cm before the scene is rescaled.
     pub h1_tolerance_cm: f64,
+    /// An object whose longest side is more than this many times the table top's longest
+    /// side is an error, not a warning (a scale typed wrong, a unit mix-up: a node scale of
+    /// 1e30 would make a mug wider than a city).
+    pub max_size_over_table: f64,
+    /// An object whose longest side is shorter than this many cm is an error (a scale near
+    /// zero).
+    pub min_object_side_cm: f64,
+    /// An object whose centre lies farther than this many cm from the table top (outside its
+    /// edges, above or below it) is an error: it left the table.
+    pub max_distance_from_table_cm: f64,
+    /// A table top whose longest side is longer than this many cm is an error (the table
+    /// node scaled by mistake).
+    pub max_table_side_cm: f64,
 }
 
 impl Default for IngestConfig {
@@ -80,6 +93,10 @@ impl Default for IngestConfig {
             allow_unknown_nodes: false,
             tilt_threshold_deg: 5.0,
             h1_tolerance_cm: 0.1,
+            max_size_over_table: 2.0,
+            min_object_side_cm: 0.1,
+            max_distance_from_table_cm: 200.0,
+            max_table_side_cm: 1000.0,
         }
     }
 }
@@ -98,6 +115,29 @@ impl IngestConfig {
             out.push(format!(
                 "[ingest] h1_tolerance_cm = {}: expected cm >= 0",
                 self.h1_tolerance_cm
+            ));
+        }
+        for (key, value) in [
+            ("max_size_over_table", self.max_size_over_table),
+            ("min_object_side_cm", self.min_object_side_cm),
+            (
+                "max_distance_from_table_cm",
+                self.max_distance_from_table_cm,
+            ),
+            ("max_table_side_cm", self.max_table_side_cm),
+        ] {
+            if !(value > 0.0 && value.is_finite()) {
+                out.push(format!(
+                    "[ingest] {key} = {value}: expected a finite number > 0"
+                ));
+            }
+        }
+        if self.min_object_side_cm >= self.max_table_side_cm * self.max_size_over_table {
+            out.push(format!(
+                "[ingest] min_object_side_cm = {}: expected less than max_table_side_cm × \
+                 max_size_over_table ({})",
+                self.min_object_side_cm,
+                self.max_table_side_cm * self.max_size_over_table
             ));
         }
         out
@@ -202,9 +242,157 @@ pub enum IngestError {
         /// What is wrong and the fix.
         problem: String,
     },
+    /// A transform that gives an absurd object or table (beyond the `[ingest]` plausible
+    /// ranges).
+    #[error("nodes[{node}] \"{name}\".{field}: {problem} (fix: {fix})")]
+    Implausible {
+        /// Node index.
+        node: usize,
+        /// The node name.
+        name: String,
+        /// The node's field that gives it (`scale`, `translation`).
+        field: &'static str,
+        /// What is absurd, with the range it leaves.
+        problem: String,
+        /// How to fix it.
+        fix: String,
+    },
     /// The pack and the baseline layout disagree.
     #[error("{0}")]
     Pack(String),
+}
+
+/// The table top an object must stay on and fit, as `[ingest]` bounds it.
+struct Plausible<'a> {
+    config: &'a IngestConfig,
+    /// The table top (after any H1 rescale), cm.
+    zone: ZoneCm,
+}
+
+impl Plausible<'_> {
+    fn table_side_cm(&self) -> f64 {
+        self.zone.width_cm().max(self.zone.depth_cm())
+    }
+
+    /// How far a point (table frame, cm) is from the table top: from the zone's rectangle at
+    /// z = 0.
+    fn distance_cm(&self, p: [f64; 3]) -> f64 {
+        let [x0, x1, y0, y1] = self.zone.0;
+        let dx = (x0 - p[0]).max(p[0] - x1).max(0.0);
+        let dy = (y0 - p[1]).max(p[1] - y1).max(0.0);
+        (dx * dx + dy * dy + p[2] * p[2]).sqrt()
+    }
+
+    /// An error when an object read from `node` is absurd: not finite, larger than the table
+    /// by more than the factor, near zero, or far from the table top. Only what the edit made
+    /// absurd counts: an object beyond a bound that its baseline entry (`before`) was already
+    /// beyond, and that the edit did not take further out, is left as the layout had it.
+    fn check(
+        &self,
+        node: usize,
+        name: &str,
+        read: &ReadObject,
+        before: &LayoutObject,
+    ) -> Result<(), IngestError> {
+        let config = self.config;
+        let implausible =
+            |field: &'static str, problem: String, fix: String| IngestError::Implausible {
+                node,
+                name: name.to_owned(),
+                field,
+                problem,
+                fix,
+            };
+        let values = read
+            .position_cm
+            .iter()
+            .chain(&read.size_cm)
+            .chain(&read.rotation);
+        if values.clone().any(|v| !v.is_finite()) {
+            return Err(implausible(
+                "translation",
+                format!(
+                    "the object's position {:?} cm or size {:?} cm is not finite",
+                    read.position_cm, read.size_cm
+                ),
+                "give the node a finite translation, rotation and scale".to_owned(),
+            ));
+        }
+        let longest = read.size_cm.iter().copied().fold(0.0, f64::max);
+        let longest_before = before.size_cm.0.iter().copied().fold(0.0, f64::max);
+        let table = self.table_side_cm();
+        let limit = config.max_size_over_table * table;
+        if longest > limit && longest > longest_before + UNCHANGED_CM {
+            return Err(implausible(
+                "scale",
+                format!(
+                    "the object is {} cm ({:.4e} × {:.4e} × {:.4e} cm), {} times the table \
+                     top's longest side ({table:.1} cm) (expected at most {} times: [ingest] \
+                     max_size_over_table)",
+                    fmt_big(longest),
+                    read.size_cm[0],
+                    read.size_cm[1],
+                    read.size_cm[2],
+                    fmt_big(longest / table),
+                    config.max_size_over_table
+                ),
+                format!(
+                    "scale the object back to its size in Blender (S), or clear a wrong scale \
+                     (Alt+S); raise [ingest] max_size_over_table if an object larger than {} × \
+                     the table is meant",
+                    config.max_size_over_table
+                ),
+            ));
+        }
+        if longest < config.min_object_side_cm && longest < longest_before - UNCHANGED_CM {
+            return Err(implausible(
+                "scale",
+                format!(
+                    "the object's longest side is {} cm (expected at least {} cm: [ingest] \
+                     min_object_side_cm)",
+                    fmt_big(longest),
+                    config.min_object_side_cm
+                ),
+                "scale the object back up to its size in Blender (S), or clear a wrong scale \
+                 (Alt+S)"
+                    .to_owned(),
+            ));
+        }
+        let [x0, x1, y0, y1] = self.zone.0;
+        let p = read.position_cm;
+        let distance = self.distance_cm(p);
+        if distance > config.max_distance_from_table_cm
+            && distance > self.distance_cm(before.position_cm.0) + UNCHANGED_CM
+        {
+            return Err(implausible(
+                "translation",
+                format!(
+                    "the object's centre is at ({}, {}, {}) cm in the table frame, {} cm from \
+                     the table top (x {x0:.1}..{x1:.1}, y {y0:.1}..{y1:.1}, z 0) (expected at \
+                     most {} cm: [ingest] max_distance_from_table_cm)",
+                    fmt_big(p[0]),
+                    fmt_big(p[1]),
+                    fmt_big(p[2]),
+                    fmt_big(distance),
+                    config.max_distance_from_table_cm
+                ),
+                "move the object back onto the table (or clear a wrong location with Alt+G), \
+                 or delete it"
+                    .to_owned(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A length in cm or a ratio, in plain notation when it is of a table's order, else in
+/// scientific notation (`1.2e31`).
+fn fmt_big(v: f64) -> String {
+    if v.abs() < 1e6 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.3e}")
+    }
 }
 
 /// A node's mesh box and transform, read once.
@@ -579,6 +767,32 @@ pub fn ingest_scene(
         ]);
         snap_zone(measured, Some(&baseline.zone_cm))
     };
+    let table_side_cm = zone_after.width_cm().max(zone_after.depth_cm());
+    let table_side_before_cm = baseline.zone_cm.width_cm().max(baseline.zone_cm.depth_cm());
+    if !table_side_cm.is_finite()
+        || (table_side_cm > config.max_table_side_cm
+            && table_side_cm > table_side_before_cm + UNCHANGED_CM)
+    {
+        return Err(IngestError::Implausible {
+            node: table_node,
+            name: TABLE_NODE.to_owned(),
+            field: "scale",
+            problem: format!(
+                "the table top is {} × {} cm (expected a longest side of at most {} cm: \
+                 [ingest] max_table_side_cm)",
+                fmt_big(zone_after.width_cm()),
+                fmt_big(zone_after.depth_cm()),
+                config.max_table_side_cm
+            ),
+            fix: "scale the table back to its size in Blender (S), or clear a wrong scale \
+                  (Alt+S); raise [ingest] max_table_side_cm if a larger table is meant"
+                .to_owned(),
+        });
+    }
+    let plausible = Plausible {
+        config,
+        zone: zone_after,
+    };
     let resized = zone_after != baseline.zone_cm;
     if resized {
         warnings.push(format!(
@@ -679,6 +893,12 @@ pub fn ingest_scene(
             &mut mesh_boxes,
             &world,
         )?;
+        plausible.check(
+            node,
+            root.nodes[node].name.as_deref().unwrap_or("unnamed"),
+            &read,
+            object,
+        )?;
         let mesh_status = mesh_status(
             &document,
             node,
@@ -724,6 +944,12 @@ pub fn ingest_scene(
             &object.retrieved_uid,
             &mut mesh_boxes,
             &world,
+        )?;
+        plausible.check(
+            node,
+            root.nodes[node].name.as_deref().unwrap_or("unnamed"),
+            &read,
+            object,
         )?;
         let mesh_status = mesh_status(
             &document,

@@ -513,7 +513,7 @@ fn hostile_and_damaged_files_are_clear_errors() {
     // Truncated.
     let e = err(&p, &p.glb[..p.glb.len() / 2]);
     assert!(
-        e.contains("GLB_LENGTH_MISMATCH") && e.contains("truncated"),
+        e.contains("GLB_UNEXPECTED_END_OF_CHUNK_DATA") && e.contains("truncated"),
         "{e}"
     );
     // A buffer whose byteLength claims more than the BIN chunk holds.
@@ -674,4 +674,172 @@ fn blender_suffixes_are_split_and_copies_named_by_category() {
     assert_eq!(next_instance("mug_0", &taken), "mug_2");
     assert_eq!(next_instance("pen_1", &taken), "pen_11");
     assert_eq!(next_instance("tray", &taken), "tray_0");
+}
+
+/// A copy of the pack whose node `name` gets `field` = `value` (glTF JSON).
+fn with_node_field(p: &Packed, name: &str, field: &str, value: Value) -> Vec<u8> {
+    edit_glb(&p.glb, |j, _| {
+        let n = node_at(j, name);
+        j["nodes"][n][field] = value;
+    })
+}
+
+#[test]
+fn absurd_sizes_and_positions_are_errors_naming_the_node_the_field_and_the_fix() {
+    let p = packed();
+    let (root, _) = crate::pack::testing::split_glb(&p.glb);
+    let mug = crate::pack::testing::node(&root, "mug_0");
+    let table = crate::pack::testing::node(&root, "table");
+    // A node scale of 1e30: the mug would be ~1e31 cm wide.
+    let e = err(
+        &p,
+        &with_node_field(&p, "mug_0", "scale", json!([1e30, 1e30, 1e30])),
+    );
+    for expected in [
+        &format!("nodes[{mug}] \"mug_0\".scale: the object is "),
+        "e31 cm",
+        "times the table top's longest side (120.0 cm)",
+        "[ingest] max_size_over_table",
+        "(fix: scale the object back",
+    ] {
+        assert!(e.contains(expected), "{expected}: {e}");
+    }
+    // Control: a plausible scale passes; a large one passes once the factor allows it.
+    ok(
+        &p,
+        &with_node_field(&p, "mug_0", "scale", json!([1.5, 1.5, 1.5])),
+    );
+    let big = with_node_field(&p, "mug_0", "scale", json!([30.0, 30.0, 30.0]));
+    assert!(err(&p, &big).contains("max_size_over_table"));
+    let roomy = IngestConfig {
+        max_size_over_table: 10.0,
+        ..IngestConfig::default()
+    };
+    ingest(&p, &big, &roomy).expect("allowed by the configured factor");
+    // A scale near zero.
+    let tiny = with_node_field(&p, "mug_0", "scale", json!([1e-5, 1e-5, 1e-5]));
+    let e = err(&p, &tiny);
+    assert!(
+        e.contains(&format!("nodes[{mug}] \"mug_0\".scale"))
+            && e.contains("[ingest] min_object_side_cm")
+            && e.contains("(fix: scale the object back up"),
+        "{e}"
+    );
+
+    // A translation of 3e38 m: a position of 3e40 cm.
+    let e = err(
+        &p,
+        &with_node_field(&p, "mug_0", "translation", json!([3e38, 0.0, 0.0])),
+    );
+    for expected in [
+        &format!("nodes[{mug}] \"mug_0\".translation: the object's centre is at (3.000e40, "),
+        "from the table top (x 0.0..120.0, y 0.0..60.0, z 0)",
+        "[ingest] max_distance_from_table_cm",
+        "(fix: move the object back onto the table",
+    ] {
+        assert!(e.contains(expected), "{expected}: {e}");
+    }
+    // Control: moved 1.5 m (50 cm past the table's edge) passes, 3.5 m (250 cm past it) does
+    // not, unless configured.
+    let moved = |dx: f64| {
+        edit_glb(&p.glb, |j, _| {
+            let n = node_at(j, "mug_0");
+            let t = j["nodes"][n]["translation"].clone();
+            j["nodes"][n]["translation"] = json!([t[0].as_f64().unwrap_or(0.0) + dx, t[1], t[2]]);
+        })
+    };
+    ok(&p, &moved(1.5));
+    let far = moved(3.5);
+    assert!(err(&p, &far).contains("max_distance_from_table_cm"));
+    let wide = IngestConfig {
+        max_distance_from_table_cm: 300.0,
+        ..IngestConfig::default()
+    };
+    ingest(&p, &far, &wide).expect("allowed by the configured distance");
+
+    // The table scaled by 1e30.
+    let e = err(
+        &p,
+        &with_node_field(&p, "table", "scale", json!([1e30, 1.0, 1e30])),
+    );
+    assert!(
+        e.contains(&format!(
+            "nodes[{table}] \"table\".scale: the table top is "
+        )) && e.contains("[ingest] max_table_side_cm")
+            && e.contains("(fix: scale the table back"),
+        "{e}"
+    );
+    // Only what the edit made absurd counts: with a factor the packed mugs already exceed,
+    // the unedited pack passes, and a mug scaled further does not.
+    let strict = IngestConfig {
+        max_size_over_table: 0.01,
+        ..IngestConfig::default()
+    };
+    ingest(&p, &p.glb, &strict).expect("the baseline is left as it is");
+    let scaled = with_node_field(&p, "mug_0", "scale", json!([1.5, 1.5, 1.5]));
+    let e = ingest(&p, &scaled, &strict)
+        .map(|_| ())
+        .expect_err("scaled up");
+    assert!(e.to_string().contains("\"mug_0\".scale"), "{e}");
+    // Every bound is a key that a bad value of fails before any work.
+    let bad = IngestConfig {
+        max_size_over_table: f64::NAN,
+        ..IngestConfig::default()
+    };
+    assert!(bad.problems()[0].contains("[ingest] max_size_over_table = NaN"));
+}
+
+#[test]
+fn an_integer_position_accessor_needs_khr_mesh_quantization() {
+    let p = packed();
+    let (root, _) = crate::pack::testing::split_glb(&p.glb);
+    let mesh = root.nodes[crate::pack::testing::node(&root, "mug_0")]
+        .mesh
+        .expect("mesh")
+        .value();
+    let position = root.meshes[mesh].primitives[0]
+        .attributes
+        .get(&gltf_json::validation::Checked::Valid(
+            gltf_json::mesh::Semantic::Positions,
+        ))
+        .expect("position")
+        .value();
+    let retyped = |quantization: bool| {
+        edit_glb(&p.glb, |j, _| {
+            // The float bytes read as UNSIGNED_BYTE: values up to 255 (metres).
+            j["accessors"][position]["componentType"] = json!(5121);
+            j["accessors"][position]
+                .as_object_mut()
+                .expect("accessor")
+                .remove("min");
+            j["accessors"][position]
+                .as_object_mut()
+                .expect("accessor")
+                .remove("max");
+            if quantization {
+                j["extensionsUsed"] = json!(["KHR_mesh_quantization"]);
+                j["extensionsRequired"] = json!(["KHR_mesh_quantization"]);
+            }
+        })
+    };
+    let e = err(&p, &retyped(false));
+    for expected in [
+        &format!("meshes[{mesh}].primitives[0].attributes.POSITION (accessor {position})"),
+        "MESH_PRIMITIVE_ATTRIBUTES_ACCESSOR_INVALID_FORMAT: componentType UNSIGNED_BYTE is not \
+         allowed for it without KHR_mesh_quantization (expected FLOAT, as glTF 2.0 says)",
+        "(fix: re-export the mesh with FLOAT POSITION data",
+    ] {
+        assert!(e.contains(expected), "{expected}: {e}");
+    }
+    // Control: with the extension the accessor is read as glTF says (integers, no
+    // dequantization in the node): the mug is then metres wide, which the plausible ranges
+    // catch.
+    let e = err(&p, &retyped(true));
+    assert!(
+        e.contains("\"mug_") && e.contains("\".scale") && e.contains("max_size_over_table"),
+        "{e}"
+    );
+    let quantized = retyped(true);
+    let doc = crate::glb_read::open_glb(&quantized);
+    assert!(doc.is_ok(), "{doc:?}");
 }

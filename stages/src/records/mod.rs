@@ -56,6 +56,12 @@ pub struct RecordsConfig {
     pub missing_object: corrupt::MissingObjectConfig,
     /// The share of scenes in each split.
     pub split: split::SplitRatios,
+    /// Keep the scenes that failed `mesa check`: qa/check.json finds the layout not clean (a
+    /// collision, a floating object, a zone violation, an object it could not check) and no
+    /// settled layout replaced it. By default they are left out of the records, listed in
+    /// records/split.json and counted in the summary. Scenes never checked (or whose check
+    /// could not run, e.g. without an asset index) are kept.
+    pub keep_failed_check: bool,
 }
 
 impl Default for RecordsConfig {
@@ -73,6 +79,7 @@ impl Default for RecordsConfig {
             relation: corrupt::RelationConfig::default(),
             missing_object: corrupt::MissingObjectConfig::default(),
             split: split::SplitRatios::default(),
+            keep_failed_check: false,
         }
     }
 }
