@@ -346,6 +346,7 @@ mod tests {
         ChatReply {
             content: text.to_owned(),
             finish_reason: Some("stop".to_owned()),
+            redacted: false,
         }
     }
 
@@ -406,6 +407,7 @@ mod tests {
         let cut = ChatReply {
             content: "{\"tasks\": [".into(),
             finish_reason: Some("length".into()),
+            redacted: false,
         };
         let err = read_tasks_reply(&cut, &scene(), 3).expect_err("cut");
         assert!(err.0[0].contains("max_tokens"));
