@@ -516,3 +516,49 @@ fn rejects_are_written_before_the_error_and_the_last_tasks_stay() {
     assert!(!last.contains_key(&lamp_rejects), "{:?}", last.keys());
     assert_ne!(last[&lamp_tasks], lamp_bytes);
 }
+
+/// Issue #20 item 13: log lines carry ANSI colour codes only on a terminal, and not even there
+/// with `NO_COLOR` set. The terminal is a pseudo-terminal from util-linux `script`.
+#[test]
+fn log_lines_are_coloured_only_on_a_terminal_without_no_color() {
+    let server = MockServer::start(|request, _| Reply::completion(&answer(&request.json())));
+    let dir = dataset(&server.base_url);
+    let mesa_bin = assert_cmd::cargo::cargo_bin("mesa");
+    // Each run takes another scene, so that it sends requests (and the HTTP client logs them
+    // at debug level) instead of answering from the cache.
+    let command = |scene: &str| {
+        format!(
+            "{} -v tasks --progress off --jobs 1 --scenes {scene} {}",
+            mesa_bin.display(),
+            dir.path().display()
+        )
+    };
+    // Redirected: plain text.
+    let out = std::process::Command::new("sh")
+        .args(["-c", &command("dining_table_0001")])
+        .env(KEY_VAR, KEY)
+        .env_remove("NO_COLOR")
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("DEBUG"), "the run logs: {stderr}");
+    assert!(!stderr.contains('\u{1b}'), "no colour codes: {stderr:?}");
+    // On a terminal: coloured (the control), unless NO_COLOR says otherwise.
+    let on_terminal = |scene: &str, no_color: Option<&str>| {
+        let mut cmd = std::process::Command::new("script");
+        cmd.args(["-qec", &command(scene), "/dev/null"])
+            .env(KEY_VAR, KEY)
+            .env_remove("NO_COLOR");
+        if let Some(value) = no_color {
+            cmd.env("NO_COLOR", value);
+        }
+        let out = cmd.output().expect("script (util-linux) runs");
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(out.status.success(), "{text}");
+        assert!(text.contains("DEBUG"), "the run logs: {text}");
+        text
+    };
+    assert!(on_terminal("office_table_0002", None).contains("\u{1b}["));
+    assert!(!on_terminal("kitchen_counter_0003", Some("1")).contains('\u{1b}'));
+}
