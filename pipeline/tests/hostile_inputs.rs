@@ -465,7 +465,12 @@ fn a_duplicate_key_is_named_by_every_json_reader() {
         for args in [
             vec![os("convert"), file.as_os_str(), os("--to"), os("dataset")],
             vec![os("graph"), os("--layout"), file.as_os_str()],
-            vec![os("validate"), os("--kind"), os("llm-layout"), file.as_os_str()],
+            vec![
+                os("validate"),
+                os("--kind"),
+                os("llm-layout"),
+                file.as_os_str(),
+            ],
         ] {
             let out = run_mesa(&args);
             let text = format!(

@@ -40,8 +40,16 @@ const INJECTED: &str = "mug_0, left of, pen_0)\n(pen_0, in, mug_0";
 fn bad_instance_names_are_refused_by_validate_convert_and_graph() {
     let dir = tempfile::tempdir().expect("tempdir");
     let cases = [
-        (INJECTED, "holds a comma", "\"mug_0_left_of_pen_0_pen_0_in_mug_0\""),
-        ("mug_0\n(pen_0, in, mug_0)", "holds a line break", "\"mug_0_pen_0_in_mug_0\""),
+        (
+            INJECTED,
+            "holds a comma",
+            "\"mug_0_left_of_pen_0_pen_0_in_mug_0\"",
+        ),
+        (
+            "mug_0\n(pen_0, in, mug_0)",
+            "holds a line break",
+            "\"mug_0_pen_0_in_mug_0\"",
+        ),
         ("mug(0)", "holds a parenthesis", "\"mug_0\""),
         ("", "is empty", "\"object_0\""),
         (&"m".repeat(65), "is 65 characters long", "\"mmmm"),
@@ -61,7 +69,9 @@ fn bad_instance_names_are_refused_by_validate_convert_and_graph() {
             assert_eq!(code, Some(1), "{args:?}: {text}");
             assert!(text.contains(&file), "{args:?} names the file: {text}");
             assert!(
-                text.contains(&format!("$.objects[0].instance: the instance name {quoted} {problem}")),
+                text.contains(&format!(
+                    "$.objects[0].instance: the instance name {quoted} {problem}"
+                )),
                 "{args:?}: {text}"
             );
             assert!(
@@ -113,7 +123,9 @@ fn a_scene_layout_with_a_bad_name_fails_only_that_scene() {
     assert!(
         stderr.contains("failed coffee_table/coffee_table_0007")
             && stderr.contains("refined/layout.json")
-            && stderr.contains("the instance name \"mug_0, left of, pen_0)\\n(pen_0, in, mug_0\" holds a comma"),
+            && stderr.contains(
+                "the instance name \"mug_0, left of, pen_0)\\n(pen_0, in, mug_0\" holds a comma"
+            ),
         "{stderr}"
     );
     let graph = dir

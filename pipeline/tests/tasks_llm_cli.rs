@@ -400,7 +400,11 @@ fn a_key_echoed_in_replies_is_redacted_before_anything_is_written() {
         .arg(dir.path())
         .output()
         .expect("records");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let files = common::all_files(dir.path());
     for (path, bytes) in &files {
         assert!(
@@ -436,14 +440,22 @@ fn a_key_echoed_in_replies_is_redacted_before_anything_is_written() {
         .iter()
         .filter(|c| c.contains("\"redacted\": true"))
         .count();
-    assert_eq!(marked, 7 + 35 + 1, "only the replies that held the key are marked");
+    assert_eq!(
+        marked,
+        7 + 35 + 1,
+        "only the replies that held the key are marked"
+    );
     // Marked entries are valid cache entries.
     let out = mesa()
         .arg("validate")
         .arg(dir.path().join(".mesa/cache/chat"))
         .output()
         .expect("validate");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stdout));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
 }
 
 /// Issue #20 item 8: when every reply of a call is rejected, `tasks/rejects.jsonl` is written
@@ -499,12 +511,17 @@ fn rejects_are_written_before_the_error_and_the_last_tasks_stay() {
         rejects.iter().map(|r| r.attempt).collect::<Vec<_>>(),
         [0, 1, 2]
     );
-    assert!(rejects.iter().all(|r| r.reasons[0].contains("not valid JSON")));
+    assert!(rejects
+        .iter()
+        .all(|r| r.reasons[0].contains("not valid JSON")));
     // The previous tasks are kept, byte for byte; the other scenes have the new model's.
     assert_eq!(after[&lamp_tasks], lamp_bytes);
     for (path, bytes) in &after {
         if path.ends_with("tasks.jsonl") && *path != lamp_tasks {
-            assert!(String::from_utf8_lossy(bytes).contains("llm:mock-model-2"), "{path}");
+            assert!(
+                String::from_utf8_lossy(bytes).contains("llm:mock-model-2"),
+                "{path}"
+            );
         }
     }
     // Control: a successful run replaces the kept tasks and removes the stale rejects.

@@ -565,7 +565,13 @@ mod instance_name_tests {
 
     #[test]
     fn the_names_mesatask_uses_pass() {
-        for name in ["mug_0", "desk_lamp_0", "soap_dispenser_lotion_bottle_0", "t-shirt_1", "A1"] {
+        for name in [
+            "mug_0",
+            "desk_lamp_0",
+            "soap_dispenser_lotion_bottle_0",
+            "t-shirt_1",
+            "A1",
+        ] {
             assert_eq!(instance_name_problem(name), None, "{name}");
         }
         // The published gallery's names (../shared/realdata), when the folder is there.

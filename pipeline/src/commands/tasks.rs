@@ -9,11 +9,11 @@ use std::process::ExitCode;
 use std::sync::{Arc, OnceLock};
 
 use anyhow::{anyhow, bail, Context as _};
+use mesa_schemas::artifacts::TaskReject;
 use mesa_schemas::json::to_sorted_line;
 use mesa_stages::tasks::chat::{Chat, ChatRequest};
 use mesa_stages::tasks::prompts::Prompts;
 use mesa_stages::tasks::scene::NoChat;
-use mesa_schemas::artifacts::TaskReject;
 use mesa_stages::tasks::{
     write_scene_tasks_keeping_rejects, Backend, FailedScene, SceneInput, SceneTasks, TasksError,
     View,

@@ -388,16 +388,31 @@ pub fn process_scene(
     let result = catch_unwind(AssertUnwindSafe(|| stage.run(ctx, scene)));
     let output = match result {
         Ok(Ok(output)) => output,
-        Ok(Err(e)) => return fail(ctx, scene, &marker_file, base, prepared.previous.as_ref(), &e),
-        Err(payload) => {
-            let error = anyhow::anyhow!(
-                "this is a bug in mesa: please report it with this scene's inputs"
+        Ok(Err(e)) => {
+            return fail(
+                ctx,
+                scene,
+                &marker_file,
+                base,
+                prepared.previous.as_ref(),
+                &e,
             )
-            .context(format!(
-                "internal error: {}",
-                panic_message(payload.as_ref())
-            ));
-            return fail(ctx, scene, &marker_file, base, prepared.previous.as_ref(), &error);
+        }
+        Err(payload) => {
+            let error =
+                anyhow::anyhow!("this is a bug in mesa: please report it with this scene's inputs")
+                    .context(format!(
+                        "internal error: {}",
+                        panic_message(payload.as_ref())
+                    ));
+            return fail(
+                ctx,
+                scene,
+                &marker_file,
+                base,
+                prepared.previous.as_ref(),
+                &error,
+            );
         }
     };
     match write_outputs(ctx, scene, &output, prepared.previous.as_ref()) {
@@ -417,7 +432,14 @@ pub fn process_scene(
                 },
             }
         }
-        Err(e) => fail(ctx, scene, &marker_file, base, prepared.previous.as_ref(), &e),
+        Err(e) => fail(
+            ctx,
+            scene,
+            &marker_file,
+            base,
+            prepared.previous.as_ref(),
+            &e,
+        ),
     }
 }
 

@@ -1037,7 +1037,10 @@ mod tests {
         let long = sanitize_label(&"word ".repeat(40));
         assert!(long.len() <= 58 && !long.ends_with('_'), "{long}");
         let instance = format!("{long}_12345");
-        assert_eq!(mesa_schemas::validate::instance_name_problem(&instance), None);
+        assert_eq!(
+            mesa_schemas::validate::instance_name_problem(&instance),
+            None
+        );
     }
 
     #[test]

@@ -332,7 +332,8 @@ pub fn write_scene_tasks_keeping_rejects(
                 return Err(TasksError::Template {
                     call: "task",
                     reasons: problems.join("; "),
-                }.into());
+                }
+                .into());
             }
             let core: Vec<String> = core_types(&types, &draft.objects_cluster)
                 .iter()
@@ -344,7 +345,8 @@ pub fn write_scene_tasks_keeping_rejects(
                 return Err(TasksError::Template {
                     call: "reasoning",
                     reasons: problems.join("; "),
-                }.into());
+                }
+                .into());
             }
             records.push(record(index, &description, &[], draft, reasoning));
         }
@@ -352,7 +354,8 @@ pub fn write_scene_tasks_keeping_rejects(
             return Err(TasksError::Template {
                 call: "tasks",
                 reasons: "no task could be built from this scene".to_owned(),
-            }.into());
+            }
+            .into());
         }
         return Ok(SceneTasks {
             records,

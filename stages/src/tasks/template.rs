@@ -615,7 +615,11 @@ mod tests {
             assert_eq!(drafts.len(), 5, "{scene_id}");
             for draft in &drafts {
                 let problems = check_task(draft, &types, 3);
-                assert!(problems.is_empty(), "{scene_id}: {}: {problems:?}", draft.task);
+                assert!(
+                    problems.is_empty(),
+                    "{scene_id}: {}: {problems:?}",
+                    draft.task
+                );
                 contain_tasks += usize::from(draft.task.starts_with("Put "));
             }
         }
