@@ -76,6 +76,19 @@ pub fn check_unique_keys(text: &str) -> Result<(), serde_json::Error> {
     deserializer.end()
 }
 
+/// `path.key`, or `path["key"]` for a key that is not an identifier (as
+/// `validate::path_key`, which this module cannot import: validate imports it).
+fn key_path(path: &str, key: &str) -> String {
+    let plain = !key.is_empty()
+        && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && !key.starts_with(|c: char| c.is_ascii_digit());
+    if plain {
+        format!("{path}.{key}")
+    } else {
+        format!("{path}[{}]", Value::String(key.to_owned()))
+    }
+}
+
 /// A visitor that walks any JSON value and fails on a repeated key.
 struct UniqueKeys<'p> {
     path: &'p str,
@@ -142,7 +155,7 @@ impl<'de> serde::de::Visitor<'de> for UniqueKeys<'_> {
                     self.path
                 )));
             }
-            let path = crate::validate::path_key(self.path, &key);
+            let path = key_path(self.path, &key);
             seen.insert(key);
             map.next_value_seed(UniqueKeys { path: &path })?;
         }
