@@ -6,7 +6,11 @@
 //! - The API key comes from the environment variable `[tasks.llm] api_key_env` names. It is
 //!   sent as a Bearer token and nowhere else: it is not in the request body (so not in batch
 //!   files or cache keys), not in any message (error texts from a server are scrubbed of it),
-//!   and [`ApiKey`] prints as `<redacted>`.
+//!   and [`ApiKey`] prints as `<redacted>`. A reply that holds the key (a server echoing it)
+//!   has it replaced by `<redacted>` in the one place every reply passes before anything is
+//!   written, [`ReplyCache::put`] (direct replies and batch imports alike; entries cached
+//!   before are scrubbed when read): the cache entry and the rejects of such a reply say
+//!   `"redacted": true`, and its scene gets a warning.
 //! - The cache key is the SHA-256 of the request body's canonical JSON (sorted keys): model,
 //!   messages (images included), sampling parameters. The endpoint URL is not part of it: the
 //!   same model name behind another URL is taken as the same model, which is what lets batch
@@ -80,6 +84,29 @@ impl ApiKey {
             text.replace(&self.0, "<redacted>")
         }
     }
+
+    /// Whether `text` holds the key.
+    pub fn is_in(&self, text: &str) -> bool {
+        !self.0.is_empty() && text.contains(&self.0)
+    }
+}
+
+/// A reply (and the model the server named) with the key replaced by `<redacted>`, marked
+/// redacted when it held the key.
+fn redacted(
+    key: Option<&ApiKey>,
+    mut reply: ChatReply,
+    model: Option<String>,
+) -> (ChatReply, Option<String>) {
+    let Some(key) = key else {
+        return (reply, model);
+    };
+    let in_model = model.as_deref().is_some_and(|m| key.is_in(m));
+    if key.is_in(&reply.content) || in_model {
+        reply.content = key.scrub(&reply.content);
+        reply.redacted = true;
+    }
+    (reply, model.map(|m| key.scrub(&m)))
 }
 
 /// The digest of a request: SHA-256 of its body's canonical JSON.
@@ -89,10 +116,12 @@ pub fn request_digest(request: &ChatRequest) -> String {
     sha256_hex(&serde_json::to_vec(&request.body).unwrap_or_default())
 }
 
-/// The content-addressed reply cache of a dataset.
+/// The content-addressed reply cache of a dataset. With the API key, it redacts the key
+/// from every reply it stores or returns.
 #[derive(Debug, Clone)]
 pub struct ReplyCache {
     dir: PathBuf,
+    key: Option<ApiKey>,
 }
 
 impl ReplyCache {
@@ -100,7 +129,14 @@ impl ReplyCache {
     pub fn of_dataset(dataset: &Path) -> Self {
         Self {
             dir: dataset.join(mesa_stages::paths::dataset::CHAT_CACHE),
+            key: None,
         }
+    }
+
+    /// The cache, redacting `key` from replies.
+    pub fn with_key(mut self, key: Option<ApiKey>) -> Self {
+        self.key = key;
+        self
     }
 
     fn path(&self, digest: &str) -> PathBuf {
@@ -129,25 +165,41 @@ impl ReplyCache {
                 path.display()
             )
         })?;
-        Ok(Some(ChatReply {
+        let reply = ChatReply {
             content: cached.content,
             finish_reason: cached.finish_reason,
-        }))
+            redacted: cached.redacted,
+        };
+        // An entry written before redaction existed, or with another key: scrub it in place.
+        let (clean, model) = redacted(self.key.as_ref(), reply.clone(), cached.model.clone());
+        if clean.redacted && !reply.redacted {
+            return self.put(digest, &clean, model.as_deref()).map(Some);
+        }
+        Ok(Some(clean))
     }
 
-    /// Stores a reply (atomically).
-    pub fn put(&self, digest: &str, reply: &ChatReply, model: Option<&str>) -> Result<(), String> {
+    /// Stores a reply (atomically) with the key redacted from it, and returns what was stored
+    /// (marked redacted when it held the key).
+    pub fn put(
+        &self,
+        digest: &str,
+        reply: &ChatReply,
+        model: Option<&str>,
+    ) -> Result<ChatReply, String> {
+        let (reply, model) = redacted(self.key.as_ref(), reply.clone(), model.map(str::to_owned));
         let cached = CachedReply {
             schema: CACHE_SCHEMA.to_owned(),
             request_sha256: digest.to_owned(),
-            model: model.map(str::to_owned),
+            model,
             content: reply.content.clone(),
             finish_reason: reply.finish_reason.clone(),
+            redacted: reply.redacted,
         };
         let path = self.path(digest);
         let bytes = mesa_schemas::json::to_sorted_pretty(&cached).map_err(|e| e.to_string())?;
         write_atomic(&path, &bytes)
-            .map_err(|e| format!("{}: cannot write the cached reply: {e}", path.display()))
+            .map_err(|e| format!("{}: cannot write the cached reply: {e}", path.display()))?;
+        Ok(reply)
     }
 
     /// Whether a reply to the digest is cached.
@@ -189,6 +241,7 @@ pub fn reply_from_completion(body: &Value) -> Result<(ChatReply, Option<String>)
         ChatReply {
             content,
             finish_reason,
+            redacted: false,
         },
         model,
     ))
@@ -310,7 +363,8 @@ impl ChatClient {
     pub fn new(dataset: &Path, config: &LlmConfig, mode: Mode) -> Result<Self, String> {
         let key = match mode {
             Mode::Live => ApiKey::from_env(&config.api_key_env)?,
-            Mode::CacheOnly => None,
+            // Nothing is sent; the key, when set, only serves to redact batch replies.
+            Mode::CacheOnly => ApiKey::from_env(&config.api_key_env).ok().flatten(),
         };
         Ok(Self::with_key(dataset, config, mode, key))
     }
@@ -324,9 +378,9 @@ impl ChatClient {
         Self {
             agent: ureq::Agent::new_with_config(agent_config),
             endpoint: format!("{}/chat/completions", config.base_url.trim_end_matches('/')),
-            key,
             config: config.clone(),
-            cache: ReplyCache::of_dataset(dataset),
+            cache: ReplyCache::of_dataset(dataset).with_key(key.clone()),
+            key,
             mode,
             slots: Slots::new(config.max_concurrency),
             no_json_mode: AtomicBool::new(false),
@@ -477,10 +531,11 @@ impl ChatClient {
             let bytes = serde_json::to_vec(&body).map_err(|e| ChatError::Failed(e.to_string()))?;
             match self.send_once(&bytes) {
                 Ok((reply, model)) => {
-                    self.cache
+                    // What is returned is what was stored: the key redacted.
+                    return self
+                        .cache
                         .put(digest, &reply, model.as_deref())
-                        .map_err(ChatError::Failed)?;
-                    return Ok(reply);
+                        .map_err(ChatError::Failed);
                 }
                 Err(SendError::NoJsonMode(why)) if body.get("response_format").is_some() => {
                     self.no_json_mode.store(true, Ordering::Relaxed);
@@ -671,7 +726,7 @@ pub fn import_batch(
         }
         match reply_from_completion(&body) {
             Ok((reply, model)) => match cache.put(digest, &reply, model.as_deref()) {
-                Ok(()) => report.stored += 1,
+                Ok(_) => report.stored += 1,
                 Err(e) => report.failed.push(format!("{at}: {id}: {e}")),
             },
             Err(why) => report.failed.push(format!("{at}: {id}: {why}")),

@@ -404,7 +404,11 @@ pub fn read_json<T: DeserializeOwned>(path: &Path, hint: &str) -> anyhow::Result
     if mesa_schemas::json::starts_with_bom(&text) {
         bail!("{}: {}", path.display(), mesa_schemas::json::BOM_PROBLEM);
     }
-    serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e} ({hint})", path.display()))
+    let value =
+        serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e} ({hint})", path.display()))?;
+    mesa_schemas::json::check_unique_keys(&text)
+        .map_err(|e| anyhow!("{}: {e} ({hint})", path.display()))?;
+    Ok(value)
 }
 
 #[cfg(test)]

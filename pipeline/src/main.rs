@@ -62,6 +62,8 @@ fn init_logging(verbose: u8, quiet: bool) {
     }
     tracing_subscriber::fmt()
         .with_env_filter(filter)
+        // Colour codes only for a person at a terminal: a redirected log stays plain text.
+        .with_ansi(mesa_pipeline::progress::colour_on_stderr())
         .with_writer(std::io::stderr)
         .with_target(false)
         .without_time()

@@ -35,6 +35,21 @@ pub struct Progress {
     failed: AtomicUsize,
 }
 
+/// Whether what mesa writes to standard error may hold ANSI colour codes: only when it is a
+/// terminal and `NO_COLOR` is unset or empty (<https://no-color.org>). The log lines use it;
+/// the progress bar, drawn on a terminal only, has no colours.
+pub fn colour_on_stderr() -> bool {
+    colour_allowed(
+        std::io::stderr().is_terminal(),
+        std::env::var_os("NO_COLOR").as_deref(),
+    )
+}
+
+/// [`colour_on_stderr`] for a given stream kind and `NO_COLOR` value.
+fn colour_allowed(terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
+    terminal && no_color.is_none_or(|v| v.is_empty())
+}
+
 impl Progress {
     /// A display for `total` units (`unit`, like "scenes") of the stage `label`.
     pub fn new(
@@ -126,5 +141,19 @@ impl Progress {
         if let Some(bar) = &self.bar {
             bar.finish_and_clear();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colour_only_on_a_terminal_without_no_color() {
+        use std::ffi::OsStr;
+        assert!(colour_allowed(true, None));
+        assert!(colour_allowed(true, Some(OsStr::new(""))));
+        assert!(!colour_allowed(true, Some(OsStr::new("1"))));
+        assert!(!colour_allowed(false, None));
     }
 }

@@ -581,3 +581,81 @@ fn fifos_among_the_files_report_and_release_read_never_hang_them() {
         "{stderr}"
     );
 }
+
+/// Issue #20 item 13: a key given twice is refused by every JSON reader with the file, the key,
+/// its JSON path and its line, instead of silently keeping the last value.
+#[test]
+fn a_duplicate_key_is_named_by_every_json_reader() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plain = dir.path().join("plain.json");
+    grid_layout(&plain, 3);
+    let text = std::fs::read_to_string(&plain).expect("read");
+    // The second object gets its size twice: the first [4, 4, 8], then a 1 m cup.
+    let marker = "\"size\": [";
+    let second = text.match_indices(marker).nth(1).expect("a second size").0;
+    let mut twice = text.clone();
+    twice.insert_str(second, "\"size\": [100.0, 100.0, 100.0],\n      ");
+    let layout = dir.path().join("layout.json");
+    std::fs::write(&layout, &twice).expect("write");
+    let line = twice[..second].lines().count() + 1;
+
+    for (file, code) in [(&layout, 1), (&plain, 0)] {
+        for args in [
+            vec![os("convert"), file.as_os_str(), os("--to"), os("dataset")],
+            vec![os("graph"), os("--layout"), file.as_os_str()],
+            vec![
+                os("validate"),
+                os("--kind"),
+                os("llm-layout"),
+                file.as_os_str(),
+            ],
+        ] {
+            let out = run_mesa(&args);
+            let text = format!(
+                "{}{}",
+                String::from_utf8_lossy(&out.stdout),
+                stderr_of(&out)
+            );
+            // Control: the file without the duplicate passes every reader.
+            assert_eq!(out.status.code(), Some(code), "{args:?}: {text}");
+            if code == 1 {
+                assert!(
+                    text.contains(&file.display().to_string())
+                        && text.contains("duplicate key \"size\" in $.objects[1]")
+                        && text.contains("keep one of them")
+                        && text.contains(&format!("at line {line} column")),
+                    "{args:?}: {text}"
+                );
+            }
+        }
+    }
+}
+
+/// A key twice in a scene input fails that scene with the file and the key; the other scene
+/// is lifted.
+#[test]
+fn a_duplicate_key_in_camera_json_fails_that_scene_only() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (ws, scenes) = demo(dir.path());
+    let camera = ws.join("scenes").join(&scenes[0]).join("input/camera.json");
+    let text = std::fs::read_to_string(&camera).expect("read");
+    let twice = text.replacen('{', "{\n  \"width\": 1,", 1);
+    assert_ne!(twice, text);
+    std::fs::write(&camera, twice).expect("write");
+
+    let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
+    let stderr = stderr_of(&out);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let marker = ws
+        .join(".mesa/markers/lift")
+        .join(format!("{}.json", scenes[0]));
+    let marker = std::fs::read_to_string(&marker).expect("failed marker");
+    assert!(
+        marker.contains("input/camera.json")
+            && marker.contains("duplicate key \\\"width\\\" in $")
+            && marker.contains("line"),
+        "{marker}"
+    );
+    let lifted = ws.join("scenes").join(&scenes[1]).join("coarse/lift.json");
+    assert!(lifted.is_file(), "the other scene is lifted: {stderr}");
+}

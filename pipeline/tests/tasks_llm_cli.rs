@@ -355,3 +355,227 @@ fn offline_batches_give_the_same_tasks_as_the_direct_path() {
     );
     assert!(stderr.contains("stray.jsonl:2: not JSON"), "{stderr}");
 }
+
+/// Issue #20 item 8: a server that echoes the key inside valid replies (the description and
+/// every reasoning text) and inside a rejected one. The key is redacted before anything is
+/// written: no file of the dataset holds it (tasks, rejects, cache, records, markers), and the
+/// cache entries and the reject say `"redacted": true`.
+#[test]
+fn a_key_echoed_in_replies_is_redacted_before_anything_is_written() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Arc;
+    let echoed = Arc::new(AtomicUsize::new(0));
+    let server = {
+        let echoed = echoed.clone();
+        MockServer::start(move |request, _| {
+            let body = request.json();
+            let content = match call_of(&body) {
+                "description" => format!("{} Inventory tag {KEY}.", answer(&body)),
+                "reasoning" => answer(&body).replace(
+                    "The objects stand where the task needs them.",
+                    &format!("The objects stand where the task needs them (key {KEY})."),
+                ),
+                _ => model(&body).replace("{not json", &format!("{{not json {KEY}")),
+            };
+            let reply = Reply::completion(&content);
+            // Control: the key really goes out in the replies.
+            if reply.body.contains(KEY) {
+                echoed.fetch_add(1, Ordering::SeqCst);
+            }
+            reply
+        })
+    };
+    let dir = dataset(&server.base_url);
+    let (success, stdout, stderr) = run_direct(dir.path(), &[]);
+    assert!(success, "{stderr}");
+    assert!(stderr.contains("tasks: 7 scenes: 7 done"), "{stderr}");
+    // 7 descriptions, 35 reasonings and the rejected tasks reply.
+    assert_eq!(echoed.load(Ordering::SeqCst), 7 + 35 + 1);
+    assert!(
+        stderr.contains("model replies held the API key: it was replaced by <redacted>"),
+        "{stderr}"
+    );
+    let out = mesa()
+        .args(["records", "--progress", "off"])
+        .arg(dir.path())
+        .output()
+        .expect("records");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let files = common::all_files(dir.path());
+    for (path, bytes) in &files {
+        assert!(
+            !bytes.windows(KEY.len()).any(|w| w == KEY.as_bytes()),
+            "{path} holds the key"
+        );
+    }
+    for text in [&stdout, &stderr] {
+        assert!(!text.contains(KEY));
+    }
+    // The replies kept their place, redacted and marked.
+    let text_of = |suffix: &str| -> Vec<String> {
+        files
+            .iter()
+            .filter(|(k, _)| k.ends_with(suffix))
+            .map(|(_, b)| String::from_utf8_lossy(b).into_owned())
+            .collect()
+    };
+    let records = text_of("tasks.jsonl").concat();
+    assert!(records.contains("(key <redacted>)"), "{records}");
+    let rejects = text_of("rejects.jsonl");
+    assert_eq!(rejects.len(), 1);
+    let reject: TaskReject = serde_json::from_str(rejects[0].trim()).expect("reject");
+    assert_eq!(reject.reply, "{not json <redacted>");
+    assert!(reject.redacted);
+    let cache: Vec<String> = files
+        .iter()
+        .filter(|(k, _)| k.starts_with(".mesa/cache/chat/"))
+        .map(|(_, b)| String::from_utf8_lossy(b).into_owned())
+        .collect();
+    assert_eq!(cache.len(), 7 + 8 + 35);
+    let marked = cache
+        .iter()
+        .filter(|c| c.contains("\"redacted\": true"))
+        .count();
+    assert_eq!(
+        marked,
+        7 + 35 + 1,
+        "only the replies that held the key are marked"
+    );
+    // Marked entries are valid cache entries.
+    let out = mesa()
+        .arg("validate")
+        .arg(dir.path().join(".mesa/cache/chat"))
+        .output()
+        .expect("validate");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+}
+
+/// Issue #20 item 8: when every reply of a call is rejected, `tasks/rejects.jsonl` is written
+/// before the error that names it, the last success's `tasks.jsonl` stays, and the other
+/// scenes finish; a later success replaces both.
+#[test]
+fn rejects_are_written_before_the_error_and_the_last_tasks_stay() {
+    let server = MockServer::start(|request, _| {
+        let body = request.json();
+        // The second model answers the tasks call of the desk-lamp scene with text that is
+        // never JSON, whatever the attempt.
+        if body["model"] == "mock-model-2"
+            && call_of(&body) == "tasks"
+            && user_text(&body).contains("Desk Lamp(")
+        {
+            return Reply::completion("{not json, attempt after attempt");
+        }
+        Reply::completion(&answer(&body))
+    });
+    let dir = dataset(&server.base_url);
+    let (success, _, stderr) = run_direct(dir.path(), &[]);
+    assert!(success, "{stderr}");
+    let before = task_files(dir.path());
+    assert_eq!(before.len(), 7, "no rejects yet: {:?}", before.keys());
+    // The desk-lamp scene: the one the second model fails.
+    let (lamp_tasks, lamp_bytes) = before
+        .iter()
+        .find(|(_, b)| String::from_utf8_lossy(b).contains("Desk Lamp"))
+        .map(|(k, b)| (k.clone(), b.clone()))
+        .expect("a scene with a desk lamp");
+    let lamp_rejects = lamp_tasks.replace("tasks.jsonl", "rejects.jsonl");
+
+    let toml = config(&server.base_url).replace("mock-model", "mock-model-2");
+    std::fs::write(dir.path().join("mesa.toml"), toml).expect("config");
+    let (success, _, stderr) = run_direct(dir.path(), &[]);
+    assert!(!success, "{stderr}");
+    assert!(stderr.contains("7 scenes: 6 done"), "{stderr}");
+    assert!(
+        stderr.contains(
+            "no valid reply to the tasks call in 3 attempts (the rejects, with reasons, are in \
+             tasks/rejects.jsonl)"
+        ),
+        "{stderr}"
+    );
+    let after = task_files(dir.path());
+    // The file the error names exists, with every attempt and its reason.
+    let rejects = String::from_utf8_lossy(&after[&lamp_rejects]).into_owned();
+    let rejects: Vec<TaskReject> = rejects
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("reject"))
+        .collect();
+    assert_eq!(
+        rejects.iter().map(|r| r.attempt).collect::<Vec<_>>(),
+        [0, 1, 2]
+    );
+    assert!(rejects
+        .iter()
+        .all(|r| r.reasons[0].contains("not valid JSON")));
+    // The previous tasks are kept, byte for byte; the other scenes have the new model's.
+    assert_eq!(after[&lamp_tasks], lamp_bytes);
+    for (path, bytes) in &after {
+        if path.ends_with("tasks.jsonl") && *path != lamp_tasks {
+            assert!(
+                String::from_utf8_lossy(bytes).contains("llm:mock-model-2"),
+                "{path}"
+            );
+        }
+    }
+    // Control: a successful run replaces the kept tasks and removes the stale rejects.
+    let toml = config(&server.base_url).replace("mock-model", "mock-model-3");
+    std::fs::write(dir.path().join("mesa.toml"), toml).expect("config");
+    let (success, _, stderr) = run_direct(dir.path(), &[]);
+    assert!(success, "{stderr}");
+    let last = task_files(dir.path());
+    assert!(!last.contains_key(&lamp_rejects), "{:?}", last.keys());
+    assert_ne!(last[&lamp_tasks], lamp_bytes);
+}
+
+/// Issue #20 item 13: log lines carry ANSI colour codes only on a terminal, and not even there
+/// with `NO_COLOR` set. The terminal is a pseudo-terminal from util-linux `script`.
+#[test]
+fn log_lines_are_coloured_only_on_a_terminal_without_no_color() {
+    let server = MockServer::start(|request, _| Reply::completion(&answer(&request.json())));
+    let dir = dataset(&server.base_url);
+    let mesa_bin = assert_cmd::cargo::cargo_bin("mesa");
+    // Each run takes another scene, so that it sends requests (and the HTTP client logs them
+    // at debug level) instead of answering from the cache.
+    let command = |scene: &str| {
+        format!(
+            "{} -v tasks --progress off --jobs 1 --scenes {scene} {}",
+            mesa_bin.display(),
+            dir.path().display()
+        )
+    };
+    // Redirected: plain text.
+    let out = std::process::Command::new("sh")
+        .args(["-c", &command("dining_table_0001")])
+        .env(KEY_VAR, KEY)
+        .env_remove("NO_COLOR")
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("DEBUG"), "the run logs: {stderr}");
+    assert!(!stderr.contains('\u{1b}'), "no colour codes: {stderr:?}");
+    // On a terminal: coloured (the control), unless NO_COLOR says otherwise.
+    let on_terminal = |scene: &str, no_color: Option<&str>| {
+        let mut cmd = std::process::Command::new("script");
+        cmd.args(["-qec", &command(scene), "/dev/null"])
+            .env(KEY_VAR, KEY)
+            .env_remove("NO_COLOR");
+        if let Some(value) = no_color {
+            cmd.env("NO_COLOR", value);
+        }
+        let out = cmd.output().expect("script (util-linux) runs");
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(out.status.success(), "{text}");
+        assert!(text.contains("DEBUG"), "the run logs: {text}");
+        text
+    };
+    assert!(on_terminal("office_table_0002", None).contains("\u{1b}["));
+    assert!(!on_terminal("kitchen_counter_0003", Some("1")).contains('\u{1b}'));
+}

@@ -945,8 +945,13 @@ pub struct TaskReject {
     pub generator: String,
     /// Every reason the reply was rejected.
     pub reasons: Vec<String>,
-    /// The reply text as received (for a single task, that task's JSON).
+    /// The reply text as received (for a single task, that task's JSON), except that the API
+    /// key, when the reply held it, is replaced by `<redacted>`.
     pub reply: String,
+    /// Present and true when the reply held the API key, replaced by `<redacted>` before
+    /// anything was written.
+    #[serde(default, skip_serializing_if = "crate::artifacts::is_false")]
+    pub redacted: bool,
 }
 
 /// An SFT record in LLaMA-Factory's alpaca form (`records/sft.json` and `records/test.json`
@@ -1305,4 +1310,14 @@ pub struct CachedChatReply {
     /// The finish reason.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub finish_reason: Option<String>,
+    /// Present and true when the reply held the API key, replaced by `<redacted>` in `content`
+    /// (and `model`) before the entry was written.
+    #[serde(default, skip_serializing_if = "crate::artifacts::is_false")]
+    pub redacted: bool,
+}
+
+/// For `skip_serializing_if`: flags written only when set, so files without them keep their
+/// bytes.
+pub(crate) fn is_false(value: &bool) -> bool {
+    !*value
 }

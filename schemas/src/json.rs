@@ -40,19 +40,126 @@ pub fn starts_with_bom(text: &str) -> bool {
 
 /// Parses JSON text, accepting the non-finite tokens `NaN`, `Infinity` and `-Infinity` outside
 /// strings (they become sentinel strings, see [`nonfinite_token`]). Text that starts with a
-/// byte order mark is refused with [`BOM_PROBLEM`].
+/// byte order mark is refused with [`BOM_PROBLEM`], an object with a key twice as
+/// [`check_unique_keys`] says.
 pub fn parse_lenient(text: &str) -> Result<Value, serde_json::Error> {
     if starts_with_bom(text) {
         return Err(<serde_json::Error as serde::de::Error>::custom(BOM_PROBLEM));
     }
     match serde_json::from_str(text) {
-        Ok(value) => Ok(value),
+        Ok(value) => {
+            check_unique_keys(text)?;
+            Ok(value)
+        }
         Err(strict_error) => {
             let Some(rewritten) = rewrite_nonfinite(text) else {
                 return Err(strict_error);
             };
-            serde_json::from_str(&rewritten)
+            let value = serde_json::from_str(&rewritten)?;
+            // The sentinels change columns, not lines: the line of a duplicate stays right.
+            check_unique_keys(&rewritten)?;
+            Ok(value)
         }
+    }
+}
+
+/// Refuses JSON text in which an object has the same key twice: serde_json would silently
+/// keep the last value. The error names the key, its JSON path and (from serde_json) its line
+/// and column: `duplicate key "size" in $.objects[1] (a JSON object holds each key once; keep
+/// one of them) at line 9 column 14`. Every reader of outside JSON calls it (through
+/// [`parse_lenient`] or directly). Bounded like a parse: one pass, serde_json's nesting limit,
+/// memory for the keys of the objects open along one path.
+pub fn check_unique_keys(text: &str) -> Result<(), serde_json::Error> {
+    use serde::de::DeserializeSeed as _;
+    let mut deserializer = serde_json::Deserializer::from_str(text);
+    UniqueKeys { path: "$" }.deserialize(&mut deserializer)?;
+    deserializer.end()
+}
+
+/// `path.key`, or `path["key"]` for a key that is not an identifier (as
+/// `validate::path_key`, which this module cannot import: validate imports it).
+fn key_path(path: &str, key: &str) -> String {
+    let plain = !key.is_empty()
+        && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && !key.starts_with(|c: char| c.is_ascii_digit());
+    if plain {
+        format!("{path}.{key}")
+    } else {
+        format!("{path}[{}]", Value::String(key.to_owned()))
+    }
+}
+
+/// A visitor that walks any JSON value and fails on a repeated key.
+struct UniqueKeys<'p> {
+    path: &'p str,
+}
+
+impl<'de> serde::de::DeserializeSeed<'de> for UniqueKeys<'_> {
+    type Value = ();
+
+    fn deserialize<D: serde::Deserializer<'de>>(self, deserializer: D) -> Result<(), D::Error> {
+        deserializer.deserialize_any(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for UniqueKeys<'_> {
+    type Value = ();
+
+    fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("a JSON value")
+    }
+
+    fn visit_bool<E>(self, _: bool) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_i64<E>(self, _: i64) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_u64<E>(self, _: u64) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_f64<E>(self, _: f64) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_str<E>(self, _: &str) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_unit<E>(self) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
+        let mut index = 0usize;
+        loop {
+            let path = format!("{}[{index}]", self.path);
+            if seq.next_element_seed(UniqueKeys { path: &path })?.is_none() {
+                return Ok(());
+            }
+            index += 1;
+        }
+    }
+
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+        let mut seen = std::collections::BTreeSet::new();
+        while let Some(key) = map.next_key::<String>()? {
+            if seen.contains(&key) {
+                return Err(serde::de::Error::custom(format!(
+                    "duplicate key {} in {} (a JSON object holds each key once; keep one of \
+                     them)",
+                    Value::String(key),
+                    self.path
+                )));
+            }
+            let path = key_path(self.path, &key);
+            seen.insert(key);
+            map.next_value_seed(UniqueKeys { path: &path })?;
+        }
+        Ok(())
     }
 }
 
@@ -122,6 +229,30 @@ pub fn to_sorted_line<T: Serialize + ?Sized>(value: &T) -> Result<String, serde_
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_key_twice_is_refused_with_its_path_and_position() {
+        let text = "{\"objects\": [\n  {\"instance\": \"mug_0\"},\n  {\"size\": [1, 2, 3], \"size\": [4, 5, 6]}\n]}";
+        let e = parse_lenient(text).expect_err("duplicate");
+        assert_eq!(
+            e.to_string(),
+            "duplicate key \"size\" in $.objects[1] (a JSON object holds each key once; keep \
+             one of them) at line 3 column 28"
+        );
+        // With a non-finite token too (the lenient path).
+        let e = parse_lenient("{\"a\": NaN,\n \"a\": 1}").expect_err("duplicate");
+        assert!(e.to_string().starts_with("duplicate key \"a\" in $"), "{e}");
+        assert_eq!(e.line(), 2);
+        // Control: the same keys in different objects, and plain values, pass; serde_json
+        // alone keeps the last value silently.
+        let fine = "{\"a\": {\"x\": 1}, \"b\": {\"x\": [true, null, \"s\", -1, 2.5]}}";
+        assert!(parse_lenient(fine).is_ok());
+        let last: Value = serde_json::from_str("{\"a\": 1, \"a\": 2}").expect("serde_json");
+        assert_eq!(last["a"], 2);
+        // Deep nesting stays bounded by serde_json's recursion limit, an error not a crash.
+        let deep = format!("{}{}", "[".repeat(100_000), "]".repeat(100_000));
+        assert!(check_unique_keys(&deep).is_err());
+    }
 
     #[test]
     fn nonfinite_tokens_become_sentinels_outside_strings_only() {

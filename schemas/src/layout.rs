@@ -47,6 +47,8 @@ fn layout_schema() -> String {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct LayoutObject {
     /// Instance name: category and index, like `mug_0`.
+    /// 1 to 64 ASCII letters, digits, `_` or `-`, starting with a letter or digit.
+    #[schemars(pattern(crate::validate::INSTANCE_NAME_PATTERN))]
     pub instance: String,
     /// The uid of the asset placed here (the file `assets/library/<uid>.glb`); empty when no
     /// asset has been retrieved yet (such a layout cannot be released).
@@ -106,6 +108,9 @@ impl DatasetLayout {
         if let Some(zone) = &self.restricted_zone_cm {
             crate::units::check_zone(zone, "$.restricted_zone", false, &mut problems);
         }
+        problems.extend(crate::validate::invalid_instances(
+            self.objects.iter().map(|o| o.instance.as_str()),
+        ));
         problems.extend(crate::validate::duplicate_instances(
             self.objects.iter().map(|o| o.instance.as_str()),
         ));

@@ -192,7 +192,9 @@ fn name_objects(problems: Vec<Problem>, layout: Option<&Value>, root: &str) -> V
                 .and_then(|i| objects?.get(i))
                 .and_then(|o| o.get("instance"))
                 .and_then(Value::as_str)
-                .filter(|name| !name.starts_with(NONFINITE_PREFIX));
+                .filter(|name| !name.starts_with(NONFINITE_PREFIX))
+                // A name that breaks the rule is quoted in its own problem, never printed raw.
+                .filter(|name| crate::validate::instance_name_problem(name).is_none());
             if let Some(instance) = instance {
                 problem.problem = format!("{instance}: {}", problem.problem);
             }

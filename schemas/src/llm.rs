@@ -25,6 +25,8 @@ pub struct LlmLayout {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct LlmObject {
     /// Instance name: category and index, like `pen_0`.
+    /// 1 to 64 ASCII letters, digits, `_` or `-`, starting with a letter or digit.
+    #[schemars(pattern(crate::validate::INSTANCE_NAME_PATTERN))]
     pub instance: String,
     /// [width, depth, height] in cm before rotation.
     #[serde(rename = "size")]
@@ -54,6 +56,9 @@ impl LlmLayout {
         if let Some(zone) = &self.sink_zone_cm {
             crate::units::check_zone(zone, "$.sink_zone", false, &mut problems);
         }
+        problems.extend(crate::validate::invalid_instances(
+            self.objects.iter().map(|o| o.instance.as_str()),
+        ));
         problems.extend(crate::validate::duplicate_instances(
             self.objects.iter().map(|o| o.instance.as_str()),
         ));

@@ -48,6 +48,91 @@ impl fmt::Display for Problem {
     }
 }
 
+/// The longest instance name, in characters.
+pub const INSTANCE_NAME_MAX_CHARS: usize = 64;
+
+/// The instance-name rule as a JSON Schema `pattern` (written into the layout schemas).
+pub const INSTANCE_NAME_PATTERN: &str = "^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$";
+
+/// The instance-name rule in words, for messages and docs.
+pub const INSTANCE_NAME_RULE: &str = "an instance name of 1 to 64 ASCII letters, digits, '_' or \
+     '-', starting with a letter or digit, like mug_0";
+
+/// What is wrong with an instance name, or `None` when layouts, scene-graph lines
+/// (`(mug_0, left of, cup_1)`) and file names (`snapshots/<instance>.png`) can all carry it.
+/// The one rule every reader of layouts applies (docs/conventions.md, "Instance names").
+pub fn instance_name_problem(name: &str) -> Option<String> {
+    let chars = name.chars().count();
+    let bad: Option<char> = name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || *c == '_' || *c == '-'));
+    Some(if name.is_empty() {
+        "is empty".to_owned()
+    } else if chars > INSTANCE_NAME_MAX_CHARS {
+        format!("is {chars} characters long")
+    } else if let Some(c) = bad {
+        let what = match c {
+            '\n' | '\r' => "a line break".to_owned(),
+            ',' => "a comma".to_owned(),
+            '(' | ')' => "a parenthesis".to_owned(),
+            ' ' => "a space".to_owned(),
+            c if c.is_control() => format!("the control character U+{:04X}", u32::from(c)),
+            c => format!("the character {c:?}"),
+        };
+        format!("holds {what}")
+    } else if name.starts_with(['_', '-']) {
+        "starts with a '_' or '-'".to_owned()
+    } else {
+        return None;
+    })
+}
+
+/// A name that follows the rule, made from `name` (lower case, runs of other characters as
+/// one `_`, at most 64 characters): the fix a message suggests.
+pub fn suggested_instance_name(name: &str) -> String {
+    let mut out = String::new();
+    for c in name.chars() {
+        if c.is_ascii_alphanumeric() || c == '-' {
+            out.push(c.to_ascii_lowercase());
+        } else if !out.is_empty() && !out.ends_with('_') {
+            out.push('_');
+        }
+    }
+    let out: String = out
+        .trim_matches(['_', '-'])
+        .chars()
+        .take(INSTANCE_NAME_MAX_CHARS)
+        .collect();
+    let out = out.trim_end_matches(['_', '-']).to_owned();
+    if out.is_empty() {
+        "object_0".to_owned()
+    } else {
+        out
+    }
+}
+
+/// Reports instance names that break the rule ([`instance_name_problem`]) in
+/// `$.objects[i].instance`, quoted (a name is never printed raw: it may hold a line break).
+pub fn invalid_instances<'a>(names: impl Iterator<Item = &'a str>) -> Vec<Problem> {
+    names
+        .enumerate()
+        .filter_map(|(i, name)| {
+            let problem = instance_name_problem(name)?;
+            Some(Problem::new(
+                format!("$.objects[{i}].instance"),
+                format!(
+                    "the instance name {} {problem}",
+                    Value::String(name.to_owned())
+                ),
+                format!(
+                    "{INSTANCE_NAME_RULE}; rename it, e.g. to \"{}\"",
+                    suggested_instance_name(name)
+                ),
+            ))
+        })
+        .collect()
+}
+
 /// Reports instance names used twice in `$.objects[i].instance`.
 pub fn duplicate_instances<'a>(names: impl Iterator<Item = &'a str>) -> Vec<Problem> {
     let mut seen = std::collections::BTreeMap::new();
@@ -56,7 +141,10 @@ pub fn duplicate_instances<'a>(names: impl Iterator<Item = &'a str>) -> Vec<Prob
         if let Some(first) = seen.insert(name, i) {
             problems.push(Problem::new(
                 format!("$.objects[{i}].instance"),
-                format!("duplicate instance \"{name}\" (also objects[{first}])"),
+                format!(
+                    "duplicate instance {} (also objects[{first}])",
+                    Value::String(name.to_owned())
+                ),
                 "instance names unique within a layout",
             ));
         }
@@ -468,5 +556,73 @@ pub fn describe(value: &Value) -> String {
         }
         Value::Array(items) => format!("is an array of {} items", items.len()),
         Value::Object(_) => "is an object".to_owned(),
+    }
+}
+
+#[cfg(test)]
+mod instance_name_tests {
+    use super::*;
+
+    #[test]
+    fn the_names_mesatask_uses_pass() {
+        for name in [
+            "mug_0",
+            "desk_lamp_0",
+            "soap_dispenser_lotion_bottle_0",
+            "t-shirt_1",
+            "A1",
+        ] {
+            assert_eq!(instance_name_problem(name), None, "{name}");
+        }
+        // The published gallery's names (../shared/realdata), when the folder is there.
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../shared/realdata/layouts/mesatask_gallery");
+        let mut checked = 0;
+        for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+            let text = std::fs::read_to_string(entry.path()).unwrap_or_default();
+            for part in text.split("\"instance\"").skip(1) {
+                // Inline or inside a JSON string (`\"instance\": \"mug_0\"`).
+                let name: String = part
+                    .trim_start_matches(['\\', '"', ':', ' '])
+                    .chars()
+                    .take_while(|c| *c != '"' && *c != '\\')
+                    .collect();
+                assert_eq!(instance_name_problem(&name), None, "{name:?}");
+                checked += 1;
+            }
+        }
+        assert!(checked > 50, "{}: {checked} names", dir.display());
+    }
+
+    #[test]
+    fn names_that_break_lines_files_or_triplets_fail() {
+        let cases = [
+            ("", "is empty"),
+            ("mug_0\n(a, in, b)", "holds a line break"),
+            ("mug,0", "holds a comma"),
+            ("mug(0)", "holds a parenthesis"),
+            ("mug 0", "holds a space"),
+            ("../mug", "holds the character '.'"),
+            ("mug\u{7}", "holds the control character U+0007"),
+            ("_mug", "starts with a '_' or '-'"),
+        ];
+        for (name, problem) in cases {
+            assert_eq!(
+                instance_name_problem(name).as_deref(),
+                Some(problem),
+                "{name:?}"
+            );
+        }
+        assert_eq!(
+            instance_name_problem(&"a".repeat(65)).as_deref(),
+            Some("is 65 characters long")
+        );
+        assert_eq!(instance_name_problem(&"a".repeat(64)), None);
+        // The suggested fix follows the rule.
+        for (name, _) in cases {
+            let fixed = suggested_instance_name(name);
+            assert_eq!(instance_name_problem(&fixed), None, "{name:?} -> {fixed:?}");
+        }
+        assert_eq!(suggested_instance_name("Coffee Mug(2)"), "coffee_mug_2");
     }
 }

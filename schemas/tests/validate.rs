@@ -145,6 +145,7 @@ fn asset_views_and_cached_chat_replies_validate() {
         model: Some("gpt-4o-2024-08-06".to_owned()),
         content: "A desk with a lamp and two mugs.".to_owned(),
         finish_reason: Some("stop".to_owned()),
+        redacted: false,
     };
     let views_text = String::from_utf8(to_sorted_pretty(&views).expect("ser")).expect("utf8");
     let reply_text = String::from_utf8(to_sorted_pretty(&reply).expect("ser")).expect("utf8");

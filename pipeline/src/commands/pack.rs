@@ -53,15 +53,11 @@ impl PackStage {
 
 fn read_layout(scene: &Scene) -> anyhow::Result<(DatasetLayout, Vec<u8>)> {
     let path = scene.path(COARSE_LAYOUT);
-    let bytes = std::fs::read(&path)
-        .with_context(|| format!("{}: cannot read (run `mesa place`)", path.display()))?;
-    let layout = serde_json::from_slice(&bytes).map_err(|e| {
-        anyhow!(
-            "{}: not a dataset layout: {e} (run `mesa validate` on it)",
-            path.display()
-        )
-    })?;
-    Ok((layout, bytes))
+    if !path.exists() {
+        bail!("{}: no layout (run `mesa place`)", path.display());
+    }
+    // The one layout reader: bounded, validated (instance names, duplicate keys included).
+    crate::layouts::read_dataset_layout_bytes(&path, "pack")
 }
 
 /// The mask files of a scene that exist, relative to the scene folder.

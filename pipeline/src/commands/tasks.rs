@@ -9,11 +9,15 @@ use std::process::ExitCode;
 use std::sync::{Arc, OnceLock};
 
 use anyhow::{anyhow, bail, Context as _};
+use mesa_schemas::artifacts::TaskReject;
 use mesa_schemas::json::to_sorted_line;
 use mesa_stages::tasks::chat::{Chat, ChatRequest};
 use mesa_stages::tasks::prompts::Prompts;
 use mesa_stages::tasks::scene::NoChat;
-use mesa_stages::tasks::{write_scene_tasks, Backend, SceneInput, SceneTasks, TasksError, View};
+use mesa_stages::tasks::{
+    write_scene_tasks_keeping_rejects, Backend, FailedScene, SceneInput, SceneTasks, TasksError,
+    View,
+};
 use serde::Serialize;
 
 use clap::{Args as ClapArgs, ValueEnum};
@@ -24,8 +28,8 @@ use crate::exit::{usage, UsageError, EXIT_FAILED, EXIT_OK};
 use crate::fsio::DigestCache;
 use crate::layouts::present_layouts;
 use crate::runner::{
-    digest_of, discover_scenes, scene_state, select_scenes, RunError, Scene, SceneOutput,
-    SceneStage, SceneState, StageContext,
+    digest_of, discover_scenes, scene_state, select_scenes, FailureOutputs, RunError, Scene,
+    SceneOutput, SceneStage, SceneState, StageContext,
 };
 use crate::scene_docs::read_scene_docs;
 use rayon::prelude::*;
@@ -222,6 +226,16 @@ pub fn load_prompts(dataset: &Path, prompts_dir: &str) -> Result<Prompts, String
     result.map_err(|e| format!("[tasks] prompts_dir: {e}"))
 }
 
+/// `tasks/rejects.jsonl`: one sorted JSON line per reject.
+fn rejects_jsonl(rejects: &[TaskReject]) -> anyhow::Result<Vec<u8>> {
+    let mut lines = String::new();
+    for reject in rejects {
+        lines.push_str(&to_sorted_line(reject)?);
+        lines.push('\n');
+    }
+    Ok(lines.into_bytes())
+}
+
 /// The outcome of one scene.
 #[derive(Debug)]
 pub enum Computed {
@@ -369,7 +383,7 @@ impl TasksStage {
     pub fn compute(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Computed> {
         let loaded = self.loaded(ctx)?;
         let (input, warnings) = self.scene_input(scene)?;
-        match write_scene_tasks(
+        match write_scene_tasks_keeping_rejects(
             &input,
             &ctx.config.tasks,
             &loaded.prompts,
@@ -380,8 +394,19 @@ impl TasksStage {
                 tasks.warnings.splice(0..0, warnings);
                 Ok(Computed::Done(tasks))
             }
-            Err(TasksError::Pending(request)) => Ok(Computed::Pending(request)),
-            Err(e) => Err(anyhow!(e)),
+            Err(FailedScene {
+                error: TasksError::Pending(request),
+                ..
+            }) => Ok(Computed::Pending(request)),
+            Err(FailedScene { error, rejects }) => {
+                // The rejects are written before the error that names them, and the tasks of
+                // the last success stay (records use them while they match the layout).
+                let mut failure = FailureOutputs::new(anyhow!(error)).keep_previous_outputs();
+                if !rejects.is_empty() {
+                    failure.add_file(REJECTS, rejects_jsonl(&rejects)?);
+                }
+                Err(anyhow::Error::new(failure))
+            }
         }
     }
 
@@ -517,12 +542,7 @@ impl SceneStage for TasksStage {
         }
         output.add_file(TASKS, lines.into_bytes());
         if !tasks.rejects.is_empty() {
-            let mut lines = String::new();
-            for reject in &tasks.rejects {
-                lines.push_str(&to_sorted_line(reject)?);
-                lines.push('\n');
-            }
-            output.add_file(REJECTS, lines.into_bytes());
+            output.add_file(REJECTS, rejects_jsonl(&tasks.rejects)?);
             output.warn(format!(
                 "{} model replies rejected (kept with their reasons in {REJECTS})",
                 tasks.rejects.len()

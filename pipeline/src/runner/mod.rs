@@ -35,5 +35,5 @@ pub use self::core::{
 pub use self::dataset::{run_dataset_stage, DatasetReport, DatasetStage, Executor};
 pub use self::scene::{
     format_summary, marker_path, process_scene, run_and_report, run_stage, scene_state,
-    SceneOutcome, SceneOutput, SceneStage, SceneState, StageSummary,
+    FailureOutputs, SceneOutcome, SceneOutput, SceneStage, SceneState, StageSummary,
 };

@@ -61,6 +61,52 @@ impl SceneOutput {
     }
 }
 
+/// A scene failure that still leaves files: what the stage kept before it failed (the
+/// rejected replies a `tasks` error names), written before the failure is recorded, and
+/// whether the outputs of the scene's last success stay (a failed rerun of `tasks` does not
+/// take the previous `tasks.jsonl` away). A stage returns it as its error
+/// (`anyhow::Error::new(failure)`); its message and causes are those of the error it wraps.
+#[derive(Debug)]
+pub struct FailureOutputs {
+    files: BTreeMap<String, Vec<u8>>,
+    keep_previous: bool,
+    error: anyhow::Error,
+}
+
+impl FailureOutputs {
+    /// The failure `error`, with no file yet.
+    pub fn new(error: anyhow::Error) -> Self {
+        Self {
+            files: BTreeMap::new(),
+            keep_previous: false,
+            error,
+        }
+    }
+
+    /// Adds a file at `rel` (relative to the scene folder), written although the scene failed.
+    pub fn add_file(&mut self, rel: impl Into<String>, bytes: Vec<u8>) {
+        self.files.insert(rel.into(), bytes);
+    }
+
+    /// Keeps the outputs of the last success (those the failure does not rewrite).
+    pub fn keep_previous_outputs(mut self) -> Self {
+        self.keep_previous = true;
+        self
+    }
+}
+
+impl std::fmt::Display for FailureOutputs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Display::fmt(&*self.error, f)
+    }
+}
+
+impl std::error::Error for FailureOutputs {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        self.error.source()
+    }
+}
+
 /// A per-scene stage.
 pub trait SceneStage: Sync {
     /// The stage name (the subcommand), like `graph`.
@@ -347,7 +393,7 @@ pub fn process_scene(
         Ok(p) => p,
         Err(e) => {
             let previous = read_marker(&marker_file);
-            return fail(ctx, &marker_file, base, previous.as_ref(), error_chain(&e));
+            return fail(ctx, scene, &marker_file, base, previous.as_ref(), &e);
         }
     };
     base.inputs = prepared.inputs.clone();
@@ -364,18 +410,28 @@ pub fn process_scene(
         Ok(Err(e)) => {
             return fail(
                 ctx,
+                scene,
                 &marker_file,
                 base,
                 prepared.previous.as_ref(),
-                error_chain(&e),
+                &e,
             )
         }
         Err(payload) => {
-            let error = vec![
-                format!("internal error: {}", panic_message(payload.as_ref())),
-                "this is a bug in mesa: please report it with this scene's inputs".to_owned(),
-            ];
-            return fail(ctx, &marker_file, base, prepared.previous.as_ref(), error);
+            let error =
+                anyhow::anyhow!("this is a bug in mesa: please report it with this scene's inputs")
+                    .context(format!(
+                        "internal error: {}",
+                        panic_message(payload.as_ref())
+                    ));
+            return fail(
+                ctx,
+                scene,
+                &marker_file,
+                base,
+                prepared.previous.as_ref(),
+                &error,
+            );
         }
     };
     match write_outputs(ctx, scene, &output, prepared.previous.as_ref()) {
@@ -401,10 +457,11 @@ pub fn process_scene(
         }
         Err(e) => fail(
             ctx,
+            scene,
             &marker_file,
             base,
             prepared.previous.as_ref(),
-            error_chain(&e),
+            &e,
         ),
     }
 }
@@ -463,18 +520,46 @@ fn removed_warning(rel: &str) -> String {
 
 fn fail(
     ctx: &StageContext<'_>,
+    scene: &Scene,
     marker_file: &Path,
     mut marker: RunMarker,
     previous: Option<&RunMarker>,
-    error: Vec<String>,
+    cause: &anyhow::Error,
 ) -> SceneOutcome {
-    // The outputs of an earlier success no longer match this scene's inputs: remove them so
-    // that nothing downstream reads them as current.
-    if let Some(previous) = previous.filter(|p| p.status == MarkerStatus::Done) {
-        for rel in previous.outputs.keys() {
-            let _ = std::fs::remove_file(ctx.dataset.join(rel));
+    let mut error = error_chain(cause);
+    let leftovers = cause.downcast_ref::<FailureOutputs>();
+    // The files the failure leaves (rejects it names), written before it is recorded. A
+    // failed marker lists them, so that a later success removes them.
+    let mut written = BTreeMap::new();
+    for (rel, bytes) in leftovers.map(|f| &f.files).into_iter().flatten() {
+        let path = scene.path(rel);
+        let result = check_output_path(rel)
+            .and_then(|()| sweep_tmp_for(&path).map_err(anyhow::Error::from))
+            .and_then(|()| write_atomic(&path, bytes).map_err(anyhow::Error::from));
+        match result {
+            Ok(()) => {
+                written.insert(scene.rel(rel), sha256_hex(bytes));
+            }
+            Err(e) => error.push(format!("{}: cannot write: {e:#}", path.display())),
         }
     }
+    let keep_previous = leftovers.is_some_and(|f| f.keep_previous);
+    if let Some(previous) = previous {
+        for (rel, digest) in &previous.outputs {
+            if written.contains_key(rel) {
+                continue;
+            }
+            if keep_previous {
+                // Still the last success's outputs; listed so a later run replaces them.
+                written.insert(rel.clone(), digest.clone());
+            } else {
+                // The outputs of an earlier run no longer match this scene's inputs: remove
+                // them so that nothing downstream reads them as current.
+                let _ = std::fs::remove_file(ctx.dataset.join(rel));
+            }
+        }
+    }
+    marker.outputs = written;
     marker.status = MarkerStatus::Failed;
     marker.error = error.clone();
     if let Err(e) = write_marker(marker_file, &marker) {

@@ -485,16 +485,19 @@ fn has_fov(camera_path: &Path) -> bool {
     inputs::read_json(camera_path).is_ok_and(|v| v.get("fov_x_deg").is_some())
 }
 
-/// `Coffee Mug` → `coffee_mug`: lowercase, runs of other characters become one `_`.
+/// `Coffee Mug` → `coffee_mug`: lowercase ASCII, runs of other characters become one `_`, at
+/// most 58 characters, so that `<label>_<index>` follows the instance-name rule
+/// (`mesa_schemas::validate::instance_name_problem`).
 pub fn sanitize_label(label: &str) -> String {
     let mut out = String::new();
     for c in label.trim().chars() {
-        if c.is_alphanumeric() {
-            out.extend(c.to_lowercase());
+        if c.is_ascii_alphanumeric() {
+            out.push(c.to_ascii_lowercase());
         } else if !out.ends_with('_') && !out.is_empty() {
             out.push('_');
         }
     }
+    let out: String = out.chars().take(58).collect();
     let out = out.trim_end_matches('_').to_owned();
     if out.is_empty() {
         "object".to_owned()
@@ -1068,6 +1071,14 @@ mod tests {
         assert_eq!(sanitize_label("Coffee Mug"), "coffee_mug");
         assert_eq!(sanitize_label("  desk-lamp "), "desk_lamp");
         assert_eq!(sanitize_label("!!"), "object");
+        assert_eq!(sanitize_label("Café mug"), "caf_mug");
+        let long = sanitize_label(&"word ".repeat(40));
+        assert!(long.len() <= 58 && !long.ends_with('_'), "{long}");
+        let instance = format!("{long}_12345");
+        assert_eq!(
+            mesa_schemas::validate::instance_name_problem(&instance),
+            None
+        );
     }
 
     #[test]

@@ -347,6 +347,8 @@ pub fn query_embeddings(
     let instances: InstancesJson = serde_json::from_str(&text).map_err(|e| {
         RetrieveError::file(instances_path, format!("is not an instances file: {e}"))
     })?;
+    mesa_schemas::json::check_unique_keys(&text)
+        .map_err(|e| RetrieveError::file(instances_path, e.to_string()))?;
     let rows = match sidecar {
         Some(path) => {
             if let Some(entry) = instances.instances.iter().find(|e| e.embedding.is_some()) {

@@ -60,12 +60,16 @@ impl ChatRequest {
 }
 
 /// A model reply.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct ChatReply {
     /// The text of `choices[0].message.content`.
     pub content: String,
     /// `choices[0].finish_reason` when the server gave one (`length` means cut at max_tokens).
     pub finish_reason: Option<String>,
+    /// Whether the backend found the API key in the reply and replaced it by `<redacted>`
+    /// (before caching it): rejects of such a reply say `"redacted": true`, and the scene gets
+    /// a warning.
+    pub redacted: bool,
 }
 
 /// Why a backend gave no reply.

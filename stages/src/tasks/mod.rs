@@ -22,7 +22,10 @@ pub mod validate;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-pub use scene::{write_scene_tasks, SceneInput, SceneTasks, TasksError, View};
+pub use scene::{
+    write_scene_tasks, write_scene_tasks_keeping_rejects, FailedScene, SceneInput, SceneTasks,
+    TasksError, View,
+};
 
 /// Which backend writes the tasks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]

@@ -148,6 +148,10 @@ struct Writer<'a> {
     types: SceneTypes,
     generator: String,
     rejects: Vec<TaskReject>,
+    /// Whether the reply being judged had the API key redacted from it.
+    reply_redacted: bool,
+    /// Replies that had the API key redacted from them.
+    redacted_replies: usize,
 }
 
 impl Writer<'_> {
@@ -186,6 +190,7 @@ impl Writer<'_> {
             generator: self.generator.clone(),
             reasons,
             reply,
+            redacted: self.reply_redacted,
         });
     }
 
@@ -214,6 +219,8 @@ impl Writer<'_> {
         for attempt in 0..self.config.max_attempts {
             let request = build_request(call, &self.config.llm, prompt, images, json, attempt);
             let reply = self.ask(&request)?;
+            self.reply_redacted = reply.redacted;
+            self.redacted_replies += usize::from(reply.redacted);
             match accept(self, &reply, attempt) {
                 Ok(value) => return Ok(value),
                 Err(reasons) => {
@@ -230,8 +237,28 @@ impl Writer<'_> {
     }
 }
 
+/// A scene whose tasks failed, with the replies its calls rejected before the failure: the
+/// caller writes them (`tasks/rejects.jsonl`) before it reports the error that names them.
+#[derive(Debug)]
+pub struct FailedScene {
+    /// Why the scene has no tasks.
+    pub error: TasksError,
+    /// The rejected replies, with their reasons (empty for the template backend).
+    pub rejects: Vec<TaskReject>,
+}
+
+impl From<TasksError> for FailedScene {
+    fn from(error: TasksError) -> Self {
+        Self {
+            error,
+            rejects: Vec::new(),
+        }
+    }
+}
+
 /// Writes the tasks of one scene with the configured backend. `chat` serves the `llm`
-/// backend (the template backend asks nothing of it); `seed` is `[run] seed`.
+/// backend (the template backend asks nothing of it); `seed` is `[run] seed`. On failure the
+/// rejects are dropped: [`write_scene_tasks_keeping_rejects`] returns them.
 pub fn write_scene_tasks(
     input: &SceneInput,
     config: &TasksConfig,
@@ -239,8 +266,19 @@ pub fn write_scene_tasks(
     chat: &dyn Chat,
     seed: u64,
 ) -> Result<SceneTasks, TasksError> {
+    write_scene_tasks_keeping_rejects(input, config, prompts, chat, seed).map_err(|f| f.error)
+}
+
+/// [`write_scene_tasks`], whose failure keeps the replies rejected before it.
+pub fn write_scene_tasks_keeping_rejects(
+    input: &SceneInput,
+    config: &TasksConfig,
+    prompts: &Prompts,
+    chat: &dyn Chat,
+    seed: u64,
+) -> Result<SceneTasks, FailedScene> {
     if input.layout.objects.is_empty() {
-        return Err(TasksError::EmptyLayout);
+        return Err(TasksError::EmptyLayout.into());
     }
     let types = SceneTypes::of_layout(&input.layout);
     let count = config.tasks_per_scene as usize;
@@ -274,6 +312,7 @@ pub fn write_scene_tasks(
         let check = check_description(&ChatReply {
             content: description.clone(),
             finish_reason: None,
+            redacted: false,
         });
         let description = check.map_err(|reasons| TasksError::Template {
             call: "description",
@@ -293,7 +332,8 @@ pub fn write_scene_tasks(
                 return Err(TasksError::Template {
                     call: "task",
                     reasons: problems.join("; "),
-                });
+                }
+                .into());
             }
             let core: Vec<String> = core_types(&types, &draft.objects_cluster)
                 .iter()
@@ -305,7 +345,8 @@ pub fn write_scene_tasks(
                 return Err(TasksError::Template {
                     call: "reasoning",
                     reasons: problems.join("; "),
-                });
+                }
+                .into());
             }
             records.push(record(index, &description, &[], draft, reasoning));
         }
@@ -313,7 +354,8 @@ pub fn write_scene_tasks(
             return Err(TasksError::Template {
                 call: "tasks",
                 reasons: "no task could be built from this scene".to_owned(),
-            });
+            }
+            .into());
         }
         return Ok(SceneTasks {
             records,
@@ -329,162 +371,179 @@ pub fn write_scene_tasks(
         types,
         generator: generator.clone(),
         rejects: Vec::new(),
+        reply_redacted: false,
+        redacted_replies: 0,
     };
-    // Call 1: the table description, from the views when there are any.
-    let images: Vec<View> = if config.llm.send_images {
-        input.views.clone()
-    } else {
-        Vec::new()
-    };
-    let views_text = if images.is_empty() {
-        "No rendered view of this table is available: describe it from the object list and the \
-         scene graph below."
-            .to_owned()
-    } else {
-        let names: Vec<&str> = images.iter().map(|v| v.name.as_str()).collect();
-        format!(
-            "Attached are {} rendered view{} of the table ({}).",
-            images.len(),
-            if images.len() == 1 { "" } else { "s" },
-            names.join(", ")
-        )
-    };
-    let view_files: Vec<String> = images.iter().map(|v| v.file.clone()).collect();
-    let prompt = writer.render(&prompts.table_description, [("views", views_text)])?;
-    let description = writer.call(
-        CallKind::Description,
-        &prompt,
-        &images,
-        false,
-        None,
-        |_, reply, _| check_description(reply).map_err(Vec::from),
-    )?;
+    // The calls, in a closure so that their rejects survive a failure (the caller writes them
+    // before the error that names them).
+    let result = (|| -> Result<SceneTasks, TasksError> {
+        // Call 1: the table description, from the views when there are any.
+        let images: Vec<View> = if config.llm.send_images {
+            input.views.clone()
+        } else {
+            Vec::new()
+        };
+        let views_text = if images.is_empty() {
+            "No rendered view of this table is available: describe it from the object list and the \
+             scene graph below."
+                .to_owned()
+        } else {
+            let names: Vec<&str> = images.iter().map(|v| v.name.as_str()).collect();
+            format!(
+                "Attached are {} rendered view{} of the table ({}).",
+                images.len(),
+                if images.len() == 1 { "" } else { "s" },
+                names.join(", ")
+            )
+        };
+        let view_files: Vec<String> = images.iter().map(|v| v.file.clone()).collect();
+        let prompt = writer.render(&prompts.table_description, [("views", views_text)])?;
+        let description = writer.call(
+            CallKind::Description,
+            &prompt,
+            &images,
+            false,
+            None,
+            |_, reply, _| check_description(reply).map_err(Vec::from),
+        )?;
 
-    // Call 2: the tasks.
-    let prompt = writer.render(
-        &prompts.tasks,
-        [
-            ("description", description.clone()),
-            ("task_count", count.to_string()),
-            ("min_task_objects", min_objects.to_string()),
-            ("actions", actions_text()),
-        ],
-    )?;
-    let types = writer.types.clone();
-    let drafts = writer.call(
-        CallKind::Tasks,
-        &prompt,
-        &[],
-        true,
-        None,
-        |w, reply, attempt| {
-            let verdict = read_tasks_reply(reply, &types, min_objects)?;
-            for (i, json, reasons) in verdict.rejected {
-                w.reject(CallKind::Tasks, Some(i as u32), attempt, reasons, json);
-            }
-            if verdict.accepted.is_empty() {
-                return Err(vec![
-                    "no task of the reply passed validation (see the rejects of single tasks)"
-                        .to_owned(),
-                ]);
-            }
-            Ok(verdict.accepted)
-        },
-    )?;
-    let mut drafts = drafts;
-    if drafts.len() > count {
-        warnings.push(format!(
-            "the model wrote {} valid tasks; the first {count} are kept",
-            drafts.len()
-        ));
-        drafts.truncate(count);
-    } else if drafts.len() < count {
-        warnings.push(format!(
-            "the model wrote {} valid tasks ({count} asked)",
-            drafts.len()
-        ));
-    }
-
-    // Call 3, per task: the reasoning text. The tasks do not depend on each other: in batch
-    // mode every missing reply of this round is collected before the scene waits.
-    let mut records = Vec::new();
-    let mut pending = Vec::new();
-    for draft in &drafts {
-        let info = task_info_of(draft, &description, &input.layout);
-        let core = core_types(&types, &draft.objects_cluster);
-        let environment: Vec<&ObjectType> = types
-            .types
-            .iter()
-            .filter(|t| !core.iter().any(|c| c.key == t.key))
-            .collect();
+        // Call 2: the tasks.
         let prompt = writer.render(
-            &prompts.reasoning,
+            &prompts.tasks,
             [
-                ("task_info", task_info_json(&info)),
-                ("task_types", SceneTypes::list(core.iter().copied())),
-                (
-                    "environment_types",
-                    SceneTypes::list(environment.iter().copied()),
-                ),
+                ("description", description.clone()),
+                ("task_count", count.to_string()),
+                ("min_task_objects", min_objects.to_string()),
+                ("actions", actions_text()),
             ],
         )?;
-        let index = (records.len() + pending.len()) as u32;
-        let result = writer.call(
-            CallKind::Reasoning,
+        let types = writer.types.clone();
+        let drafts = writer.call(
+            CallKind::Tasks,
             &prompt,
             &[],
-            false,
-            Some(index),
-            |_, reply, _| {
-                let mut problems = Vec::new();
-                if reply.finish_reason.as_deref() == Some("length") {
-                    problems.push(
-                        "the reply was cut at max_tokens (finish_reason \"length\")".to_owned(),
-                    );
+            true,
+            None,
+            |w, reply, attempt| {
+                let verdict = read_tasks_reply(reply, &types, min_objects)?;
+                for (i, json, reasons) in verdict.rejected {
+                    w.reject(CallKind::Tasks, Some(i as u32), attempt, reasons, json);
                 }
-                problems.extend(check_reasoning(
-                    &reply.content,
-                    &types,
-                    &draft.objects_cluster,
-                ));
-                if problems.is_empty() {
-                    Ok(reply.content.trim().to_owned())
-                } else {
-                    Err(problems)
+                if verdict.accepted.is_empty() {
+                    return Err(vec![
+                        "no task of the reply passed validation (see the rejects of single tasks)"
+                            .to_owned(),
+                    ]);
                 }
+                Ok(verdict.accepted)
             },
-        );
-        match result {
-            Ok(reasoning) => records.push(record(
-                records.len(),
-                &description,
-                &view_files,
-                draft,
-                reasoning,
-            )),
-            Err(TasksError::Pending(mut requests)) => pending.append(&mut requests),
-            Err(TasksError::NoValidReply { attempts, .. }) => warnings.push(format!(
-                "task \"{}\" dropped: no reasoning reply passed validation in {attempts} attempts \
-                 (see tasks/rejects.jsonl)",
-                draft.task
-            )),
-            Err(other) => return Err(other),
+        )?;
+        let mut drafts = drafts;
+        if drafts.len() > count {
+            warnings.push(format!(
+                "the model wrote {} valid tasks; the first {count} are kept",
+                drafts.len()
+            ));
+            drafts.truncate(count);
+        } else if drafts.len() < count {
+            warnings.push(format!(
+                "the model wrote {} valid tasks ({count} asked)",
+                drafts.len()
+            ));
         }
-    }
-    if !pending.is_empty() {
-        return Err(TasksError::Pending(pending));
-    }
-    if records.is_empty() {
-        return Err(TasksError::NoValidReply {
-            call: "reasoning",
-            attempts: config.max_attempts,
-            last: "every task lost its reasoning text".to_owned(),
-        });
-    }
-    Ok(SceneTasks {
-        records,
+
+        // Call 3, per task: the reasoning text. The tasks do not depend on each other: in batch
+        // mode every missing reply of this round is collected before the scene waits.
+        let mut records = Vec::new();
+        let mut pending = Vec::new();
+        for draft in &drafts {
+            let info = task_info_of(draft, &description, &input.layout);
+            let core = core_types(&types, &draft.objects_cluster);
+            let environment: Vec<&ObjectType> = types
+                .types
+                .iter()
+                .filter(|t| !core.iter().any(|c| c.key == t.key))
+                .collect();
+            let prompt = writer.render(
+                &prompts.reasoning,
+                [
+                    ("task_info", task_info_json(&info)),
+                    ("task_types", SceneTypes::list(core.iter().copied())),
+                    (
+                        "environment_types",
+                        SceneTypes::list(environment.iter().copied()),
+                    ),
+                ],
+            )?;
+            let index = (records.len() + pending.len()) as u32;
+            let result = writer.call(
+                CallKind::Reasoning,
+                &prompt,
+                &[],
+                false,
+                Some(index),
+                |_, reply, _| {
+                    let mut problems = Vec::new();
+                    if reply.finish_reason.as_deref() == Some("length") {
+                        problems.push(
+                            "the reply was cut at max_tokens (finish_reason \"length\")".to_owned(),
+                        );
+                    }
+                    problems.extend(check_reasoning(
+                        &reply.content,
+                        &types,
+                        &draft.objects_cluster,
+                    ));
+                    if problems.is_empty() {
+                        Ok(reply.content.trim().to_owned())
+                    } else {
+                        Err(problems)
+                    }
+                },
+            );
+            match result {
+                Ok(reasoning) => records.push(record(
+                    records.len(),
+                    &description,
+                    &view_files,
+                    draft,
+                    reasoning,
+                )),
+                Err(TasksError::Pending(mut requests)) => pending.append(&mut requests),
+                Err(TasksError::NoValidReply { attempts, .. }) => warnings.push(format!(
+                    "task \"{}\" dropped: no reasoning reply passed validation in {attempts} attempts \
+                     (see tasks/rejects.jsonl)",
+                    draft.task
+                )),
+                Err(other) => return Err(other),
+            }
+        }
+        if !pending.is_empty() {
+            return Err(TasksError::Pending(pending));
+        }
+        if records.is_empty() {
+            return Err(TasksError::NoValidReply {
+                call: "reasoning",
+                attempts: config.max_attempts,
+                last: "every task lost its reasoning text".to_owned(),
+            });
+        }
+        if writer.redacted_replies > 0 {
+            warnings.push(format!(
+                "{} model replies held the API key: it was replaced by <redacted> before anything \
+                 was written (their cache entries and rejects say \"redacted\": true)",
+                writer.redacted_replies
+            ));
+        }
+        Ok(SceneTasks {
+            records,
+            rejects: std::mem::take(&mut writer.rejects),
+            warnings,
+        })
+    })();
+    result.map_err(|error| FailedScene {
+        error,
         rejects: writer.rejects,
-        warnings,
     })
 }
 

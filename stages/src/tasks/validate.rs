@@ -135,6 +135,7 @@ fn tasks_reply(
     }
     let text = strip_fence(reply.content.trim());
     let value: Value = serde_json::from_str(text)
+        .and_then(|value| mesa_schemas::json::check_unique_keys(text).map(|()| value))
         .map_err(|e| vec![format!("the reply is not valid JSON: {e}")])?;
     let items = match &value {
         Value::Array(items) => items,
@@ -346,6 +347,7 @@ mod tests {
         ChatReply {
             content: text.to_owned(),
             finish_reason: Some("stop".to_owned()),
+            redacted: false,
         }
     }
 
@@ -406,6 +408,7 @@ mod tests {
         let cut = ChatReply {
             content: "{\"tasks\": [".into(),
             finish_reason: Some("length".into()),
+            redacted: false,
         };
         let err = read_tasks_reply(&cut, &scene(), 3).expect_err("cut");
         assert!(err.0[0].contains("max_tokens"));
