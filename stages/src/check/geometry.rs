@@ -162,6 +162,14 @@ impl Hull {
         })
     }
 
+    /// The hull's points in the table frame, metres.
+    pub fn points(&self) -> Vec<[f64; 3]> {
+        self.points
+            .iter()
+            .map(|p| std::array::from_fn(|k| self.center[k] + f64::from(p[k])))
+            .collect()
+    }
+
     /// Moves the hull by `t` (metres).
     pub fn translate(&mut self, t: [f64; 3]) {
         for (c, v) in self.center.iter_mut().zip(t) {

@@ -153,6 +153,9 @@ pub struct PlacedObject {
     pub instance: String,
     /// Its shape in the table frame, or why there is none.
     pub body: Result<Body, String>,
+    /// How far its parts may reach outside its mesh at the layout's scale, metres (see
+    /// [`AssetShape::reach_at`]; 0 without a shape).
+    pub reach_m: f64,
 }
 
 /// A scene ready to check: the zones and the placed objects, in layout order.
@@ -176,12 +179,17 @@ impl PhysicsScene {
         let objects = layout
             .objects
             .iter()
-            .map(|object| PlacedObject {
-                instance: object.instance.clone(),
-                body: shape_of(object).and_then(|shape| {
-                    Body::new(shape.place(&Pose::of_object(object)))
-                        .ok_or_else(|| format!("asset {}: no convex part", shape.uid))
-                }),
+            .map(|object| {
+                let pose = Pose::of_object(object);
+                let shape = shape_of(object);
+                PlacedObject {
+                    instance: object.instance.clone(),
+                    reach_m: shape.as_ref().map_or(0.0, |s| s.reach_at(&pose)),
+                    body: shape.and_then(|shape| {
+                        Body::new(shape.place(&pose))
+                            .ok_or_else(|| format!("asset {}: no convex part", shape.uid))
+                    }),
+                }
             })
             .collect();
         Self {

@@ -93,6 +93,24 @@ pub fn check_layout(
             names.join(", ")
         ));
     }
+    // Parts that reach past the mesh by more than the tolerance at this scale: the depths and
+    // contacts of these objects are uncertain by that much.
+    let bulging: Vec<String> = scene
+        .objects
+        .iter()
+        .filter(|o| o.reach_m > tolerances.penetration_m)
+        .map(|o| format!("{} ({:.1} mm)", o.instance, o.reach_m * 1000.0))
+        .collect();
+    if !bulging.is_empty() {
+        warnings.push(format!(
+            "{}: the collision parts of {} reach outside their meshes by more than \
+             penetration_tolerance_mm at the layout's scale: their depths and contacts are \
+             uncertain by that much (`mesa assets --force` with a smaller \
+             [assets] decomposition_tolerance_m makes finer parts)",
+            source.file,
+            bulging.join(", ")
+        ));
+    }
     let before = findings.to_schema(&scene);
     let settle_report = settle_scene.then(|| {
         settle_layout(

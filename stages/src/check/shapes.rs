@@ -34,6 +34,9 @@ pub struct AssetShape {
     parts: Vec<HullMesh>,
     /// The asset's size [w, d, h] in its table-aligned frame, metres.
     pub size_m: [f64; 3],
+    /// How far the parts reach outside the asset's mesh, as `mesa assets` measured it, in the
+    /// asset's own metres (a layout's scale multiplies it: [`AssetShape::reach_at`]).
+    pub reach_m: f64,
 }
 
 /// Why a shapes file does not give an asset's shape (the caller names the file); each says to
@@ -101,10 +104,16 @@ impl AssetShape {
                 .collect();
             parts.push(convex_hull(&centred));
         }
+        let d = &shapes.decomposition;
+        let reach_m = d
+            .max_deviation_m
+            .unwrap_or(0.0)
+            .max(d.simplified.as_ref().map_or(0.0, |s| s.reach_m));
         Ok(Self {
             uid: uid.to_owned(),
             parts,
             size_m: geometry.size_m,
+            reach_m: if reach_m.is_finite() { reach_m } else { 0.0 },
         })
     }
 
@@ -115,7 +124,20 @@ impl AssetShape {
             uid: uid.to_owned(),
             parts: parts.iter().map(|p| convex_hull(p)).collect(),
             size_m,
+            reach_m: 0.0,
         }
+    }
+
+    /// The shape with another measured reach (metres, the asset's own size), for tests.
+    pub fn with_reach_m(mut self, reach_m: f64) -> Self {
+        self.reach_m = reach_m;
+        self
+    }
+
+    /// How far the parts may reach outside the mesh once a pose scales them: the measured
+    /// reach times the largest scale (a distance outside the mesh grows at most by it).
+    pub fn reach_at(&self, pose: &Pose) -> f64 {
+        self.reach_m * pose.scale.iter().fold(0.0_f64, |m, s| m.max(s.abs()))
     }
 
     /// The number of convex parts.

@@ -98,6 +98,7 @@ fn scene(items: &[Item]) -> PhysicsScene {
             .iter()
             .map(|item| PlacedObject {
                 instance: item.name.to_owned(),
+                reach_m: item.shape.reach_at(&item.pose),
                 body: Body::new(item.shape.place(&item.pose)).ok_or_else(|| "empty".to_owned()),
             })
             .collect(),
@@ -339,6 +340,7 @@ fn objects_without_shapes_are_listed_and_make_no_pair() {
     ]);
     s.objects.push(PlacedObject {
         instance: "ghost_0".to_owned(),
+        reach_m: 0.0,
         body: Err("no retrieved_uid".to_owned()),
     });
     let f = check_scene(&s, &Tolerances::default());
@@ -370,4 +372,44 @@ fn a_dataset_layout_places_each_asset_by_its_object() {
     assert_eq!(schema.collisions[0].a, "box_0");
     assert_eq!(schema.collisions[0].b, "box_1");
     assert_abs_diff_eq!(schema.collisions[0].depth_mm, 7.0, epsilon = 1e-2);
+}
+
+#[test]
+fn the_reach_of_parts_grows_with_the_scale_a_layout_applies() {
+    // A pencil-like asset whose one part reaches 0.5 mm outside its mesh: within a 2 mm
+    // tolerance as it is, 10.5 mm outside once a layout scales it ×21 (and only then named).
+    let text = r#"{"item_placement_zone": [0, 400, 0, 60], "objects": [
+        {"instance": "pencil_0", "retrieved_uid": "pencil", "position": [30, 30, 0.4],
+         "rotation": [0, 0, 0, 1], "size": [17.5, 0.75, 0.75], "scale_factor": [1, 1, 1]},
+        {"instance": "pencil_1", "retrieved_uid": "pencil", "position": [200, 30, 8],
+         "rotation": [0, 0, 0, 1], "size": [367.5, 15.75, 15.75],
+         "scale_factor": [21, 21, 21]}]}"#;
+    let layout: DatasetLayout = serde_json::from_str(text).expect("layout");
+    let pencil = Arc::new(AssetShape::clone(&cuboid([0.175, 0.0075, 0.0075])).with_reach_m(0.0005));
+    let s = PhysicsScene::from_layout(&layout, |_| Ok(Arc::clone(&pencil)));
+    assert_abs_diff_eq!(s.objects[0].reach_m, 0.0005, epsilon = 1e-12);
+    assert_abs_diff_eq!(s.objects[1].reach_m, 0.0105, epsilon = 1e-12);
+    let config = CheckConfig::default();
+    let source = super::scene::LayoutSource {
+        layout: &layout,
+        file: "coarse/layout.json",
+        sha256: "0",
+        scene_id: "office_table_0001",
+    };
+    let checked = super::check_layout(
+        source,
+        |_| Ok(Arc::clone(&pencil)),
+        &[false, false],
+        &crate::graph::GraphOptions::default(),
+        &config,
+        false,
+    );
+    let named: Vec<&String> = checked
+        .warnings
+        .iter()
+        .filter(|w| w.contains("reach outside their meshes"))
+        .collect();
+    assert_eq!(named.len(), 1, "{:?}", checked.warnings);
+    assert!(named[0].contains("pencil_1 (10.5 mm)"), "{}", named[0]);
+    assert!(!named[0].contains("pencil_0"), "{}", named[0]);
 }

@@ -78,6 +78,7 @@ fn mesh_colliding_names(
             .iter()
             .map(|o| PlacedObject {
                 instance: o.instance.clone(),
+                reach_m: 0.0,
                 body: shapes
                     .get(&o.instance)
                     .and_then(|shape| Body::new(shape.place(&llm_pose(o, shape))))

@@ -1,0 +1,577 @@
+//! `mesa check` against an independent reference on the placed triangle meshes
+//! (`scripts/mesh_reference.py`: FCL on the meshes' BVHs, winding numbers for containment,
+//! rays for falls; it never sees mesa's convex parts).
+//!
+//! Two demo datasets of 12 scenes (seeds 7 and 8) go through lift, retrieve, place, pack, the
+//! simulated annotator and ingest; each scene is checked four times: the coarse layout, the
+//! refined one, and both after `--settle`. Each of these layouts is written as a scene GLB by
+//! `mesa pack`'s writer (node per instance; its placement is the one Blender and MesaTask's
+//! reconstruction read back exactly), and the reference computes on it:
+//! - every pair whose meshes overlap, with a bracket [lo, hi] of its penetration depth;
+//! - every object's fall straight down onto the table or another mesh.
+//!
+//! Agreement (tolerance t = 2 mm, slack s = 1 mm), as issue #16 defines it:
+//! - a pair with lo > t + s must be reported by `check`; a pair `check` reports at depth d
+//!   must have hi > t − s and lo − s ≤ d ≤ hi + s;
+//! - an object whose mesh could fall more than t + s must be reported floating; an object
+//!   reported floating by g must have a reference fall within s of g.
+//!
+//! What holds today, and is asserted: the refined layouts and their settled forms agree with
+//! the meshes (0 disagreements). What does not hold yet, and is printed: on coarse layouts an
+//! object that `mesa place` scaled far up (a pencil ×21, its one convex part reaching 10 mm
+//! outside its mesh at that scale) is reported deeper than its mesh is, and after settling it
+//! can rest on its parts while its mesh hangs above what it rests on. `mesa check` warns about
+//! every such object (its parts' reach at the layout's scale); judging them on their meshes is
+//! the open part of issue #16.
+//!
+//! The reference needs Python with trimesh, python-fcl, rtree and scipy (`.venv-tools`,
+//! installed by scripts/test.sh); without it the test says SKIPPED, and fails instead when
+//! `MESA_REQUIRE_TOOLS` is set, as in CI.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
+
+use common::mesa;
+use std::sync::Arc;
+
+use mesa_schemas::artifacts::{AssetIndexArtifact, CheckArtifact, CheckFindings, ShapesArtifact};
+use mesa_schemas::DatasetLayout;
+use mesa_stages::check::{AssetShape, PhysicsScene};
+use mesa_stages::pack::{pack_scene, AssetSource, PackConfig, PackRequest};
+use serde_json::Value;
+
+const TOLERANCE_MM: f64 = 2.0;
+const SLACK_MM: f64 = 1.0;
+
+fn read<T: serde::de::DeserializeOwned>(path: &Path) -> T {
+    serde_json::from_slice(
+        &std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+    )
+    .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn ok(args: &[&str], dir: &Path) {
+    let out = mesa().args(args).arg(dir).output().expect("runs");
+    assert!(
+        out.status.success(),
+        "mesa {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn scene_dirs(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for table in std::fs::read_dir(dir.join("scenes")).expect("scenes") {
+        for scene in std::fs::read_dir(table.expect("entry").path()).expect("table") {
+            out.push(scene.expect("entry").path());
+        }
+    }
+    out.sort();
+    out
+}
+
+/// The Python of the reference, or None (after saying SKIPPED) when it is missing.
+fn reference_python() -> Option<PathBuf> {
+    let required = std::env::var_os("MESA_REQUIRE_TOOLS").is_some();
+    let python = std::env::var_os("MESA_PYTHON").map(PathBuf::from);
+    let usable = python.as_ref().is_some_and(|p| {
+        std::process::Command::new(p)
+            .args(["-c", "import trimesh, fcl, rtree, scipy"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    });
+    if usable {
+        return python;
+    }
+    assert!(
+        !required,
+        "the mesh reference needs MESA_PYTHON with trimesh, python-fcl, rtree and scipy \
+         (scripts/test.sh installs them) and MESA_REQUIRE_TOOLS is set"
+    );
+    eprintln!(
+        "SKIPPED: the exact-mesh reference of mesa check (set MESA_PYTHON to a Python with \
+         trimesh, python-fcl, rtree and scipy; scripts/test.sh does)"
+    );
+    None
+}
+
+/// One checked layout of a scene: what `check` found, and the layout itself.
+struct Checked {
+    /// `seed<S>/<scene_id>/<coarse|refined>[-settled]`.
+    key: String,
+    layout: DatasetLayout,
+    findings: CheckFindings,
+}
+
+fn findings_of(report: &CheckArtifact) -> CheckFindings {
+    CheckFindings {
+        collisions: report.collisions.clone(),
+        floating: report.floating.clone(),
+        zone_violations: report.zone_violations.clone(),
+        pairs_total: report.pairs_total,
+        collision_rate: report.collision_rate,
+        mesatask_rule_pairs: report.mesatask_rule_pairs,
+        clean: report.clean,
+    }
+}
+
+/// Runs the demo of `seed` up to ingest, then check and settle on coarse and refined layouts.
+fn checked_layouts(root: &Path, seed: u64) -> (PathBuf, Vec<Checked>) {
+    let dir = root.join(format!("seed{seed}"));
+    mesa()
+        .args(["demo", "--scenes", "12", "--seed", &seed.to_string(), "-q"])
+        .arg(&dir)
+        .assert()
+        .success();
+    for stage in ["assets", "lift", "retrieve", "place", "pack"] {
+        ok(&[stage, "--progress", "off"], &dir);
+    }
+    ok(&["demo", "annotate"], &dir);
+    ok(&["ingest", "--progress", "off"], &dir);
+    let mut out = Vec::new();
+    for source in ["coarse", "refined"] {
+        ok(
+            &["check", "--layout", source, "--settle", "--progress", "off"],
+            &dir,
+        );
+        for scene in scene_dirs(&dir) {
+            let name = scene.file_name().unwrap().to_string_lossy().into_owned();
+            let report_path = scene.join("qa/check.json");
+            if !report_path.is_file() {
+                continue;
+            }
+            let report: CheckArtifact = read(&report_path);
+            let layout: DatasetLayout = read(&scene.join(format!("{source}/layout.json")));
+            out.push(Checked {
+                key: format!("seed{seed}/{name}/{source}"),
+                layout,
+                findings: findings_of(&report),
+            });
+            let settle = report.settle.as_ref().expect("a settle report");
+            if let Some(file) = &settle.layout {
+                out.push(Checked {
+                    key: format!("seed{seed}/{name}/{source}-settled"),
+                    layout: read(&scene.join(file)),
+                    findings: settle.after.clone(),
+                });
+            }
+        }
+    }
+    (dir, out)
+}
+
+/// The layout as a scene GLB, written by the pack's writer.
+fn scene_glb(dataset: &Path, layout: &DatasetLayout, path: &Path) {
+    let index: AssetIndexArtifact = read(&dataset.join("assets/index/assets.json"));
+    let mut bytes: BTreeMap<String, (Vec<u8>, f64)> = BTreeMap::new();
+    for object in &layout.objects {
+        let record = &index.assets[&object.retrieved_uid];
+        let glb = std::fs::read(dataset.join(&record.file)).expect("asset");
+        let yaw = record.geometry.as_ref().map_or(0.0, |g| g.front_yaw_deg);
+        bytes.insert(object.retrieved_uid.clone(), (glb, yaw));
+    }
+    let assets: BTreeMap<String, AssetSource<'_>> = bytes
+        .iter()
+        .map(|(uid, (glb, yaw))| {
+            (
+                uid.clone(),
+                AssetSource {
+                    glb,
+                    front_yaw_deg: *yaw,
+                },
+            )
+        })
+        .collect();
+    let layout_bytes = serde_json::to_vec(layout).expect("json");
+    let out = pack_scene(
+        &PackRequest {
+            scene_id: "scene",
+            table_type: "office_table",
+            layout,
+            layout_rel: "layout.json",
+            layout_bytes: &layout_bytes,
+            assets: &assets,
+            photo: None,
+            masks: &BTreeMap::new(),
+        },
+        &PackConfig::default(),
+    )
+    .expect("packs");
+    std::fs::write(path, &out.files["scene.glb"]).expect("write");
+}
+
+/// The dataset's collision shapes, read from the asset index as `mesa check` reads them.
+fn shapes(dir: &Path) -> BTreeMap<String, Arc<AssetShape>> {
+    let index: AssetIndexArtifact = read(&dir.join("assets/index/assets.json"));
+    index
+        .assets
+        .iter()
+        .filter_map(|(uid, record)| {
+            let (s, g) = (record.shapes.as_ref()?, record.geometry.as_ref()?);
+            let artifact: ShapesArtifact = read(&dir.join(&s.file));
+            Some((
+                uid.clone(),
+                Arc::new(AssetShape::new(uid, &artifact, g).expect("shape")),
+            ))
+        })
+        .collect()
+}
+
+/// A drop-test scene: every object's convex parts placed by the layout.
+fn drop_scene(
+    key: &str,
+    layout: &DatasetLayout,
+    shapes: &BTreeMap<String, Arc<AssetShape>>,
+) -> Value {
+    let placed = PhysicsScene::from_layout(layout, |o| {
+        shapes
+            .get(&o.retrieved_uid)
+            .cloned()
+            .ok_or_else(|| "no shape".to_owned())
+    });
+    let objects: Vec<Value> = placed
+        .objects
+        .iter()
+        .filter_map(|o| {
+            let body = o.body.as_ref().ok()?;
+            let parts: Vec<Vec<[f64; 3]>> = body.hulls.iter().map(|h| h.points()).collect();
+            Some(serde_json::json!({"name": o.instance, "parts": parts}))
+        })
+        .collect();
+    serde_json::json!({"key": key, "table": placed.zone_m, "objects": objects})
+}
+
+/// Runs a Python script on jobs split in two halves (two processes).
+fn run_split(
+    python: &Path,
+    script: &str,
+    jobs: Vec<Value>,
+    extra: Value,
+) -> BTreeMap<String, Value> {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../scripts")
+        .join(script);
+    let half = jobs.len().div_ceil(2);
+    let children: Vec<_> = jobs
+        .chunks(half.max(1))
+        .map(|chunk| {
+            let mut child = std::process::Command::new(python)
+                .arg(&script)
+                .stdin(Stdio::piped())
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("python starts");
+            let mut job = extra.clone();
+            job["scenes"] = Value::from(chunk.to_vec());
+            child
+                .stdin
+                .take()
+                .unwrap()
+                .write_all(&serde_json::to_vec(&job).unwrap())
+                .unwrap();
+            child
+        })
+        .collect();
+    let mut out = BTreeMap::new();
+    for child in children {
+        let result = child.wait_with_output().expect("python runs");
+        assert!(
+            result.status.success(),
+            "{}: {}",
+            script.display(),
+            String::from_utf8_lossy(&result.stderr)
+        );
+        let map: BTreeMap<String, Value> = serde_json::from_slice(&result.stdout).expect("json");
+        out.extend(map);
+    }
+    out
+}
+
+/// The disagreements of one checked layout with the reference, one line each.
+fn disagreements(checked: &Checked, reference: &Value) -> Vec<String> {
+    let (t, s) = (TOLERANCE_MM, SLACK_MM);
+    let mut out = Vec::new();
+    let pairs: BTreeMap<(String, String), (f64, f64)> = reference["pairs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            let (a, b) = (p["a"].as_str().unwrap(), p["b"].as_str().unwrap());
+            let key = if a <= b { (a, b) } else { (b, a) };
+            (
+                (key.0.to_owned(), key.1.to_owned()),
+                (p["lo_mm"].as_f64().unwrap(), p["hi_mm"].as_f64().unwrap()),
+            )
+        })
+        .collect();
+    let reported: BTreeMap<(String, String), f64> = checked
+        .findings
+        .collisions
+        .iter()
+        .map(|c| ((c.a.clone(), c.b.clone()), c.depth_mm))
+        .collect();
+    for (pair, (lo, hi)) in &pairs {
+        if *lo > t + s && !reported.contains_key(pair) {
+            out.push(format!(
+                "{}: {} / {} collide on the meshes ({lo:.2}–{hi:.2} mm), check reports nothing",
+                checked.key, pair.0, pair.1
+            ));
+        }
+    }
+    for (pair, depth) in &reported {
+        let (lo, hi) = pairs.get(pair).copied().unwrap_or((0.0, 0.0));
+        if hi <= t - s || *depth < lo - s || *depth > hi + s {
+            out.push(format!(
+                "{}: {} / {}: check says {depth:.2} mm, the meshes {lo:.2}–{hi:.2} mm",
+                checked.key, pair.0, pair.1
+            ));
+        }
+    }
+    let gaps = reference["gaps_mm"].as_object().unwrap();
+    let floating: BTreeMap<&str, f64> = checked
+        .findings
+        .floating
+        .iter()
+        .map(|f| (f.instance.as_str(), f.gap_mm))
+        .collect();
+    for (instance, gap) in gaps {
+        let gap = gap.as_f64().unwrap();
+        match floating.get(instance.as_str()) {
+            None if gap > t + s => out.push(format!(
+                "{}: {instance} could fall {gap:.2} mm on the meshes, check says it rests",
+                checked.key
+            )),
+            Some(g) if (g - gap).abs() > s => out.push(format!(
+                "{}: {instance} floats {g:.2} mm by check, {gap:.2} mm on the meshes",
+                checked.key
+            )),
+            _ => {}
+        }
+    }
+    out
+}
+
+#[test]
+fn check_agrees_with_the_meshes_on_demo_scenes() {
+    let Some(python) = reference_python() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let glbs = tmp.path().join("glbs");
+    std::fs::create_dir_all(&glbs).unwrap();
+    let mut all = Vec::new();
+    let mut jobs = Vec::new();
+    let started = std::time::Instant::now();
+    let root = tmp.path();
+    let datasets: Vec<(PathBuf, Vec<Checked>)> = std::thread::scope(|s| {
+        let runs: Vec<_> = [7, 8]
+            .map(|seed| s.spawn(move || checked_layouts(root, seed)))
+            .into_iter()
+            .collect();
+        runs.into_iter().map(|r| r.join().expect("seed")).collect()
+    });
+    println!(
+        "mesa demo → ingest, check and settle: {:.0} s",
+        started.elapsed().as_secs_f64()
+    );
+    let mut drops = Vec::new();
+    for (dir, checked) in datasets {
+        let shapes = shapes(&dir);
+        for c in checked {
+            drops.push(drop_scene(&c.key, &c.layout, &shapes));
+            let path = glbs.join(format!("{}.glb", c.key.replace('/', "_")));
+            scene_glb(&dir, &c.layout, &path);
+            jobs.push(serde_json::json!({
+                "key": c.key,
+                "glb": path,
+                "instances": c.layout.objects.iter().map(|o| &o.instance).collect::<Vec<_>>(),
+            }));
+            all.push(c);
+        }
+    }
+    let started = std::time::Instant::now();
+    let references = run_split(
+        &python,
+        "mesh_reference.py",
+        jobs,
+        serde_json::json!({"tolerance_mm": TOLERANCE_MM}),
+    );
+    println!(
+        "the mesh reference: {:.0} s",
+        started.elapsed().as_secs_f64()
+    );
+    let mut problems = Vec::new();
+    let mut open = Vec::new();
+    let (mut pairs, mut reported, mut objects) = (0, 0, 0);
+    for c in &all {
+        let r = &references[&c.key];
+        pairs += r["pairs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|p| p["lo_mm"].as_f64().unwrap() > TOLERANCE_MM)
+            .count();
+        reported += c.findings.collisions.len();
+        objects += c.layout.objects.len();
+        if c.key.contains("/coarse") {
+            open.extend(disagreements(c, r));
+        } else {
+            problems.extend(disagreements(c, r));
+        }
+    }
+    println!(
+        "{} checked layouts, {objects} objects: {pairs} pairs deeper than {TOLERANCE_MM} mm on \
+         the meshes, {reported} reported by check; {} disagreements on refined and settled \
+         refined layouts, {} on coarse and settled coarse ones (open, issue #16)",
+        all.len(),
+        problems.len(),
+        open.len()
+    );
+    for p in problems.iter().chain(&open) {
+        println!("  {p}");
+    }
+    assert!(
+        all.len() >= 48,
+        "{} layouts (coarse, refined, and settled ones)",
+        all.len()
+    );
+    assert!(problems.is_empty(), "{} disagreements", problems.len());
+
+    if mujoco_python(&python) {
+        drop_test(&python, drops);
+    }
+}
+
+/// Whether the reference's Python has MuJoCo (SKIPPED, or a failure under
+/// `MESA_REQUIRE_TOOLS`, without it).
+fn mujoco_python(python: &Path) -> bool {
+    let has = std::process::Command::new(python)
+        .args(["-c", "import mujoco"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    assert!(
+        has || std::env::var_os("MESA_REQUIRE_TOOLS").is_none(),
+        "the drop test needs mujoco in MESA_PYTHON (scripts/test.sh installs it) and \
+         MESA_REQUIRE_TOOLS is set"
+    );
+    if !has {
+        eprintln!("SKIPPED: the MuJoCo drop test (no mujoco in MESA_PYTHON)");
+    }
+    has
+}
+
+/// The MuJoCo drop test of 2 s on every layout: per layout kind, the share of objects that
+/// move less than 1 cm, and those that fall off the table; per scene for the settled ones.
+fn drop_test(python: &Path, drops: Vec<Value>) {
+    let started = std::time::Instant::now();
+    let results = run_split(
+        python,
+        "mujoco_drop.py",
+        drops,
+        serde_json::json!({"seconds": 2.0, "density": 500.0}),
+    );
+    println!(
+        "the MuJoCo drop test: {:.0} s",
+        started.elapsed().as_secs_f64()
+    );
+    let mut by_kind: BTreeMap<String, (usize, usize, usize)> = BTreeMap::new();
+    println!("scene | layout | objects | moved > 1 cm | fell off | worst (cm)");
+    for (key, objects) in &results {
+        let kind = key.rsplit('/').next().unwrap_or("").to_owned();
+        let objects = objects.as_object().unwrap();
+        let moved: Vec<(&String, f64)> = objects
+            .iter()
+            .map(|(n, o)| (n, o["moved_cm"].as_f64().unwrap()))
+            .filter(|(_, m)| *m >= 1.0)
+            .collect();
+        let fell = objects
+            .values()
+            .filter(|o| o["fell"].as_bool().unwrap())
+            .count();
+        let entry = by_kind.entry(kind.clone()).or_default();
+        entry.0 += objects.len();
+        entry.1 += moved.len();
+        entry.2 += fell;
+        let worst = objects
+            .values()
+            .map(|o| o["moved_cm"].as_f64().unwrap())
+            .fold(0.0, f64::max);
+        println!(
+            "{key} | {} | {} | {fell} | {worst:.2}",
+            objects.len(),
+            moved.len()
+        );
+    }
+    for (kind, (objects, moved, fell)) in &by_kind {
+        println!(
+            "{kind}: {objects} objects, {moved} moved more than 1 cm in 2 s ({:.1} % still), \
+             {fell} fell off the table",
+            100.0 * (objects - moved) as f64 / *objects as f64
+        );
+    }
+    // The control: coarse layouts, before settling, fail the test a settled scene must pass.
+    let (objects, moved, fell) = by_kind["coarse"];
+    assert!(
+        moved as f64 > 0.01 * objects as f64 || fell > 0,
+        "coarse layouts pass the drop test: {moved} of {objects} moved"
+    );
+}
+
+/// The comparison itself can fail: a depth off the bracket, a missed pair, a missed fall and a
+/// wrong gap are each one disagreement (the control of the test above).
+#[test]
+fn the_comparison_finds_each_kind_of_disagreement() {
+    use mesa_schemas::artifacts::{CollisionPair, FloatingObject};
+    let layout: DatasetLayout = serde_json::from_value(serde_json::json!({
+        "item_placement_zone": [0, 100, 0, 60],
+        "objects": []
+    }))
+    .expect("a layout");
+    let findings = |collisions: Vec<CollisionPair>, floating: Vec<FloatingObject>| CheckFindings {
+        collisions,
+        floating,
+        zone_violations: Vec::new(),
+        pairs_total: 3,
+        collision_rate: 0.0,
+        mesatask_rule_pairs: 0,
+        clean: false,
+    };
+    let reference = serde_json::json!({
+        "pairs": [
+            {"a": "a", "b": "b", "lo_mm": 5.0, "hi_mm": 6.0},
+            {"a": "a", "b": "c", "lo_mm": 4.0, "hi_mm": 4.5},
+        ],
+        "gaps_mm": {"a": 0.0, "b": 8.0, "c": 3.5},
+    });
+    let pair = |a: &str, b: &str, depth_mm: f64| CollisionPair {
+        a: a.to_owned(),
+        b: b.to_owned(),
+        depth_mm,
+    };
+    let float = |instance: &str, gap_mm: f64| FloatingObject {
+        instance: instance.to_owned(),
+        gap_mm,
+        over: "table".to_owned(),
+    };
+    let agreeing = Checked {
+        key: "agreeing".to_owned(),
+        layout: layout.clone(),
+        findings: findings(
+            vec![pair("a", "b", 5.5), pair("a", "c", 4.2)],
+            vec![float("b", 7.8), float("c", 3.4)],
+        ),
+    };
+    assert_eq!(disagreements(&agreeing, &reference), Vec::<String>::new());
+    let wrong = Checked {
+        key: "wrong".to_owned(),
+        layout,
+        findings: findings(vec![pair("a", "b", 9.0)], vec![float("b", 5.0)]),
+    };
+    let found = disagreements(&wrong, &reference);
+    assert_eq!(found.len(), 4, "{found:#?}");
+}
