@@ -347,3 +347,115 @@ fn a_sharded_run_names_the_dataset_stages_it_leaves_out_in_clean_lines() {
         .find(|l| l.contains("  "));
     assert_eq!(leftover, None, "{stderr}");
 }
+
+/// `scripts/slurm/run_all.sh --dry-run` with `args`, the environment `env` (and no other
+/// MESA_SLURM_* variable): its stdout and stderr, and whether it exited 0.
+fn run_all_dry(args: &[&str], env: &[(&str, &str)]) -> (String, String, bool) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/slurm/run_all.sh");
+    let mut cmd = std::process::Command::new("bash");
+    cmd.arg(script).arg("--dry-run").args(args);
+    for var in [
+        "MESA_SLURM_CPUS",
+        "MESA_SLURM_MEM",
+        "MESA_SLURM_TIME",
+        "MESA_SLURM_PARTITION",
+        "MESA_SLURM_ACCOUNT",
+        "MESA_SLURM_SBATCH",
+        "MESA_SLURM_LOGS",
+        "MESA_RELEASE_OUT",
+    ] {
+        cmd.env_remove(var);
+    }
+    cmd.envs(env.iter().copied());
+    let out = cmd.output().expect("bash");
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+        out.status.success(),
+    )
+}
+
+#[test]
+fn run_all_takes_resources_from_flags_then_the_environment_with_small_node_defaults() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let dataset = dir.path().to_str().expect("utf8").to_owned();
+    // Defaults: one CPU, 2 GB, two hours; no partition or account.
+    let (out, err, ok) = run_all_dry(&[&dataset, "3", "assets", "lift", "release"], &[]);
+    assert!(ok, "{err}");
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines.len(), 3, "{out}");
+    for line in &lines {
+        assert!(
+            line.contains("--cpus-per-task=1 --mem=2G --time=02:00:00"),
+            "{line}"
+        );
+        assert!(
+            !line.contains("--partition") && !line.contains("--account"),
+            "{line}"
+        );
+    }
+    assert!(lines[0].contains("--array=0-2") && lines[0].ends_with(&format!("assets {dataset}")));
+    assert!(lines[1].contains("--dependency=afterany:"), "{}", lines[1]);
+    // release gets its required output folder, and is one task.
+    assert!(!lines[2].contains("--array"), "{}", lines[2]);
+    assert!(
+        lines[2].ends_with(&format!("release {dataset} {dataset}/release")),
+        "{}",
+        lines[2]
+    );
+
+    // The environment, and flags over it.
+    let env = [
+        ("MESA_SLURM_CPUS", "8"),
+        ("MESA_SLURM_MEM", "3G"),
+        ("MESA_SLURM_PARTITION", "small"),
+        ("MESA_SLURM_ACCOUNT", "lab"),
+        ("MESA_SLURM_SBATCH", "--qos=low --exclusive"),
+        ("MESA_RELEASE_OUT", "/elsewhere"),
+    ];
+    let (out, err, ok) = run_all_dry(
+        &[
+            "--cpus", "2", "--time", "0:10:00", &dataset, "4", "lift", "release",
+        ],
+        &env,
+    );
+    assert!(ok, "{err}");
+    for line in out.lines() {
+        assert!(
+            line.contains(
+                "--cpus-per-task=2 --mem=3G --time=0:10:00 --partition=small --account=lab \
+                 --qos=low --exclusive"
+            ),
+            "{line}"
+        );
+    }
+    assert!(out.contains("--array=0-3"), "{out}");
+    assert!(
+        out.contains(&format!("release {dataset} /elsewhere")),
+        "{out}"
+    );
+
+    // Clear errors, exit code 2.
+    for (args, message) in [
+        (
+            vec!["--cpus", "0", dataset.as_str(), "3", "lift"],
+            "--cpus \"0\" is not a positive number",
+        ),
+        (
+            vec![dataset.as_str(), "3", "lfit"],
+            "unknown stage \"lfit\"",
+        ),
+        (
+            vec!["--memory", "1G", dataset.as_str(), "3", "lift"],
+            "unknown option --memory",
+        ),
+        (
+            vec!["/no/such/dataset", "3", "lift"],
+            "/no/such/dataset: no such dataset folder",
+        ),
+    ] {
+        let (out, err, ok) = run_all_dry(&args, &[]);
+        assert!(!ok && out.is_empty(), "{args:?}: {out}");
+        assert!(err.contains(message), "{args:?}: {err}");
+    }
+}

@@ -10,6 +10,8 @@
 //! - Preemption: an array task of `lift` cancelled (`scancel`) after the first of its scenes,
 //!   the chain going on without it, then the same submission again: done scenes are skipped and
 //!   the tree is the same.
+//! - Requeue: an array task of `lift` requeued (`scontrol requeue`, what a preemption does to
+//!   a `--requeue` job) after its first scene runs again and skips it.
 //!
 //! Without root, slurm-wlm or munge the test says SKIPPED, and fails instead when
 //! `MESA_REQUIRE_TOOLS` is set, as in CI (`.ci/run` installs the packages).
@@ -390,5 +392,77 @@ fn the_demo_through_a_real_slurm_cluster_writes_the_tree_of_a_local_run() {
         "preemption and resubmission: {:.1} s",
         started.elapsed().as_secs_f64()
     );
+
+    // Requeue (what Slurm does to a preempted task of a `--requeue` job): `scontrol requeue`
+    // of lift's task 0 after its first scene; the task runs again by itself and skips it.
+    let started = Instant::now();
+    let requeued = dir.path().join("requeued");
+    copy_tree(&demo, &requeued);
+    copy_tree(&local.join("assets/index"), &requeued.join("assets/index"));
+    let logs = dir.path().join("logs-requeued");
+    let out = cluster
+        .command("bash")
+        .arg(script("run_all.sh"))
+        .args(["--cpus", "1", "--mem", "1G", "--time", "00:30:00", "--logs"])
+        .arg(&logs)
+        .arg(&requeued)
+        .args(["3", "lift"])
+        .output()
+        .expect("run_all.sh");
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{stdout}");
+    let lift = job_ids(&stdout)["lift"].clone();
+    let (first, second) = (
+        lift_marker(&requeued, &keys[0]),
+        lift_marker(&requeued, &keys[3]),
+    );
+    let waited = Instant::now();
+    while !first.exists() && !second.exists() {
+        assert!(
+            waited.elapsed() < Duration::from_secs(600),
+            "lift's task 0 wrote no marker in 10 minutes"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = cluster
+        .command("scontrol")
+        .args(["requeue", &format!("{lift}_0")])
+        .output()
+        .expect("scontrol");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let caught = !(first.exists() && second.exists());
+    cluster.wait(std::slice::from_ref(&lift));
+    let record: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(requeued.join(".mesa/runs/lift/shard-0-of-3.json")).expect("record"),
+    )
+    .expect("json");
+    assert!(
+        caught,
+        "lift's task 0 finished both scenes before the requeue landed"
+    );
+    // The requeued run of task 0 (its record replaced the first run's) skipped the done scene.
+    assert_eq!(
+        (record["done"].as_u64(), record["skipped"].as_u64()),
+        (Some(1), Some(1)),
+        "{record}"
+    );
+    for key in &keys {
+        let marker = std::fs::read_to_string(lift_marker(&requeued, key)).expect("marker");
+        assert!(marker.contains("\"done\""), "{key:?}: {marker}");
+    }
+    let lifted = |dataset: &Path| {
+        tree(dataset)
+            .into_iter()
+            .filter(|(k, _)| k.contains("/coarse/lift.json") || k.contains("/points/"))
+            .collect::<BTreeMap<_, _>>()
+    };
+    let expected_lift = lifted(&local);
+    assert!(!expected_lift.is_empty());
+    assert!(lifted(&requeued) == expected_lift, "requeued lift differs");
+    eprintln!("requeue: {:.1} s", started.elapsed().as_secs_f64());
     drop(cluster);
 }

@@ -11,6 +11,7 @@
 # Nothing outside DIR is written: the daemons' state, spool, logs, pid files and munge socket
 # live in DIR, on ports chosen from the free ones (SLURM_TEST_PORT overrides: it and the next
 # port). The node offers the machine's CPUs and 90% of its memory; the partition is "debug".
+# A requeued job starts again after cred_expire (10 s here, 120 s by default).
 set -euo pipefail
 
 usage() {
@@ -99,7 +100,7 @@ SlurmdUser=root
 SlurmctldPort=$port
 SlurmdPort=$((port + 1))
 AuthType=auth/munge
-AuthInfo=socket=$dir/munge/socket
+AuthInfo=socket=$dir/munge/socket,cred_expire=10
 CredType=cred/munge
 StateSaveLocation=$dir/state
 SlurmdSpoolDir=$dir/spool

@@ -17,10 +17,11 @@
 //! Sharded (`--shard I/N`, or a Slurm array task): task I indexes asset number k of the sorted
 //! library when k mod N = I, writes their shapes files and its part of the records
 //! (`.mesa/parts/assets/<I>-of-<N>.json`), then takes the merge lock: the task that finds every
-//! part of the same run present (the last to finish) writes `text.json` and `assets.json`
-//! exactly as one task would, reusing each part's record only when its inputs' digest still
-//! matches (what does not match is indexed again), and deletes the parts. The index bytes do
-//! not depend on N.
+//! part of the same run present (the last to finish; a run is keyed by the library listing,
+//! the annotations, the settings, N and the array job) writes `text.json` and `assets.json`
+//! from the parts' records, exactly as one task would, and deletes the parts. The index bytes
+//! do not depend on N. A part of another run is only a source of records to reuse, each when
+//! its inputs' digest still matches, like the last index.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -698,35 +699,63 @@ fn index_shard(
         summary.elapsed_s = started.elapsed().as_secs_f64();
         return Ok(summary);
     }
-    let present: std::collections::BTreeSet<String> = read_parts(dataset)
+    let parts: Vec<Part> = read_parts(dataset)
         .into_iter()
         .filter(|p| p.run == key)
-        .map(|p| p.shard)
         .collect();
+    let present: std::collections::BTreeSet<&str> =
+        parts.iter().map(|p| p.shard.as_str()).collect();
     summary.parts_present = present.len();
     let complete = (0..shard.count).all(|i| {
         present.contains(
-            &Shard {
+            Shard {
                 index: i,
                 count: shard.count,
             }
-            .to_string(),
+            .to_string()
+            .as_str(),
         )
     });
     if complete {
-        // Every asset's record is in a part (checked again against its inputs: an asset
-        // changed since is indexed here), so this is the index one task would write.
+        // Every asset's record is in a part of this run (the library listing, annotations and
+        // settings it was keyed by are those read above), indexed by its task from the bytes
+        // it hashed: the records one task would write, taken as they are. An asset no part
+        // holds (none, when the parts are complete) is indexed here.
         let merge_started = Instant::now();
-        let candidates = candidates(dataset, !force);
-        let outcomes = index_uids(
+        let mut from_parts: BTreeMap<String, AssetRecord> = BTreeMap::new();
+        for part in parts {
+            from_parts.extend(part.records);
+        }
+        let missing: Vec<String> = library
+            .uids
+            .iter()
+            .filter(|uid| !from_parts.contains_key(*uid))
+            .cloned()
+            .collect();
+        let indexed = index_uids(
             dataset,
             &library,
-            &library.uids,
-            &candidates,
+            &missing,
+            &Candidates::new(),
             config,
             exec,
-            false,
+            force,
         )?;
+        let mut outcomes: BTreeMap<String, Outcome> =
+            indexed.into_iter().map(|o| (o.uid.clone(), o)).collect();
+        for (uid, record) in from_parts {
+            if library.uids.binary_search(&uid).is_ok() {
+                outcomes.insert(
+                    uid.clone(),
+                    Outcome {
+                        uid,
+                        record,
+                        reused: true,
+                    },
+                );
+            }
+        }
+        let outcomes: Vec<Outcome> = outcomes.into_values().collect();
         let merged = write_index(dataset, config, library, outcomes, merge_started)?;
         remove_parts(dataset)?;
         summary.merged = Some(merged);
