@@ -8,6 +8,9 @@
 #
 # On a machine with fewer cores than T, the tasks share them: the wall time of the sharded run
 # is then bounded by cores, not by T (the CPU time per task shows the split of the work).
+# The copies are named by digests, as library uids are: named in cycle order (00000..., the
+# 44 demo assets over and over) with T dividing 44, task k would get only the demo assets
+# j = k mod T, and the costly ones all in one task.
 set -euo pipefail
 n="${1:-1000}"
 shards="${2:-4}"
@@ -17,7 +20,7 @@ trap 'rm -rf "$work"' EXIT
 "$mesa" demo "$work/demo" --scenes 1 >/dev/null 2>&1
 mkdir -p "$work/one/assets/library" "$work/one/scenes"
 python3 - "$work" "$n" <<'PY'
-import json, os, shutil, sys
+import hashlib, json, os, shutil, sys
 work, n = sys.argv[1], int(sys.argv[2])
 src = os.path.join(work, "demo/assets")
 glbs = sorted(f[:-4] for f in os.listdir(os.path.join(src, "library")) if f.endswith(".glb"))
@@ -25,7 +28,9 @@ annotations = json.load(open(os.path.join(src, "annotations.json")))
 out = {}
 for i in range(n):
     uid = glbs[i % len(glbs)]
-    new = f"{i:05d}{uid[5:]}"
+    # Library uids are digests (Objaverse's are 32 hex digits): name each copy so, so that the
+    # sorted order (and with it the k mod T split) does not follow the 44-asset cycle.
+    new = hashlib.md5(f"mesa bench asset {i}".encode()).hexdigest()
     shutil.copy(os.path.join(src, "library", uid + ".glb"),
                 os.path.join(work, "one/assets/library", new + ".glb"))
     out[new] = annotations[uid]
