@@ -13,6 +13,15 @@
 //!
 //! Broken assets are recorded with the reason (and how to fix it), never fatal; `--strict`
 //! makes them exit with code 1.
+//!
+//! Sharded (`--shard I/N`, or a Slurm array task): task I indexes asset number k of the sorted
+//! library when k mod N = I, writes their shapes files and its part of the records
+//! (`.mesa/parts/assets/<I>-of-<N>.json`), then takes the merge lock: the task that finds every
+//! part of the same run present (the last to finish; a run is keyed by the library listing,
+//! the annotations, the settings, N and the array job) writes `text.json` and `assets.json`
+//! from the parts' records, exactly as one task would, and deletes the parts. The index bytes
+//! do not depend on N. A part of another run is only a source of records to reuse, each when
+//! its inputs' digest still matches, like the last index.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -35,7 +44,9 @@ use crate::cli::{DatasetStageArgs, Global};
 use crate::config::Config;
 use crate::exit::UsageError;
 use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic};
-use crate::runner::{digest_of, DatasetReport, DatasetStage, Executor, Shard, StageContext};
+use crate::runner::{
+    digest_of, DatasetReport, DatasetStage, Executor, Shard, StageContext, RUN_DIR,
+};
 
 /// `mesa assets`.
 #[derive(Debug, ClapArgs)]
@@ -47,31 +58,41 @@ pub struct Args {
     /// retrieval never chooses them).
     #[arg(long)]
     pub strict: bool,
+    /// Index only asset k of the sorted library when k mod N = I; the last of the N tasks to
+    /// finish writes the index (default: from SLURM_ARRAY_TASK_ID / SLURM_ARRAY_TASK_COUNT
+    /// when set).
+    #[arg(long, value_name = "I/N")]
+    pub shard: Option<Shard>,
 }
 
 /// Runs `mesa assets`.
 pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
-    let resolved = args.stage.resolve(global)?;
-    // Under a Slurm array, one task indexes the library; the others have nothing to do.
-    if let Some(shard) = Shard::from_slurm_env().map_err(UsageError)? {
-        if shard.index != 0 {
-            eprintln!(
-                "assets: the library is indexed by array task 0 (this is task {shard}): nothing \
-                 to do here"
-            );
-            return Ok(ExitCode::SUCCESS);
-        }
-    }
+    let mut resolved = args.stage.resolve(global)?;
+    let shard = match args.shard {
+        Some(shard) => shard,
+        None => Shard::from_slurm_env()
+            .map_err(UsageError)?
+            .unwrap_or_default(),
+    };
+    // Each shard its own stage lock (the runner's); the merge has one of its own.
+    resolved.options.shard = shard;
     resolved.run_dataset(&AssetsStage {
         strict: args.strict,
+        shard,
+        run_id: std::env::var("SLURM_ARRAY_JOB_ID").unwrap_or_default(),
     })
 }
 
-/// The `assets` stage: the asset index, once over the library.
+/// The `assets` stage: the asset index, once over the library (or a shard of it).
 #[derive(Debug, Default)]
 pub struct AssetsStage {
     /// Invalid assets fail the run (exit code 1).
     pub strict: bool,
+    /// This task's share of the library (the whole library by default).
+    pub shard: Shard,
+    /// What tells the parts of one array run from those of another (the Slurm array job id);
+    /// empty outside Slurm.
+    pub run_id: String,
 }
 
 impl DatasetStage for AssetsStage {
@@ -90,6 +111,15 @@ impl DatasetStage for AssetsStage {
     }
 
     fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
+        if self.shard.count > 1 {
+            let summary = index_shard(ctx, exec, self.shard, &self.run_id)?;
+            let merged_invalid = summary.merged.as_ref().map_or(0, |m| m.invalid.len());
+            return Ok(DatasetReport {
+                success: !self.strict || (summary.invalid.is_empty() && merged_invalid == 0),
+                text: format_shard_summary(&summary),
+                record: serde_json::to_value(&summary)?,
+            });
+        }
         let summary = index_library(ctx.dataset, ctx.config, exec)?;
         Ok(DatasetReport {
             success: !self.strict || summary.invalid.is_empty(),
@@ -190,7 +220,7 @@ fn index_one(
     uid: &str,
     annotations: &Annotations,
     raw: &BTreeMap<String, String>,
-    previous: Option<&AssetIndexArtifact>,
+    candidates: &Candidates,
     config: &Config,
     config_digest: &str,
     force: bool,
@@ -229,14 +259,17 @@ fn index_one(
         .as_bytes(),
     );
     if !force {
-        if let Some(old) = previous.and_then(|p| p.assets.get(uid)) {
+        for old in candidates.get(uid).into_iter().flatten() {
+            if old.inputs_sha256 != inputs_sha256 {
+                continue;
+            }
             let shapes_intact = match &old.shapes {
                 None => true,
                 Some(s) => std::fs::read(dataset.join(&s.file))
                     .map(|b| sha256_hex(&b) == s.sha256)
                     .unwrap_or(false),
             };
-            if old.inputs_sha256 == inputs_sha256 && shapes_intact {
+            if shapes_intact {
                 return Ok(Outcome {
                     uid: uid.to_owned(),
                     record: old.clone(),
@@ -309,14 +342,20 @@ fn index_one(
     })
 }
 
-/// Indexes the asset library of a dataset, an asset a unit of `exec`.
-pub fn index_library(
-    dataset: &Path,
-    config: &Config,
-    exec: &Executor<'_>,
-) -> anyhow::Result<AssetsSummary> {
-    let force = exec.options().force;
-    let started = Instant::now();
+/// Records an asset may keep when its inputs' digest still matches: the last index's and
+/// those of the parts sharded tasks wrote, by uid.
+type Candidates = BTreeMap<String, Vec<AssetRecord>>;
+
+/// What every task reads of the library before indexing.
+struct Library {
+    uids: Vec<String>,
+    ignored: Vec<String>,
+    annotations: Annotations,
+    raw: BTreeMap<String, String>,
+    config_digest: String,
+}
+
+fn load_library(dataset: &Path, config: &Config) -> anyhow::Result<Library> {
     let (uids, ignored) = list_library(dataset)?;
     let annotations_path = dataset.join(ANNOTATIONS);
     let annotations = if annotations_path.exists() {
@@ -325,20 +364,100 @@ pub fn index_library(
         Annotations::default()
     };
     let raw = raw_annotations(&annotations_path)?;
-    let previous = if force { None } else { read_previous(dataset) };
-    let config_digest = assets_config_digest(&config.assets);
-    let outcomes: Vec<anyhow::Result<Outcome>> = exec.map("assets", &uids, |uid| {
+    Ok(Library {
+        uids,
+        ignored,
+        annotations,
+        raw,
+        config_digest: assets_config_digest(&config.assets),
+    })
+}
+
+/// The records a run may reuse: the last index's (unless `with_index` is false: `--force`)
+/// and every part's.
+fn candidates(dataset: &Path, with_index: bool) -> Candidates {
+    let mut out: Candidates = BTreeMap::new();
+    if with_index {
+        if let Some(previous) = read_previous(dataset) {
+            for (uid, record) in previous.assets {
+                out.entry(uid).or_default().push(record);
+            }
+        }
+    }
+    for part in read_parts(dataset) {
+        for (uid, record) in part.records {
+            out.entry(uid).or_default().push(record);
+        }
+    }
+    out
+}
+
+/// Indexes `uids` of the library on `exec`, in their order.
+fn index_uids(
+    dataset: &Path,
+    library: &Library,
+    uids: &[String],
+    candidates: &Candidates,
+    config: &Config,
+    exec: &Executor<'_>,
+    force: bool,
+) -> anyhow::Result<Vec<Outcome>> {
+    exec.map("assets", uids, |uid| {
         index_one(
             dataset,
             uid,
-            &annotations,
-            &raw,
-            previous.as_ref(),
+            &library.annotations,
+            &library.raw,
+            candidates,
             config,
-            &config_digest,
+            &library.config_digest,
             force,
         )
-    });
+    })
+    .into_iter()
+    .collect()
+}
+
+/// Indexes the asset library of a dataset, an asset a unit of `exec`.
+pub fn index_library(
+    dataset: &Path,
+    config: &Config,
+    exec: &Executor<'_>,
+) -> anyhow::Result<AssetsSummary> {
+    let force = exec.options().force;
+    let started = Instant::now();
+    let library = load_library(dataset, config)?;
+    let candidates = candidates(dataset, !force);
+    let outcomes = index_uids(
+        dataset,
+        &library,
+        &library.uids,
+        &candidates,
+        config,
+        exec,
+        force,
+    )?;
+    let summary = write_index(dataset, config, library, outcomes, started)?;
+    remove_parts(dataset)?;
+    Ok(summary)
+}
+
+/// Writes the index of the whole library from every asset's outcome (in uid order): the
+/// summary, stale shapes removed, `text.json`, then `assets.json`.
+fn write_index(
+    dataset: &Path,
+    config: &Config,
+    library: Library,
+    outcomes: Vec<Outcome>,
+    started: Instant,
+) -> anyhow::Result<AssetsSummary> {
+    let Library {
+        uids,
+        ignored,
+        annotations,
+        config_digest,
+        ..
+    } = library;
     let mut summary = AssetsSummary {
         assets: uids.len(),
         ignored_files: ignored,
@@ -346,7 +465,6 @@ pub fn index_library(
     };
     let mut records = BTreeMap::new();
     for outcome in outcomes {
-        let outcome = outcome?;
         if outcome.reused {
             summary.reused += 1;
         } else {
@@ -394,11 +512,309 @@ pub fn index_library(
     Ok(summary)
 }
 
+/// Where sharded tasks leave their records for the merge, under the dataset's `.mesa/`.
+const PARTS_DIR: &str = "parts/assets";
+
+/// The schema of a part.
+const PART_SCHEMA: &str = "mesa.asset-index-part/1";
+
+/// One sharded task's records: `.mesa/parts/assets/<I>-of-<N>.json`.
+#[derive(Debug, Serialize, serde::Deserialize)]
+struct Part {
+    schema: String,
+    /// The run this part belongs to (see [`run_key`]): only parts of one run are merged.
+    run: String,
+    /// `I/N`.
+    shard: String,
+    /// The records of the shard's assets.
+    records: BTreeMap<String, AssetRecord>,
+}
+
+fn parts_dir(dataset: &Path) -> PathBuf {
+    dataset.join(RUN_DIR).join(PARTS_DIR)
+}
+
+fn part_path(dataset: &Path, shard: Shard) -> PathBuf {
+    parts_dir(dataset).join(format!("{}-of-{}.json", shard.index, shard.count))
+}
+
+/// Every readable part (an unreadable one is a leftover of a killed writer: ignored).
+fn read_parts(dataset: &Path) -> Vec<Part> {
+    let Ok(entries) = std::fs::read_dir(parts_dir(dataset)) else {
+        return Vec::new();
+    };
+    let mut paths: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    paths.sort();
+    paths
+        .iter()
+        .filter_map(|p| std::fs::read_to_string(p).ok())
+        .filter_map(|text| serde_json::from_str::<Part>(&text).ok())
+        .filter(|part| part.schema == PART_SCHEMA)
+        .collect()
+}
+
+/// Removes the parts once the index holds them.
+fn remove_parts(dataset: &Path) -> anyhow::Result<()> {
+    let dir = parts_dir(dataset);
+    match std::fs::remove_dir_all(&dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => {
+            return Err(anyhow!(
+                "{}: cannot remove the merged parts: {e}",
+                dir.display()
+            ))
+        }
+    }
+    // `.mesa/parts/` too when nothing else is in it.
+    if let Some(parent) = dir.parent() {
+        let _ = std::fs::remove_dir(parent);
+    }
+    Ok(())
+}
+
+/// What identifies one sharded run: the library listing, the annotations, the `[assets]`
+/// settings, the number of tasks and the array job. A part of an earlier run (other inputs,
+/// or an array that never finished) does not count towards this run's merge.
+fn run_key(library: &Library, count: usize, run_id: &str) -> String {
+    let mut text = format!(
+        "mesa asset parts {INDEX_VERSION}\n{}\n{count}\n{run_id}\n",
+        library.config_digest
+    );
+    for uid in &library.uids {
+        text.push_str(uid);
+        text.push('\n');
+    }
+    for (uid, annotation) in &library.raw {
+        text.push_str(uid);
+        text.push('\t');
+        text.push_str(annotation);
+        text.push('\n');
+    }
+    sha256_hex(text.as_bytes())
+}
+
+/// What one sharded task of `mesa assets` did.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct ShardSummary {
+    /// `I/N`.
+    pub shard: String,
+    /// GLB files in the library.
+    pub library: usize,
+    /// Assets of this shard.
+    pub assets: usize,
+    /// Of them, indexed by this task.
+    pub indexed: usize,
+    /// Of them, records kept (unchanged inputs).
+    pub reused: usize,
+    /// Invalid assets of this shard with their reason.
+    pub invalid: Vec<(String, String)>,
+    /// Parts of this run present when this task looked (its own included).
+    pub parts_present: usize,
+    /// The index this task wrote, when it was the last to finish.
+    pub merged: Option<AssetsSummary>,
+    /// Whether another task had already merged this task's part.
+    pub merged_by_another: bool,
+    /// Wall time, seconds.
+    pub elapsed_s: f64,
+}
+
+/// One sharded task: its share of the library, its part, and the merge when it is the last.
+fn index_shard(
+    ctx: &StageContext<'_>,
+    exec: &Executor<'_>,
+    shard: Shard,
+    run_id: &str,
+) -> anyhow::Result<ShardSummary> {
+    let (dataset, config) = (ctx.dataset, ctx.config);
+    let force = exec.options().force;
+    let started = Instant::now();
+    let library = load_library(dataset, config)?;
+    let key = run_key(&library, shard.count, run_id);
+    let mine: Vec<String> = library
+        .uids
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| shard.owns(*k))
+        .map(|(_, uid)| uid.clone())
+        .collect();
+    let outcomes = index_uids(
+        dataset,
+        &library,
+        &mine,
+        &candidates(dataset, !force),
+        config,
+        exec,
+        force,
+    )?;
+    let mut summary = ShardSummary {
+        shard: shard.to_string(),
+        library: library.uids.len(),
+        assets: mine.len(),
+        ..ShardSummary::default()
+    };
+    let mut records = BTreeMap::new();
+    for outcome in outcomes {
+        if outcome.reused {
+            summary.reused += 1;
+        } else {
+            summary.indexed += 1;
+        }
+        if !outcome.record.valid {
+            summary.invalid.push((
+                outcome.uid.clone(),
+                outcome.record.reason.clone().unwrap_or_default(),
+            ));
+        }
+        records.insert(outcome.uid, outcome.record);
+    }
+    let part = Part {
+        schema: PART_SCHEMA.to_owned(),
+        run: key.clone(),
+        shard: shard.to_string(),
+        records,
+    };
+    let own = part_path(dataset, shard);
+    write_json_path(&own, &part)?;
+
+    // The merge: one task at a time looks at the parts (the others wait for the lock).
+    let merge_config = Config {
+        run: crate::config::RunConfig {
+            lock: crate::config::LockMode::Wait,
+            ..config.run.clone()
+        },
+        ..config.clone()
+    };
+    let merge_ctx = StageContext {
+        dataset,
+        config: &merge_config,
+    };
+    let _lock = crate::runner::lock::lock_stage(&merge_ctx, "assets-merge", Shard::default())?;
+    if !own.exists() {
+        // A task that finished after this one wrote its part merged it already.
+        summary.merged_by_another = true;
+        summary.elapsed_s = started.elapsed().as_secs_f64();
+        return Ok(summary);
+    }
+    let parts: Vec<Part> = read_parts(dataset)
+        .into_iter()
+        .filter(|p| p.run == key)
+        .collect();
+    let present: std::collections::BTreeSet<&str> =
+        parts.iter().map(|p| p.shard.as_str()).collect();
+    summary.parts_present = present.len();
+    let complete = (0..shard.count).all(|i| {
+        present.contains(
+            Shard {
+                index: i,
+                count: shard.count,
+            }
+            .to_string()
+            .as_str(),
+        )
+    });
+    if complete {
+        // Every asset's record is in a part of this run (the library listing, annotations and
+        // settings it was keyed by are those read above), indexed by its task from the bytes
+        // it hashed: the records one task would write, taken as they are. An asset no part
+        // holds (none, when the parts are complete) is indexed here.
+        let merge_started = Instant::now();
+        let mut from_parts: BTreeMap<String, AssetRecord> = BTreeMap::new();
+        for part in parts {
+            from_parts.extend(part.records);
+        }
+        let missing: Vec<String> = library
+            .uids
+            .iter()
+            .filter(|uid| !from_parts.contains_key(*uid))
+            .cloned()
+            .collect();
+        let indexed = index_uids(
+            dataset,
+            &library,
+            &missing,
+            &Candidates::new(),
+            config,
+            exec,
+            force,
+        )?;
+        let mut outcomes: BTreeMap<String, Outcome> =
+            indexed.into_iter().map(|o| (o.uid.clone(), o)).collect();
+        for (uid, record) in from_parts {
+            if library.uids.binary_search(&uid).is_ok() {
+                outcomes.insert(
+                    uid.clone(),
+                    Outcome {
+                        uid,
+                        record,
+                        reused: true,
+                    },
+                );
+            }
+        }
+        let outcomes: Vec<Outcome> = outcomes.into_values().collect();
+        let merged = write_index(dataset, config, library, outcomes, merge_started)?;
+        remove_parts(dataset)?;
+        summary.merged = Some(merged);
+    }
+    summary.elapsed_s = started.elapsed().as_secs_f64();
+    Ok(summary)
+}
+
+/// The summary of one sharded task.
+pub fn format_shard_summary(summary: &ShardSummary) -> String {
+    use std::fmt::Write as _;
+    let mut out = format!(
+        "assets (shard {}): {} of {} GLBs ({} indexed, {} unchanged, {} invalid) in {:.2} s\n",
+        summary.shard,
+        summary.assets,
+        summary.library,
+        summary.indexed,
+        summary.reused,
+        summary.invalid.len(),
+        summary.elapsed_s
+    );
+    let count = summary.shard.split('/').nth(1).unwrap_or("?");
+    match &summary.merged {
+        Some(merged) => {
+            let _ = writeln!(
+                out,
+                "assets (shard {}): every part present: this task merged the index",
+                summary.shard
+            );
+            out.push_str(&format_summary(merged));
+        }
+        None if summary.merged_by_another => {
+            let _ = writeln!(
+                out,
+                "assets (shard {}): the index was merged by a task that finished later",
+                summary.shard
+            );
+        }
+        None => {
+            let _ = writeln!(
+                out,
+                "assets (shard {}): {} of {count} parts written; the last task to finish \
+                 merges the index",
+                summary.shard, summary.parts_present
+            );
+        }
+    }
+    out
+}
+
 fn write_json<T: Serialize>(dataset: &Path, rel: &str, value: &T) -> anyhow::Result<()> {
-    let path = dataset.join(rel);
-    let bytes = to_sorted_pretty(value).with_context(|| format!("serialising {rel}"))?;
-    sweep_tmp_for(&path).with_context(|| format!("{}: sweeping", path.display()))?;
-    write_atomic(&path, &bytes).with_context(|| format!("{}: cannot write", path.display()))
+    write_json_path(&dataset.join(rel), value)
+}
+
+fn write_json_path<T: Serialize>(path: &Path, value: &T) -> anyhow::Result<()> {
+    let bytes =
+        to_sorted_pretty(value).with_context(|| format!("serialising {}", path.display()))?;
+    sweep_tmp_for(path).with_context(|| format!("{}: sweeping", path.display()))?;
+    write_atomic(path, &bytes).with_context(|| format!("{}: cannot write", path.display()))
 }
 
 /// The digest of the `[assets]` settings. `[assets.budget]` joined the section after indexes

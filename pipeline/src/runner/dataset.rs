@@ -2,7 +2,7 @@
 //! run once over the whole dataset, not per scene, through the same runner as per-scene
 //! stages: one thread pool ([`super::thread_pool`]), one progress display
 //! ([`crate::progress`]), the same `--jobs`, `--progress` and `--quiet` behaviour, and a run
-//! record at `.mesa/runs/<stage>/run.json`. The stage says what one unit of work is (an asset,
+//! record at `.mesa/runs/<stage>/run.json` (`shard-<k>-of-<N>.json` for a shard). The stage says what one unit of work is (an asset,
 //! a scene) through [`Executor::map`]; the executor owns the pool and the display. A stage
 //! whose output depends on all its inputs at once keeps a dataset marker
 //! (`.mesa/markers/<stage>.json`, the per-scene marker's format with scene `(dataset)`), and
@@ -149,12 +149,21 @@ pub fn run_dataset_stage(
     };
     let exec = Executor::new(stage.name(), options)?;
     let report = stage.run(ctx, &exec)?;
+    // A sharded run (`mesa assets` as an array) one record per shard, as per-scene stages.
+    let name = if options.shard.count > 1 {
+        format!(
+            "shard-{}-of-{}.json",
+            options.shard.index, options.shard.count
+        )
+    } else {
+        "run.json".to_owned()
+    };
     let record = ctx
         .dataset
         .join(RUN_DIR)
         .join("runs")
         .join(stage.name())
-        .join("run.json");
+        .join(name);
     write_run_record(&record, &report.record);
     Ok(report)
 }
