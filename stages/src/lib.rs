@@ -26,6 +26,7 @@
 //! - [`report`]: dataset statistics, SVG plots and the HTML page of a dataset (SPEC 5.10).
 //! - [`release`]: the MesaTask-10K tree's files (SPEC 5.10).
 //! - [`seeding`]: seeded random generators per scene and purpose.
+//! - [`pickle`]: MesaTask's `sbert_text_features.pkl` read (safely, no code run) and written.
 //! - [`paths`]: where every artifact of a dataset lives (the one owner of those paths).
 
 pub mod annotations;
@@ -42,6 +43,7 @@ pub mod lift;
 pub mod mesh;
 pub mod pack;
 pub mod paths;
+pub mod pickle;
 pub mod place;
 pub mod raster;
 pub mod records;
