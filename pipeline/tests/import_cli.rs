@@ -354,3 +354,87 @@ fn one_bad_scene_does_not_stop_the_others() {
         "{text}"
     );
 }
+
+/// Every file under `dir/Layout_info` and `dir/Asset_annotation.json`, by relative path.
+fn release_files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    common::all_files(dir)
+        .into_iter()
+        .filter(|(k, _)| {
+            k.starts_with("Layout_info/") && k.ends_with("layout.json")
+                || k == "Asset_annotation.json"
+        })
+        .collect()
+}
+
+#[test]
+fn release_import_release_gives_identical_layouts_and_annotations() {
+    let python = python();
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let src = tmp.path().join("release");
+    build_release(&src, python.as_deref());
+    let d0 = tmp.path().join("d0");
+    let (r1, d1, r2) = (
+        tmp.path().join("r1"),
+        tmp.path().join("d1"),
+        tmp.path().join("r2"),
+    );
+    let p = |p: &Path| p.to_str().expect("utf8").to_owned();
+    run_ok(&["import", "mesatask", &p(&src), &p(&d0), "--progress", "off"]);
+    // Released from the imported layouts (the release's own front.png shows them).
+    let out = run_ok(&["release", &p(&d0), &p(&r1), "--progress", "off"]);
+    assert!(out.contains("7 of 7 scenes released"), "{out}");
+    // What MesaTask's tools read: every annotation of the release as it was, with the
+    // description mesa's kind requires beside its detailed_caption.
+    let mut original = read_json(&src.join("Asset_annotation.json"));
+    for entry in original.as_object_mut().expect("object").values_mut() {
+        entry["description"] = entry["detailed_caption"].clone();
+    }
+    assert_eq!(read_json(&r1.join("Asset_annotation.json")), original);
+    if python.is_some() {
+        // The features pickle, loadable by Python's pickle, the same features.
+        let check = format!(
+            "import pickle, numpy as np\n\
+             a = pickle.load(open(r'{}', 'rb')); b = pickle.load(open(r'{}', 'rb'))\n\
+             assert a['uids'] == b['uids']\n\
+             assert a['text_features'].dtype == b['text_features'].dtype\n\
+             assert a['text_features'].tobytes() == b['text_features'].tobytes()\n",
+            src.join("sbert_text_features.pkl").display(),
+            r1.join("sbert_text_features.pkl").display(),
+        );
+        let status = Command::new(python.as_deref().expect("python"))
+            .arg("-c")
+            .arg(check)
+            .status()
+            .expect("python");
+        assert!(status.success());
+    }
+    run_ok(&["import", "mesatask", &p(&r1), &p(&d1), "--progress", "off"]);
+    let out = run_ok(&["release", &p(&d1), &p(&r2), "--progress", "off"]);
+    assert!(out.contains("7 of 7 scenes released"), "{out}");
+    let (first, second) = (release_files(&r1), release_files(&r2));
+    assert_eq!(first.len(), 8);
+    assert!(
+        first == second,
+        "release → import → release changed the tree"
+    );
+    if python.is_some() {
+        assert_eq!(
+            std::fs::read(r1.join("sbert_text_features.pkl")).expect("r1"),
+            std::fs::read(r2.join("sbert_text_features.pkl")).expect("r2")
+        );
+    }
+    // Control: a layout changed between the releases shows.
+    let changed = d1.join("scenes/office_table/office_table_0002/refined/layout.json");
+    let mut value = read_json(&changed);
+    value["objects"][0]["position"][0] = json!(1.25);
+    write(&changed, &serde_json::to_vec_pretty(&value).expect("json"));
+    let r3 = tmp.path().join("r3");
+    // Its release picture no longer shows it: the scene is refused until it is drawn again.
+    let out = mesa()
+        .args(["release", &p(&d1), &p(&r3), "--progress", "off"])
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(text.contains("6 of 7 scenes released"), "{text}");
+    assert_ne!(release_files(&r3), first);
+}

@@ -100,6 +100,10 @@ pub struct ImportNotes {
     pub missing_glbs: Vec<MissingGlb>,
     /// Whether the release had `front.png` for the scene (kept as `imported/front.png`).
     pub front_png: bool,
+    /// SHA-256 of the `refined/layout.json` written: while the scene's layout still has it,
+    /// the release's `front.png` shows that layout (`mesa release` may use it).
+    #[serde(default)]
+    pub layout_sha256: String,
 }
 
 fn numbers(value: &Value, n: usize) -> Option<Vec<f64>> {
@@ -171,6 +175,7 @@ pub fn import_layout(
         fixed: Vec::new(),
         missing_glbs: Vec::new(),
         front_png: false,
+        layout_sha256: String::new(),
     };
     top.remove("schema");
     // The scene without its objects: zone, restricted zone and other keys, checked by serde.
@@ -396,6 +401,19 @@ pub const TEXT_FIELDS: [&str; 3] = ["description", "detailed_caption", "caption"
 /// The field naming where `description` came from.
 pub const TEXT_SOURCE_FIELD: &str = "description_source";
 
+/// An annotation as a release writes it: [`TEXT_SOURCE_FIELD`] removed, so that release →
+/// import → release gives the same `Asset_annotation.json`. The `description` stays (mesa's
+/// `asset-annotations` kind requires it; MesaTask's code reads `detailed_caption`, which is
+/// kept beside it).
+pub fn released_annotation(entry: &Value) -> Value {
+    let Value::Object(fields) = entry else {
+        return entry.clone();
+    };
+    let mut fields = fields.clone();
+    fields.remove(TEXT_SOURCE_FIELD);
+    Value::Object(fields)
+}
+
 /// What [`normalise_annotations`] did.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct AnnotationReport {
@@ -537,6 +555,16 @@ mod tests {
         assert_eq!(out["b"]["description"], "a book");
         assert_eq!(out["b"]["detailed_caption"], "other");
         assert_eq!(report.without_text, 2);
+        // For a release: without the source field, and normalising again changes nothing.
+        assert_eq!(
+            released_annotation(&out["a"]),
+            json!({"description": "a red mug", "detailed_caption": "a red mug",
+                   "bbox": {"x": 1, "y": 2, "z": 3}})
+        );
+        assert_eq!(
+            released_annotation(&out["b"]),
+            json!({"description": "a book", "detailed_caption": "other"})
+        );
         assert!(report.dropped.contains_key("d"), "{report:?}");
         assert_eq!(report.kept, 3);
     }

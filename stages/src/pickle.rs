@@ -129,6 +129,77 @@ impl TextFeatures {
     }
 }
 
+impl TextFeatures {
+    /// Reads a `.npy` file of [`TextFeatures::to_npy`]'s form (version 1.0 to 3.0, a 2-D
+    /// `<f2`/`<f4` array in C order) with the uid of each row; `Err` says what is wrong.
+    pub fn from_npy(bytes: &[u8], uids: Vec<String>) -> Result<Self, String> {
+        let magic = bytes.get(..8).ok_or("shorter than a .npy header")?;
+        if &magic[..6] != b"\x93NUMPY" {
+            return Err("not a .npy file (no \\x93NUMPY magic)".into());
+        }
+        let (len, start) = match magic[6] {
+            1 => (
+                usize::from(u16::from_le_bytes([
+                    *bytes.get(8).ok_or("truncated header")?,
+                    *bytes.get(9).ok_or("truncated header")?,
+                ])),
+                10,
+            ),
+            2 | 3 => {
+                let b = bytes.get(8..12).ok_or("truncated header")?;
+                (u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize, 12)
+            }
+            v => return Err(format!(".npy version {v} (expected 1 to 3)")),
+        };
+        let header = bytes.get(start..start + len).ok_or("truncated header")?;
+        let header = std::str::from_utf8(header).map_err(|_| "header is not text")?;
+        let compact: String = header.chars().filter(|c| !c.is_whitespace()).collect();
+        let kind = if compact.contains("'descr':'<f2'") {
+            FloatKind::F16
+        } else if compact.contains("'descr':'<f4'") {
+            FloatKind::F32
+        } else {
+            return Err(format!("dtype in {header:?} (expected '<f2' or '<f4')"));
+        };
+        if !compact.contains("'fortran_order':False") {
+            return Err("Fortran order (expected C order)".into());
+        }
+        let shape = compact
+            .split("'shape':(")
+            .nth(1)
+            .and_then(|rest| rest.split(')').next())
+            .ok_or("no shape")?;
+        let dims: Vec<usize> = shape
+            .split(',')
+            .filter(|d| !d.is_empty())
+            .map(|d| d.parse::<usize>().map_err(|_| format!("shape ({shape})")))
+            .collect::<Result<_, _>>()?;
+        let [rows, cols] = dims[..] else {
+            return Err(format!("shape ({shape}) (expected 2 dimensions)"));
+        };
+        if rows != uids.len() {
+            return Err(format!("{rows} rows for {} uids", uids.len()));
+        }
+        let data = &bytes[start + len..];
+        let needed = rows
+            .checked_mul(cols)
+            .and_then(|n| n.checked_mul(kind.width()))
+            .ok_or("shape overflows")?;
+        if data.len() != needed {
+            return Err(format!(
+                "{} data bytes, the shape needs {needed}",
+                data.len()
+            ));
+        }
+        Ok(Self {
+            uids,
+            kind,
+            cols,
+            data_le: data.to_vec(),
+        })
+    }
+}
+
 /// A numpy dtype as this reader knows it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Dtype {
@@ -810,18 +881,20 @@ fn put_str(out: &mut Vec<u8>, s: &str) {
 }
 
 fn put_int(out: &mut Vec<u8>, v: usize) {
-    match u8::try_from(v) {
-        Ok(b) => {
-            out.push(b'K');
-            out.push(b);
-        }
-        Err(_) => {
-            // LONG1 with 8 bytes holds any usize (a 9th zero byte keeps it positive).
-            out.push(0x8a);
-            out.push(9);
-            out.extend_from_slice(&(v as u64).to_le_bytes());
-            out.push(0);
-        }
+    if let Ok(b) = u8::try_from(v) {
+        out.push(b'K');
+        out.push(b);
+    } else if let Ok(w) = u16::try_from(v) {
+        out.push(b'M');
+        out.extend_from_slice(&w.to_le_bytes());
+    } else if let Ok(i) = i32::try_from(v) {
+        out.push(b'J');
+        out.extend_from_slice(&i.to_le_bytes());
+    } else {
+        // LONG1 of 8 bytes: a shape dimension is far below 2^63, so the sign bit is clear.
+        out.push(0x8a);
+        out.push(8);
+        out.extend_from_slice(&(v as u64).to_le_bytes());
     }
 }
 
@@ -915,6 +988,20 @@ mod tests {
     }
 
     #[test]
+    fn wide_rows_and_many_uids_round_trip() {
+        // 768 columns and 300 rows need 2-byte integers (BININT2) in the shape.
+        let uids: Vec<String> = (0..300).map(|i| format!("uid{i}")).collect();
+        let features = TextFeatures {
+            data_le: vec![7u8; 300 * 768 * 2],
+            uids,
+            kind: FloatKind::F16,
+            cols: 768,
+        };
+        let bytes = write_text_features(&features);
+        assert_eq!(read_text_features(&bytes), Ok(features));
+    }
+
+    #[test]
     fn every_truncation_is_an_error() {
         let bytes = write_text_features(&sample());
         for n in 0..bytes.len() {
@@ -948,6 +1035,18 @@ mod tests {
             .expect_err("refused")
             .to_string()
             .contains("out-of-band"));
+    }
+
+    #[test]
+    fn npy_written_reads_back() {
+        let features = sample();
+        let npy = features.to_npy();
+        assert_eq!(
+            TextFeatures::from_npy(&npy, features.uids.clone()),
+            Ok(features.clone())
+        );
+        assert!(TextFeatures::from_npy(&npy[..npy.len() - 1], features.uids.clone()).is_err());
+        assert!(TextFeatures::from_npy(&npy, vec!["a".into()]).is_err());
     }
 
     #[test]

@@ -387,6 +387,7 @@ impl ImportStage {
                 .with_context(|| format!("{}: cannot remove", front_dest.display()))?;
         }
         let layout_bytes = to_sorted_pretty(&layout).map_err(|e| anyhow!("{e}"))?;
+        notes.layout_sha256 = crate::fsio::sha256_hex(&layout_bytes);
         let notes_bytes = to_sorted_pretty(&notes).map_err(|e| anyhow!("{e}"))?;
         written += usize::from(write_if_changed(
             &scene_dir.join(REFINED_LAYOUT),
