@@ -313,6 +313,11 @@ fn a_release_imports_and_runs_to_records_and_report() {
     }
     assert!(ds.join("records/sft.json").is_file(), "{text}");
     assert!(ds.join("report/index.html").is_file(), "{text}");
+    // And the release, from the layouts and pictures mesa made.
+    assert!(text.contains("release: 7 of 7 scenes released"), "{text}");
+    assert!(ds
+        .join("release/Layout_info/office_table/office_table_0002/front.png")
+        .is_file());
     // Objects without a GLB are skipped with a warning naming them, never the scene.
     assert!(text.contains("withheld_"), "{text}");
 }

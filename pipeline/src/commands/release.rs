@@ -1,4 +1,5 @@
-//! `mesa release DATASET OUT`: the MesaTask-10K tree, on demand (not part of `mesa run`).
+//! `mesa release DATASET OUT`: the MesaTask-10K tree, on demand (`mesa run` writes it to
+//! `DATASET/release/` only for a dataset of imported scenes).
 //!
 //! Per scene, the layout of `[render] layout` (by default the most refined present:
 //! `qa/layout.json`, else `refined/layout.json`) becomes
@@ -70,23 +71,48 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
     if let Some(layout) = args.layout {
         resolved.config.render.layout = layout.into();
     }
-    resolved.run_dataset(&ReleaseStage { out: args.out })
+    resolved.run_dataset(&ReleaseStage {
+        out: Some(args.out),
+    })
 }
 
 /// The `release` stage: the MesaTask-10K tree into `out`.
 #[derive(Debug)]
 pub struct ReleaseStage {
-    /// The folder written.
-    pub out: PathBuf,
+    /// The folder written; `None`: `DATASET/release` ([`IMPORTED_RELEASE_DIR`]), which
+    /// `mesa run` writes on a dataset of imported scenes.
+    pub out: Option<PathBuf>,
 }
+
+/// Where `mesa run` writes the release of a dataset with imported scenes.
+pub const IMPORTED_RELEASE_DIR: &str = "release";
 
 impl DatasetStage for ReleaseStage {
     fn name(&self) -> &'static str {
         "release"
     }
 
+    /// `mesa run` releases a dataset of imported scenes (their tree goes back out with what
+    /// mesa added); any other dataset is released on demand.
+    fn skipped_by_run(&self, ctx: &StageContext<'_>) -> Option<String> {
+        let imported = discover_scenes(ctx.dataset)
+            .map(|scenes| scenes.iter().any(Scene::imported))
+            .unwrap_or(false);
+        (!imported).then(|| {
+            format!(
+                "on demand (`mesa release {} OUT`; `mesa run` writes {IMPORTED_RELEASE_DIR}/ only \
+                 for imported scenes)",
+                ctx.dataset.display()
+            )
+        })
+    }
+
     fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
-        let summary = write_release(ctx.dataset, &self.out, ctx.config, exec)?;
+        let out = self
+            .out
+            .clone()
+            .unwrap_or_else(|| ctx.dataset.join(IMPORTED_RELEASE_DIR));
+        let summary = write_release(ctx.dataset, &out, ctx.config, exec)?;
         Ok(DatasetReport {
             success: summary.failed.is_empty(),
             text: format_release_summary(&summary),
