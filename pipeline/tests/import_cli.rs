@@ -273,6 +273,23 @@ fn a_release_imports_and_runs_to_records_and_report() {
         assert_eq!(summary["text_features"]["dtype"], "float16");
     }
 
+    // The same files at any thread count.
+    let one = tmp.path().join("one-thread");
+    run_ok(&[
+        "import",
+        "mesatask",
+        s,
+        one.to_str().expect("utf8"),
+        "--progress",
+        "off",
+        "-j",
+        "1",
+    ]);
+    assert!(
+        files_under(&one) == files_under(&ds),
+        "-j 1 and the default differ"
+    );
+
     // Idempotent: a second import writes nothing and leaves every file as it was.
     let before = files_under(&ds);
     let again = run_ok(&["import", "mesatask", s, d, "--progress", "off", "-j", "1"]);
