@@ -26,6 +26,8 @@
 //! - [`report`]: dataset statistics, SVG plots and the HTML page of a dataset (SPEC 5.10).
 //! - [`release`]: the MesaTask-10K tree's files (SPEC 5.10).
 //! - [`seeding`]: seeded random generators per scene and purpose.
+//! - [`import_mesatask`]: the released MesaTask-10K read into a dataset (layouts, annotations).
+//! - [`pickle`]: MesaTask's `sbert_text_features.pkl` read (safely, no code run) and written.
 //! - [`paths`]: where every artifact of a dataset lives (the one owner of those paths).
 
 pub mod annotations;
@@ -37,11 +39,13 @@ pub mod glb_write;
 pub mod gltf_frames;
 pub mod graph;
 pub mod image_io;
+pub mod import_mesatask;
 pub mod ingest;
 pub mod lift;
 pub mod mesh;
 pub mod pack;
 pub mod paths;
+pub mod pickle;
 pub mod place;
 pub mod raster;
 pub mod records;

@@ -28,6 +28,8 @@ pub mod dataset {
     pub const SHAPES_DIR: &str = "assets/index/shapes";
     /// The asset embeddings of the `features` encoder.
     pub const TEXT_FEATURES: &str = "assets/text_features.npy";
+    /// What `mesa import` read and normalised, dataset-wide (counts, missing GLBs).
+    pub const IMPORT_SUMMARY: &str = "assets/import.json";
     /// The uid of each row of [`TEXT_FEATURES`].
     pub const TEXT_UIDS: &str = "assets/text_uids.json";
     /// The views around every asset: `assets/renders/<uid>/`.
@@ -100,6 +102,11 @@ pub mod scene {
     pub const TASKS: &str = "tasks/tasks.jsonl";
     /// The rejected model replies.
     pub const REJECTS: &str = "tasks/rejects.jsonl";
+    /// Where an imported scene came from and what the import dropped, fixed or found missing
+    /// (`mesa import`; its presence marks the scene as imported).
+    pub const IMPORT_NOTES: &str = "imported/import.json";
+    /// The released scene's `front.png`, kept as its reference picture (`mesa import`).
+    pub const IMPORT_FRONT: &str = "imported/front.png";
     /// The demo's true layout.
     pub const TRUTH_LAYOUT: &str = "truth/layout.json";
     /// The demo's true instances.
@@ -148,6 +155,7 @@ pub fn writer_of(rel: &str) -> Option<Writer> {
         return match top {
             "input" => Some(Writer::User),
             "truth" => Some(Writer::Stage("demo")),
+            "imported" => Some(Writer::Stage("import")),
             "coarse" if file == scene::RETRIEVAL => Some(Writer::Stage("retrieve")),
             "coarse" if file == scene::COARSE_LAYOUT => Some(Writer::Stage("place")),
             "coarse" => Some(Writer::Stage("lift")),
@@ -166,6 +174,9 @@ pub fn writer_of(rel: &str) -> Option<Writer> {
         || rel.starts_with(&format!("{}/", dataset::LIBRARY))
     {
         return Some(Writer::User);
+    }
+    if rel == dataset::IMPORT_SUMMARY {
+        return Some(Writer::Stage("import"));
     }
     if rel.starts_with("assets/") {
         return Some(Writer::Stage("assets"));

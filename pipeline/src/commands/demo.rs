@@ -113,6 +113,10 @@ impl SceneStage for AnnotateStage {
         "annotate"
     }
 
+    fn before_refined(&self) -> bool {
+        true
+    }
+
     fn inputs(&self, _ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
         let mut inputs = vec![
             scene.rel(&pack_glb(&scene.scene_id)),

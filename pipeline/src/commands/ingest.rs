@@ -59,6 +59,10 @@ impl SceneStage for IngestStage {
         "ingest"
     }
 
+    fn before_refined(&self) -> bool {
+        true
+    }
+
     fn waiting(&self, _ctx: &StageContext<'_>, scene: &Scene) -> Option<String> {
         let refined = refined_glb(&scene.scene_id);
         if scene.path(&refined).is_file() {

@@ -27,6 +27,10 @@ impl SceneStage for Lift {
         "lift"
     }
 
+    fn before_refined(&self) -> bool {
+        true
+    }
+
     fn inputs(&self, _: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
         let mut inputs = vec![scene.rel(CAMERA), scene.rel(INSTANCES)];
         let depth_png = scene.path(DEPTH_PNG);

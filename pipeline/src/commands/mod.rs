@@ -12,6 +12,7 @@ pub mod check;
 pub mod demo;
 pub mod files;
 pub mod graph;
+pub mod import;
 pub mod ingest;
 pub mod lift;
 pub mod pack;
@@ -131,6 +132,9 @@ commands! {
     /// {layout.json, front.png} from each scene's refined (or settled) layout and its front
     /// render, and Asset_annotation.json for the assets they use.
     Release(release::Args) => release::run,
+    /// Read a released dataset (the MesaTask-10K tree) into a mesa dataset whose scenes enter
+    /// at the refined stage (docs/import.md)
+    Import(import::Args) => import::run,
 }
 
 #[cfg(test)]

@@ -83,6 +83,10 @@ impl SceneStage for PackStage {
         "pack"
     }
 
+    fn before_refined(&self) -> bool {
+        true
+    }
+
     fn inputs(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
         let mut inputs = vec![scene.rel(COARSE_LAYOUT), INDEX.to_owned()];
         // The assets the layout places (a missing layout is reported by the runner).

@@ -24,7 +24,8 @@ impl Step {
 
 /// Every step of `mesa run`, in order: the asset index, the per-scene stages (the simulated
 /// annotator between `pack` and `ingest` only when the configuration names it: `[annotate]
-/// annotator = "simulated"`, as `mesa demo` writes), then `records` and `report` once.
+/// annotator = "simulated"`, as `mesa demo` writes), then `records` and `report` once, and
+/// `release` into `DATASET/release/` when the scenes were imported (`mesa import`).
 pub fn pipeline(config: &Config) -> Vec<Step> {
     let mut steps = vec![
         Step::Dataset(Box::new(super::assets::AssetsStage::default())),
@@ -44,6 +45,8 @@ pub fn pipeline(config: &Config) -> Vec<Step> {
         Step::Scene(Box::new(super::tasks::TasksStage::new())),
         Step::Dataset(Box::new(super::records::RecordsStage)),
         Step::Dataset(Box::new(super::report::ReportStage)),
+        // Only on a dataset of imported scenes (`skipped_by_run` says why not otherwise).
+        Step::Dataset(Box::new(super::release::ReleaseStage { out: None })),
     ]);
     steps
 }

@@ -55,6 +55,10 @@ impl SceneStage for PlaceStage {
         "place"
     }
 
+    fn before_refined(&self) -> bool {
+        true
+    }
+
     fn inputs(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
         let mut inputs = vec![scene.rel(LIFT), scene.rel(RETRIEVAL), INDEX.to_owned()];
         if ctx.dataset.join(ANNOTATIONS).exists() {

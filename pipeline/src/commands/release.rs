@@ -1,16 +1,22 @@
-//! `mesa release DATASET OUT`: the MesaTask-10K tree, on demand (not part of `mesa run`).
+//! `mesa release DATASET OUT`: the MesaTask-10K tree, on demand (`mesa run` writes it to
+//! `DATASET/release/` only for a dataset of imported scenes).
 //!
 //! Per scene, the layout of `[render] layout` (by default the most refined present:
 //! `qa/layout.json`, else `refined/layout.json`) becomes
 //! `OUT/Layout_info/<table_type>/<scene_id>/layout.json` ([`mesa_stages::release`]) beside a
 //! copy of `render/front.png`, which must have been drawn from that very layout (its camera
-//! file records the layout's digest); `OUT/Asset_annotation.json` holds the annotations of
-//! every asset the released layouts use. Every file written is validated (the `layout` and
+//! file records the layout's digest; an imported scene whose layout is still the imported one
+//! may use the release's own `imported/front.png`); `OUT/Asset_annotation.json` holds the
+//! annotations of every asset the released layouts use and of every other asset of
+//! `assets/annotations.json` (the library's and those a release could not ship), without the
+//! `description_source` field `mesa import` adds; `OUT/sbert_text_features.pkl` (pickle protocol 4,
+//! what MesaTask's `compress_pickle.load` reads) when the dataset has
+//! `assets/text_features.npy`. Every file written is validated (the `layout` and
 //! `asset-annotations` kinds of `mesa validate`). A scene that cannot be released is reported
 //! and left out; the others are written.
 //!
-//! OUT must be new, empty, or an earlier release (nothing but `Layout_info/` and
-//! `Asset_annotation.json`), which is replaced.
+//! OUT must be new, empty, or an earlier release (nothing but `Layout_info/`,
+//! `Asset_annotation.json` and `sbert_text_features.pkl`), which is replaced.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -24,8 +30,8 @@ use mesa_schemas::Kind;
 use mesa_stages::release::{release_annotations, release_layout};
 
 use clap::Args as ClapArgs;
-use mesa_stages::paths::dataset::{ANNOTATIONS, SCENES};
-use mesa_stages::paths::scene::RENDER_DIR;
+use mesa_stages::paths::dataset::{ANNOTATIONS, SCENES, TEXT_FEATURES, TEXT_UIDS};
+use mesa_stages::paths::scene::{IMPORT_FRONT, IMPORT_NOTES, RENDER_DIR};
 use serde::Serialize;
 
 use super::render::{no_layout, present_layouts};
@@ -65,23 +71,48 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
     if let Some(layout) = args.layout {
         resolved.config.render.layout = layout.into();
     }
-    resolved.run_dataset(&ReleaseStage { out: args.out })
+    resolved.run_dataset(&ReleaseStage {
+        out: Some(args.out),
+    })
 }
 
 /// The `release` stage: the MesaTask-10K tree into `out`.
 #[derive(Debug)]
 pub struct ReleaseStage {
-    /// The folder written.
-    pub out: PathBuf,
+    /// The folder written; `None`: `DATASET/release` ([`IMPORTED_RELEASE_DIR`]), which
+    /// `mesa run` writes on a dataset of imported scenes.
+    pub out: Option<PathBuf>,
 }
+
+/// Where `mesa run` writes the release of a dataset with imported scenes.
+pub const IMPORTED_RELEASE_DIR: &str = "release";
 
 impl DatasetStage for ReleaseStage {
     fn name(&self) -> &'static str {
         "release"
     }
 
+    /// `mesa run` releases a dataset of imported scenes (their tree goes back out with what
+    /// mesa added); any other dataset is released on demand.
+    fn skipped_by_run(&self, ctx: &StageContext<'_>) -> Option<String> {
+        let imported = discover_scenes(ctx.dataset)
+            .map(|scenes| scenes.iter().any(Scene::imported))
+            .unwrap_or(false);
+        (!imported).then(|| {
+            format!(
+                "on demand (`mesa release {} OUT`; `mesa run` writes {IMPORTED_RELEASE_DIR}/ only \
+                 for imported scenes)",
+                ctx.dataset.display()
+            )
+        })
+    }
+
     fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
-        let summary = write_release(ctx.dataset, &self.out, ctx.config, exec)?;
+        let out = self
+            .out
+            .clone()
+            .unwrap_or_else(|| ctx.dataset.join(IMPORTED_RELEASE_DIR));
+        let summary = write_release(ctx.dataset, &out, ctx.config, exec)?;
         Ok(DatasetReport {
             success: summary.failed.is_empty(),
             text: format_release_summary(&summary),
@@ -94,6 +125,8 @@ impl DatasetStage for ReleaseStage {
 pub const LAYOUT_INFO: &str = "Layout_info";
 /// The annotation file of a release.
 pub const ASSET_ANNOTATION: &str = "Asset_annotation.json";
+/// The text features of a release (MesaTask's retrieval loads it with `compress_pickle`).
+pub const TEXT_FEATURES_PKL: &str = "sbert_text_features.pkl";
 
 /// What a release run wrote.
 #[derive(Debug, Serialize)]
@@ -104,8 +137,10 @@ pub struct ReleaseSummary {
     pub scenes: usize,
     /// Scenes released.
     pub released: usize,
-    /// Assets annotated.
+    /// Assets annotated (those the layouts use and every other annotated asset).
     pub assets: usize,
+    /// Rows of `sbert_text_features.pkl` (0: the dataset has no text features).
+    pub text_features: usize,
     /// What could not be released, with why (`<table_type>/<scene_id>`, or the annotation
     /// file).
     pub failed: Vec<(String, String)>,
@@ -126,7 +161,7 @@ fn prepare_out(out: &Path) -> anyhow::Result<()> {
         let mut others = Vec::new();
         for entry in std::fs::read_dir(out).with_context(|| format!("{}", out.display()))? {
             let name = entry?.file_name().to_string_lossy().into_owned();
-            if name != LAYOUT_INFO && name != ASSET_ANNOTATION {
+            if name != LAYOUT_INFO && name != ASSET_ANNOTATION && name != TEXT_FEATURES_PKL {
                 others.push(name);
             }
         }
@@ -146,10 +181,12 @@ fn prepare_out(out: &Path) -> anyhow::Result<()> {
                 format!("{}: cannot remove the earlier release", layouts.display())
             })?;
         }
-        let annotations = out.join(ASSET_ANNOTATION);
-        if annotations.exists() {
-            std::fs::remove_file(&annotations)
-                .with_context(|| format!("{}: cannot remove", annotations.display()))?;
+        for file in [ASSET_ANNOTATION, TEXT_FEATURES_PKL] {
+            let path = out.join(file);
+            if path.exists() {
+                std::fs::remove_file(&path)
+                    .with_context(|| format!("{}: cannot remove", path.display()))?;
+            }
         }
     }
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))
@@ -187,39 +224,17 @@ fn release_scene(config: &Config, scene: &Scene, out: &Path) -> anyhow::Result<B
     let bytes = release_layout(&layout).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let camera_path = scene.path(&format!("{RENDER_DIR}/front_camera.json"));
     let png_path = scene.path(&format!("{RENDER_DIR}/front.png"));
-    let camera_text = match read_text_bounded(&camera_path, JSON_LIMIT) {
-        Ok(text) => text,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
-            "{}: no front view (run `mesa render` first)",
-            camera_path.display()
-        ),
-        Err(e) => bail!("{}: cannot read: {e}", camera_path.display()),
+    // An imported scene whose layout is still the one imported has the release's picture of
+    // it (used when no render of that layout exists).
+    let imported_front = imported_front(scene, &sha);
+    let png = match (
+        front_render(&camera_path, &png_path, &sha, rel, choice),
+        imported_front,
+    ) {
+        (Ok(png), _) => png,
+        (Err(_), Some(png)) => png,
+        (Err(e), None) => return Err(e),
     };
-    let camera: RenderCameraArtifact = serde_json::from_str(&camera_text).map_err(|e| {
-        anyhow!(
-            "{}: not a render camera file: {e} (run `mesa render --force` to draw it again)",
-            camera_path.display()
-        )
-    })?;
-    if camera.layout_sha256.as_deref() != Some(sha.as_str()) {
-        bail!(
-            "{}: drawn from {} as it was before, not from the released {rel} (run `mesa render` \
-             again{})",
-            png_path.display(),
-            camera.layout.as_deref().unwrap_or("another layout"),
-            if choice == mesa_stages::render::LayoutChoice::Refined {
-                ""
-            } else {
-                " with the same --layout"
-            }
-        );
-    }
-    let png = read_bounded(&png_path, IMAGE_LIMIT).with_context(|| {
-        format!(
-            "{}: cannot read (run `mesa render` first)",
-            png_path.display()
-        )
-    })?;
     let dir = out
         .join(LAYOUT_INFO)
         .join(&scene.table_type)
@@ -233,6 +248,93 @@ fn release_scene(config: &Config, scene: &Scene, out: &Path) -> anyhow::Result<B
         .iter()
         .map(|o| o.retrieved_uid.clone())
         .collect())
+}
+
+/// `imported/front.png` when the scene was imported and its layout (digest `sha`) is the one
+/// the import wrote.
+fn imported_front(scene: &Scene, sha: &str) -> Option<Vec<u8>> {
+    let text = read_text_bounded(&scene.path(IMPORT_NOTES), JSON_LIMIT).ok()?;
+    let notes: mesa_stages::import_mesatask::ImportNotes = serde_json::from_str(&text).ok()?;
+    if notes.layout_sha256 != sha || !notes.front_png {
+        return None;
+    }
+    read_bounded(&scene.path(IMPORT_FRONT), IMAGE_LIMIT).ok()
+}
+
+/// `render/front.png` when its camera file says it was drawn from the layout of digest `sha`.
+fn front_render(
+    camera_path: &Path,
+    png_path: &Path,
+    sha: &str,
+    rel: &str,
+    choice: mesa_stages::render::LayoutChoice,
+) -> anyhow::Result<Vec<u8>> {
+    let camera_text = match read_text_bounded(camera_path, JSON_LIMIT) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
+            "{}: no front view (run `mesa render` first)",
+            camera_path.display()
+        ),
+        Err(e) => bail!("{}: cannot read: {e}", camera_path.display()),
+    };
+    let camera: RenderCameraArtifact = serde_json::from_str(&camera_text).map_err(|e| {
+        anyhow!(
+            "{}: not a render camera file: {e} (run `mesa render --force` to draw it again)",
+            camera_path.display()
+        )
+    })?;
+    if camera.layout_sha256.as_deref() != Some(sha) {
+        bail!(
+            "{}: drawn from {} as it was before, not from the released {rel} (run `mesa render` \
+             again{})",
+            png_path.display(),
+            camera.layout.as_deref().unwrap_or("another layout"),
+            if choice == mesa_stages::render::LayoutChoice::Refined {
+                ""
+            } else {
+                " with the same --layout"
+            }
+        );
+    }
+    read_bounded(png_path, IMAGE_LIMIT).with_context(|| {
+        format!(
+            "{}: cannot read (run `mesa render` first)",
+            png_path.display()
+        )
+    })
+}
+
+/// `sbert_text_features.pkl` from `assets/text_features.npy` and `assets/text_uids.json`;
+/// `None` when the dataset has no features.
+fn features_pickle(dataset: &Path) -> anyhow::Result<Option<(Vec<u8>, usize)>> {
+    let npy_path = dataset.join(TEXT_FEATURES);
+    let uids_path = dataset.join(TEXT_UIDS);
+    if !npy_path.is_file() {
+        return Ok(None);
+    }
+    let uids_text = read_text_bounded(&uids_path, JSON_LIMIT).map_err(|e| {
+        anyhow!(
+            "{}: {e} (the uid of each row of {TEXT_FEATURES})",
+            uids_path.display()
+        )
+    })?;
+    let value = parse_lenient(&uids_text).map_err(|e| anyhow!("{}: {e}", uids_path.display()))?;
+    let list = value.get("uids").unwrap_or(&value).clone();
+    let uids: Vec<String> = serde_json::from_value(list).map_err(|_| {
+        anyhow!(
+            "{}: not a list of uid strings (expected [\"uid\", ...])",
+            uids_path.display()
+        )
+    })?;
+    let npy = read_bounded(&npy_path, crate::commands::import::PICKLE_LIMIT)
+        .map_err(|e| anyhow!("{}: {e}", npy_path.display()))?;
+    let features = mesa_stages::pickle::TextFeatures::from_npy(&npy, uids)
+        .map_err(|e| anyhow!("{}: {e}", npy_path.display()))?;
+    let rows = features.uids.len();
+    Ok(Some((
+        mesa_stages::pickle::write_text_features(&features),
+        rows,
+    )))
 }
 
 /// Writes the release (see the module documentation).
@@ -276,6 +378,7 @@ pub fn write_release(
         scenes: scenes.len(),
         released: 0,
         assets: 0,
+        text_features: 0,
         failed: Vec::new(),
         elapsed_s: 0.0,
     };
@@ -288,6 +391,34 @@ pub fn write_release(
             }
             Err(e) => summary.failed.push((scene.key(), format!("{e:#}"))),
         }
+    }
+    // Every annotated asset too, not only those the layouts use (MesaTask's retrieval reads
+    // the whole library; a release's annotations also cover assets it could not ship), each
+    // entry as the release it came from had it.
+    if let Some(entries) = annotations.as_object() {
+        uids.extend(entries.keys().cloned());
+    }
+    let annotations = match annotations {
+        serde_json::Value::Object(entries) => serde_json::Value::Object(
+            entries
+                .into_iter()
+                .map(|(uid, entry)| {
+                    let entry = mesa_stages::import_mesatask::released_annotation(&entry);
+                    (uid, entry)
+                })
+                .collect(),
+        ),
+        other => other,
+    };
+    match features_pickle(dataset) {
+        Ok(Some((bytes, rows))) => {
+            write(&out.join(TEXT_FEATURES_PKL), &bytes)?;
+            summary.text_features = rows;
+        }
+        Ok(None) => {}
+        Err(e) => summary
+            .failed
+            .push((TEXT_FEATURES_PKL.to_owned(), format!("{e:#}"))),
     }
     let path = out.join(ASSET_ANNOTATION);
     match release_annotations(&annotations, &uids) {
@@ -308,10 +439,12 @@ pub fn write_release(
 pub fn format_release_summary(summary: &ReleaseSummary) -> String {
     use std::fmt::Write as _;
     let mut out = format!(
-        "release: {} of {} scenes released, {} assets annotated, {} failed in {:.2} s: {}\n",
+        "release: {} of {} scenes released, {} assets annotated, {} text features, {} failed \
+         in {:.2} s: {}\n",
         summary.released,
         summary.scenes,
         summary.assets,
+        summary.text_features,
         summary.failed.len(),
         summary.elapsed_s,
         summary.out.display()

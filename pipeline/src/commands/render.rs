@@ -274,6 +274,31 @@ impl RenderStage {
         layout: &DatasetLayout,
     ) -> anyhow::Result<(Vec<mesa_stages::render::RenderedView>, Vec<String>)> {
         let library = self.library(dataset)?;
+        // Objects whose GLB the library lacks (assets a release could not ship, flagged by
+        // `mesa import`) are left out of the pictures with a warning; the scene is drawn.
+        let (kept, absent): (Vec<_>, Vec<_>) = layout.objects.iter().partition(|o| {
+            o.retrieved_uid.is_empty()
+                || library.index.assets.contains_key(&o.retrieved_uid)
+                || dataset.join(asset_glb(&o.retrieved_uid)).exists()
+        });
+        let mut warnings = Vec::new();
+        let trimmed;
+        let layout = if absent.is_empty() {
+            layout
+        } else {
+            warnings.push(format!(
+                "not drawn: no GLB in {LIBRARY} for {}",
+                absent
+                    .iter()
+                    .map(|o| format!("{} ({})", o.instance, o.retrieved_uid))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+            let mut copy = layout.clone();
+            copy.objects = kept.into_iter().cloned().collect();
+            trimmed = copy;
+            &trimmed
+        };
         let mut assets: BTreeMap<String, Result<Arc<RenderAsset>, String>> = BTreeMap::new();
         for object in &layout.objects {
             if !object.retrieved_uid.is_empty() && !assets.contains_key(&object.retrieved_uid) {
@@ -281,7 +306,6 @@ impl RenderStage {
                 assets.insert(object.retrieved_uid.clone(), asset);
             }
         }
-        let mut warnings = Vec::new();
         for (uid, asset) in &assets {
             if let Ok(asset) = asset {
                 warnings.extend(asset.warnings.iter().map(|w| format!("asset {uid}: {w}")));

@@ -87,6 +87,10 @@ impl SceneStage for RetrieveStage {
         "retrieve"
     }
 
+    fn before_refined(&self) -> bool {
+        true
+    }
+
     fn inputs(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
         let mut inputs = vec![scene.rel(LIFT), INDEX.to_owned()];
         if ctx.dataset.join(ANNOTATIONS).exists() {

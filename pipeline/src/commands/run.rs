@@ -59,7 +59,7 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
             }
             // A dataset-level stage covers every scene: with shards, each shard has only its
             // part, and every shard would do the same work at once.
-            Step::Dataset(stage) if sharded => {
+            Step::Dataset(stage) if sharded && stage.skipped_by_run(&ctx).is_none() => {
                 eprintln!(
                     "{name}: not run by a shard (it covers the whole dataset); run `mesa {name} \
                      {}` once {}",

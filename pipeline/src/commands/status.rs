@@ -1,5 +1,6 @@
 //! `mesa status`: per per-scene stage, how many scenes are done, stale, failed, waiting and
-//! pending, from the done markers (nothing is run).
+//! pending, and which scenes were imported at the refined stage (the stages before it do
+//! not apply to them), from the done markers (nothing is run).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -35,22 +36,28 @@ pub fn run(args: Args, _global: Global) -> anyhow::Result<ExitCode> {
     let cache = DigestCache::default();
     let mut out = String::new();
     out.push_str(&format!(
-        "{}: {} scenes\n{:<10} {:>7} {:>7} {:>7} {:>7} {:>7}\n",
+        "{}: {} scenes{}\n{:<10} {:>7} {:>7} {:>7} {:>7} {:>7} {:>8}\n",
         args.dataset.display(),
         scenes.len(),
+        match scenes.iter().filter(|s| s.imported()).count() {
+            0 => String::new(),
+            n => format!(" ({n} imported: they enter at the refined stage)"),
+        },
         "stage",
         "done",
         "stale",
         "failed",
         "waiting",
-        "pending"
+        "pending",
+        "imported"
     ));
     let mut notes = Vec::new();
     // Scenes awaiting annotation, once each (every stage after ingest waits for them too).
     let mut awaiting = std::collections::BTreeMap::new();
     for stage in scene_stages(&config) {
         let digest = stage.config_digest(&ctx);
-        let (mut done, mut stale, mut failed, mut waiting, mut pending) = (0, 0, 0, 0, 0);
+        let (mut done, mut stale, mut failed, mut waiting, mut pending, mut imported) =
+            (0, 0, 0, 0, 0, 0);
         for scene in &scenes {
             match scene_state(stage.as_ref(), &ctx, scene, &digest, &cache) {
                 SceneState::Done => done += 1,
@@ -71,10 +78,11 @@ pub fn run(args: Args, _global: Global) -> anyhow::Result<ExitCode> {
                     awaiting.entry(scene.key()).or_insert(why);
                 }
                 SceneState::Pending => pending += 1,
+                SceneState::Imported => imported += 1,
             }
         }
         out.push_str(&format!(
-            "{:<10} {done:>7} {stale:>7} {failed:>7} {waiting:>7} {pending:>7}\n",
+            "{:<10} {done:>7} {stale:>7} {failed:>7} {waiting:>7} {pending:>7} {imported:>8}\n",
             stage.name()
         ));
     }

@@ -42,6 +42,12 @@ impl Scene {
     pub fn path(&self, rel: &str) -> PathBuf {
         self.dir.join(rel)
     }
+
+    /// Whether `mesa import` wrote the scene (its `imported/import.json` exists): it enters at
+    /// the refined stage.
+    pub fn imported(&self) -> bool {
+        self.path(mesa_stages::paths::scene::IMPORT_NOTES).is_file()
+    }
 }
 
 /// What a stage sees besides the scene.

@@ -122,6 +122,13 @@ pub trait SceneStage: Sync {
     /// Processes one scene.
     fn run(&self, ctx: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput>;
 
+    /// Whether this stage makes what comes before the refined layout (lift, retrieve, place,
+    /// pack, the annotator, ingest): a scene imported at the refined stage (`mesa import`,
+    /// [`Scene::imported`]) does not need it, and the runner leaves it out, counted apart.
+    fn before_refined(&self) -> bool {
+        false
+    }
+
     /// Why the scene cannot run yet although nothing is wrong with it (a scene awaiting its
     /// annotator), or `None`. A waiting scene is neither run nor failed: it is reported, and
     /// its earlier outputs and marker are left as they are.
@@ -188,6 +195,9 @@ pub struct StageSummary {
     /// Scenes that wait for something outside mesa (an annotator), with what they wait for.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub waiting: Vec<(String, String)>,
+    /// Scenes imported at the refined stage that this stage (before it) left out.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub imported: usize,
     /// Wall time in seconds.
     pub elapsed_s: f64,
     /// The lines of [`SceneStage::finish`] for the terminal.
@@ -200,6 +210,10 @@ impl StageSummary {
     pub fn success(&self) -> bool {
         self.failed.is_empty()
     }
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// Where a stage's marker for a scene lives.
@@ -225,6 +239,8 @@ pub enum SceneState {
     Pending,
     /// Cannot run yet (the reason): it waits for something outside mesa.
     Waiting(String),
+    /// Imported at the refined stage: this stage, which comes before it, does not apply.
+    Imported,
 }
 
 struct Prepared {
@@ -322,6 +338,9 @@ pub fn scene_state(
     config_digest: &str,
     cache: &DigestCache,
 ) -> SceneState {
+    if stage.before_refined() && scene.imported() {
+        return SceneState::Imported;
+    }
     if let Some(reason) = stage.waiting(ctx, scene) {
         return SceneState::Waiting(reason);
     }
@@ -601,6 +620,12 @@ pub fn run_stage(
     if let Some(only) = &options.only {
         scenes.retain(|s| only.contains(&s.key()));
     }
+    // Scenes imported at the refined stage do not need the stages that make it.
+    let before = scenes.len();
+    if stage.before_refined() {
+        scenes.retain(|s| !s.imported());
+    }
+    let imported = before - scenes.len();
     // Held until the summary is made: a second run of this stage would sweep and rename
     // this one's files away.
     let _lock = super::lock::lock_stage(ctx, stage.name(), options.shard)?;
@@ -634,6 +659,7 @@ pub fn run_stage(
         failed: Vec::new(),
         warnings: Vec::new(),
         waiting: Vec::new(),
+        imported,
         elapsed_s: 0.0,
         closing: None,
     };
@@ -702,6 +728,14 @@ pub fn format_summary(summary: &StageSummary) -> String {
         String::new()
     } else {
         format!(", {} waiting", summary.waiting.len())
+    };
+    let waiting = if summary.imported == 0 {
+        waiting
+    } else {
+        format!(
+            "{waiting}, {} imported (they enter after this stage)",
+            summary.imported
+        )
     };
     let _ = writeln!(
         out,
