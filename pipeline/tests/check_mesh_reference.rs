@@ -139,7 +139,11 @@ fn checked_layouts(root: &Path, seed: u64) -> (PathBuf, Vec<Checked>) {
             &dir,
         );
         for scene in scene_dirs(&dir) {
-            let name = scene.file_name().unwrap().to_string_lossy().into_owned();
+            let name = scene
+                .file_name()
+                .expect("a scene folder")
+                .to_string_lossy()
+                .into_owned();
             let report_path = scene.join("qa/check.json");
             if !report_path.is_file() {
                 continue;
@@ -271,9 +275,9 @@ fn run_split(
             child
                 .stdin
                 .take()
-                .unwrap()
-                .write_all(&serde_json::to_vec(&job).unwrap())
-                .unwrap();
+                .expect("well-formed")
+                .write_all(&serde_json::to_vec(&job).expect("well-formed"))
+                .expect("well-formed");
             child
         })
         .collect();
@@ -298,14 +302,20 @@ fn disagreements(checked: &Checked, reference: &Value) -> Vec<String> {
     let mut out = Vec::new();
     let pairs: BTreeMap<(String, String), (f64, f64)> = reference["pairs"]
         .as_array()
-        .unwrap()
+        .expect("well-formed")
         .iter()
         .map(|p| {
-            let (a, b) = (p["a"].as_str().unwrap(), p["b"].as_str().unwrap());
+            let (a, b) = (
+                p["a"].as_str().expect("well-formed"),
+                p["b"].as_str().expect("well-formed"),
+            );
             let key = if a <= b { (a, b) } else { (b, a) };
             (
                 (key.0.to_owned(), key.1.to_owned()),
-                (p["lo_mm"].as_f64().unwrap(), p["hi_mm"].as_f64().unwrap()),
+                (
+                    p["lo_mm"].as_f64().expect("well-formed"),
+                    p["hi_mm"].as_f64().expect("well-formed"),
+                ),
             )
         })
         .collect();
@@ -332,7 +342,7 @@ fn disagreements(checked: &Checked, reference: &Value) -> Vec<String> {
             ));
         }
     }
-    let gaps = reference["gaps_mm"].as_object().unwrap();
+    let gaps = reference["gaps_mm"].as_object().expect("well-formed");
     let floating: BTreeMap<&str, f64> = checked
         .findings
         .floating
@@ -340,7 +350,7 @@ fn disagreements(checked: &Checked, reference: &Value) -> Vec<String> {
         .map(|f| (f.instance.as_str(), f.gap_mm))
         .collect();
     for (instance, gap) in gaps {
-        let gap = gap.as_f64().unwrap();
+        let gap = gap.as_f64().expect("well-formed");
         match floating.get(instance.as_str()) {
             None if gap > t + s => out.push(format!(
                 "{}: {instance} could fall {gap:.2} mm on the meshes, check says it rests",
@@ -363,7 +373,7 @@ fn check_agrees_with_the_meshes_on_demo_scenes() {
     };
     let tmp = tempfile::tempdir().expect("tempdir");
     let glbs = tmp.path().join("glbs");
-    std::fs::create_dir_all(&glbs).unwrap();
+    std::fs::create_dir_all(&glbs).expect("well-formed");
     let mut all = Vec::new();
     let mut jobs = Vec::new();
     let started = std::time::Instant::now();
@@ -412,9 +422,9 @@ fn check_agrees_with_the_meshes_on_demo_scenes() {
         let r = &references[&c.key];
         pairs += r["pairs"]
             .as_array()
-            .unwrap()
+            .expect("well-formed")
             .iter()
-            .filter(|p| p["lo_mm"].as_f64().unwrap() > TOLERANCE_MM)
+            .filter(|p| p["lo_mm"].as_f64().expect("well-formed") > TOLERANCE_MM)
             .count();
         reported += c.findings.collisions.len();
         objects += c.layout.objects.len();
@@ -483,15 +493,15 @@ fn drop_test(python: &Path, drops: Vec<Value>) {
     println!("scene | layout | objects | moved > 1 cm | fell off | worst (cm)");
     for (key, objects) in &results {
         let kind = key.rsplit('/').next().unwrap_or("").to_owned();
-        let objects = objects.as_object().unwrap();
+        let objects = objects.as_object().expect("well-formed");
         let moved: Vec<(&String, f64)> = objects
             .iter()
-            .map(|(n, o)| (n, o["moved_cm"].as_f64().unwrap()))
+            .map(|(n, o)| (n, o["moved_cm"].as_f64().expect("well-formed")))
             .filter(|(_, m)| *m >= 1.0)
             .collect();
         let fell = objects
             .values()
-            .filter(|o| o["fell"].as_bool().unwrap())
+            .filter(|o| o["fell"].as_bool().expect("well-formed"))
             .count();
         let entry = by_kind.entry(kind.clone()).or_default();
         entry.0 += objects.len();
@@ -499,7 +509,7 @@ fn drop_test(python: &Path, drops: Vec<Value>) {
         entry.2 += fell;
         let worst = objects
             .values()
-            .map(|o| o["moved_cm"].as_f64().unwrap())
+            .map(|o| o["moved_cm"].as_f64().expect("well-formed"))
             .fold(0.0, f64::max);
         println!(
             "{key} | {} | {} | {fell} | {worst:.2}",
