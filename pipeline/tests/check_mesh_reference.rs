@@ -393,7 +393,15 @@ fn check_agrees_with_the_meshes_on_demo_scenes() {
     for (dir, checked) in datasets {
         let shapes = shapes(&dir);
         for c in checked {
-            drops.push(drop_scene(&c.key, &c.layout, &shapes));
+            // MuJoCo takes about 10 s a layout on 2 cores: the drop test runs on one scene
+            // per table type of seed 8, as its coarse layout (the control) and its settled
+            // refined layout.
+            if c.key.starts_with("seed8/")
+                && c.key.contains("_0001/")
+                && (c.key.ends_with("/coarse") || c.key.ends_with("/refined-settled"))
+            {
+                drops.push(drop_scene(&c.key, &c.layout, &shapes));
+            }
             let path = glbs.join(format!("{}.glb", c.key.replace('/', "_")));
             scene_glb(&dir, &c.layout, &path);
             jobs.push(serde_json::json!({
