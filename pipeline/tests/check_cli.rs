@@ -10,19 +10,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use common::{mesa, snapshot};
-use mesa_schemas::artifacts::{
-    AssetIndexArtifact, CheckArtifact, CheckSummaryArtifact, SettleStatus, ShapesArtifact,
-};
+use common::{dataset_shapes, mesa, read_json, scene_dirs, snapshot};
+use mesa_schemas::artifacts::{CheckArtifact, CheckSummaryArtifact, SettleStatus};
 use mesa_schemas::DatasetLayout;
-use mesa_stages::check::{check_scene, AssetShape, PhysicsScene, Tolerances};
-
-fn read<T: serde::de::DeserializeOwned>(path: &Path) -> T {
-    serde_json::from_slice(
-        &std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
-    )
-    .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
+use mesa_stages::check::{check_scene, PhysicsScene, Tolerances};
 
 fn ok(args: &[&str], dir: &Path) -> String {
     let out = mesa().args(args).arg(dir).output().expect("runs");
@@ -43,34 +34,6 @@ fn coarse_demo(dir: &Path) {
     }
 }
 
-fn scene_dirs(dir: &Path) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    for table in std::fs::read_dir(dir.join("scenes")).expect("scenes") {
-        for scene in std::fs::read_dir(table.expect("entry").path()).expect("table") {
-            out.push(scene.expect("entry").path());
-        }
-    }
-    out.sort();
-    out
-}
-
-/// The dataset's collision shapes, read from the asset index as `mesa check` reads them.
-fn shapes(dir: &Path) -> BTreeMap<String, Arc<AssetShape>> {
-    let index: AssetIndexArtifact = read(&dir.join("assets/index/assets.json"));
-    index
-        .assets
-        .iter()
-        .filter_map(|(uid, record)| {
-            let (s, g) = (record.shapes.as_ref()?, record.geometry.as_ref()?);
-            let artifact: ShapesArtifact = read(&dir.join(&s.file));
-            Some((
-                uid.clone(),
-                Arc::new(AssetShape::new(uid, &artifact, g).expect("shape")),
-            ))
-        })
-        .collect()
-}
-
 #[test]
 fn coarse_layouts_are_checked_and_settled() {
     let tmp = tempfile::tempdir().expect("tempdir");
@@ -88,7 +51,7 @@ fn coarse_layouts_are_checked_and_settled() {
     let mut pairs = 0;
     let mut colliding = 0;
     for scene in &scenes {
-        let report: CheckArtifact = read(&scene.join("qa/check.json"));
+        let report: CheckArtifact = read_json(&scene.join("qa/check.json"));
         assert_eq!(report.layout, "coarse/layout.json");
         assert!(report.settle.is_none());
         assert!(!scene.join("qa/layout.json").exists());
@@ -123,19 +86,19 @@ fn coarse_layouts_are_checked_and_settled() {
         stderr.contains("after settling: collision rate"),
         "{stderr}"
     );
-    let shapes = shapes(&dir);
+    let shapes = dataset_shapes(&dir);
     let tolerances = Tolerances::default();
     let mut at_rest = 0;
     let mut distances = Vec::new();
     for scene in &scenes {
-        let report: CheckArtifact = read(&scene.join("qa/check.json"));
+        let report: CheckArtifact = read_json(&scene.join("qa/check.json"));
         let settle = report.settle.expect("a settle report");
         if settle.status != SettleStatus::Settled {
             assert!(settle.reason.is_some());
             assert!(!scene.join("qa/layout.json").exists());
             continue;
         }
-        let settled: DatasetLayout = read(&scene.join("qa/layout.json"));
+        let settled: DatasetLayout = read_json(&scene.join("qa/layout.json"));
         let placed = PhysicsScene::from_layout(&settled, |o| {
             shapes
                 .get(&o.retrieved_uid)
@@ -149,7 +112,7 @@ fn coarse_layouts_are_checked_and_settled() {
         }
         distances.extend(settle.displacements.iter().map(|d| d.distance_cm));
         // Sizes and rotations are kept; only positions move.
-        let coarse: DatasetLayout = read(&scene.join("coarse/layout.json"));
+        let coarse: DatasetLayout = read_json(&scene.join("coarse/layout.json"));
         for (a, b) in coarse.objects.iter().zip(&settled.objects) {
             assert_eq!(
                 (&a.instance, a.size_cm.0, a.rotation.0),
@@ -174,7 +137,7 @@ fn coarse_layouts_are_checked_and_settled() {
         "{at_rest} of {} scenes at rest",
         scenes.len()
     );
-    let summary: CheckSummaryArtifact = read(&dir.join("qa/summary.json"));
+    let summary: CheckSummaryArtifact = read_json(&dir.join("qa/summary.json"));
     assert_eq!(summary.scenes, scenes.len() as u64);
     assert_eq!(summary.before.colliding_pairs, colliding);
     let after = summary.after.expect("after");
@@ -236,7 +199,7 @@ fn coarse_layouts_are_checked_and_settled() {
     ok(&["graph", "--progress", "off"], &dir);
     for scene in &scenes {
         if scene.join("qa/layout.json").is_file() {
-            let graph: serde_json::Value = read(&scene.join("graph/graph.json"));
+            let graph: serde_json::Value = read_json(&scene.join("graph/graph.json"));
             assert_eq!(graph["layout"], "qa/layout.json");
         }
     }
@@ -252,7 +215,7 @@ fn coarse_layouts_are_checked_and_settled() {
     let stderr = ok(&["records", "--progress", "off"], &dir);
     assert!(stderr.contains("scenes on meshes"), "{stderr}");
     assert!(!stderr.contains("on boxes"), "{stderr}");
-    let dpo: Vec<mesa_schemas::artifacts::DpoRecord> = read(&dir.join("records/dpo.json"));
+    let dpo: Vec<mesa_schemas::artifacts::DpoRecord> = read_json(&dir.join("records/dpo.json"));
     let mut verified = 0;
     for record in &dpo {
         let chosen = mesa_schemas::output::parse_model_output(&record.chosen).expect("chosen");
@@ -273,7 +236,7 @@ fn coarse_layouts_are_checked_and_settled() {
                     .map(|f| s.join(f))
                     .find(|p| p.is_file())
                     .expect("a layout");
-                let layout: DatasetLayout = read(&path);
+                let layout: DatasetLayout = read_json(&path);
                 let llm = mesa_schemas::convert::llm_from_dataset(&layout).layout;
                 mesa_stages::records::round_layout(&llm, 1).zone_cm == chosen.layout.zone_cm
                     && names(&llm)
@@ -287,7 +250,7 @@ fn coarse_layouts_are_checked_and_settled() {
             .map(|f| scene.join(f))
             .find(|p| p.is_file())
             .expect("a layout");
-        let layout: DatasetLayout = read(&path);
+        let layout: DatasetLayout = read_json(&path);
         let by_instance = layout
             .objects
             .iter()
@@ -404,7 +367,7 @@ fn scenes_without_a_refined_layout_are_reported_and_an_llm_layout_is_refused() {
     )
     .expect("write");
     ok(&["check", "--progress", "off"], &dir);
-    let report: CheckArtifact = read(&scenes[0].join("qa/check.json"));
+    let report: CheckArtifact = read_json(&scenes[0].join("qa/check.json"));
     assert_eq!(report.unchecked.len(), 1);
     assert!(
         report.unchecked[0]

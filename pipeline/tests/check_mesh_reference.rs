@@ -35,10 +35,10 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 
-use common::mesa;
+use common::{dataset_shapes, mesa, read_json, scene_dirs};
 use std::sync::Arc;
 
-use mesa_schemas::artifacts::{AssetIndexArtifact, CheckArtifact, CheckFindings, ShapesArtifact};
+use mesa_schemas::artifacts::{AssetIndexArtifact, CheckArtifact, CheckFindings};
 use mesa_schemas::DatasetLayout;
 use mesa_stages::check::{AssetShape, PhysicsScene};
 use mesa_stages::pack::{pack_scene, AssetSource, PackConfig, PackRequest};
@@ -47,13 +47,6 @@ use serde_json::Value;
 const TOLERANCE_MM: f64 = 2.0;
 const SLACK_MM: f64 = 1.0;
 
-fn read<T: serde::de::DeserializeOwned>(path: &Path) -> T {
-    serde_json::from_slice(
-        &std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
-    )
-    .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
-
 fn ok(args: &[&str], dir: &Path) {
     let out = mesa().args(args).arg(dir).output().expect("runs");
     assert!(
@@ -61,17 +54,6 @@ fn ok(args: &[&str], dir: &Path) {
         "mesa {args:?}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-}
-
-fn scene_dirs(dir: &Path) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    for table in std::fs::read_dir(dir.join("scenes")).expect("scenes") {
-        for scene in std::fs::read_dir(table.expect("entry").path()).expect("table") {
-            out.push(scene.expect("entry").path());
-        }
-    }
-    out.sort();
-    out
 }
 
 /// The Python of the reference, or None (after saying SKIPPED) when it is missing.
@@ -148,8 +130,8 @@ fn checked_layouts(root: &Path, seed: u64) -> (PathBuf, Vec<Checked>) {
             if !report_path.is_file() {
                 continue;
             }
-            let report: CheckArtifact = read(&report_path);
-            let layout: DatasetLayout = read(&scene.join(format!("{source}/layout.json")));
+            let report: CheckArtifact = read_json(&report_path);
+            let layout: DatasetLayout = read_json(&scene.join(format!("{source}/layout.json")));
             out.push(Checked {
                 key: format!("seed{seed}/{name}/{source}"),
                 layout,
@@ -159,7 +141,7 @@ fn checked_layouts(root: &Path, seed: u64) -> (PathBuf, Vec<Checked>) {
             if let Some(file) = &settle.layout {
                 out.push(Checked {
                     key: format!("seed{seed}/{name}/{source}-settled"),
-                    layout: read(&scene.join(file)),
+                    layout: read_json(&scene.join(file)),
                     findings: settle.after.clone(),
                 });
             }
@@ -169,8 +151,7 @@ fn checked_layouts(root: &Path, seed: u64) -> (PathBuf, Vec<Checked>) {
 }
 
 /// The layout as a scene GLB, written by the pack's writer.
-fn scene_glb(dataset: &Path, layout: &DatasetLayout, path: &Path) {
-    let index: AssetIndexArtifact = read(&dataset.join("assets/index/assets.json"));
+fn scene_glb(dataset: &Path, index: &AssetIndexArtifact, layout: &DatasetLayout, path: &Path) {
     let mut bytes: BTreeMap<String, (Vec<u8>, f64)> = BTreeMap::new();
     for object in &layout.objects {
         let record = &index.assets[&object.retrieved_uid];
@@ -206,23 +187,6 @@ fn scene_glb(dataset: &Path, layout: &DatasetLayout, path: &Path) {
     )
     .expect("packs");
     std::fs::write(path, &out.files["scene.glb"]).expect("write");
-}
-
-/// The dataset's collision shapes, read from the asset index as `mesa check` reads them.
-fn shapes(dir: &Path) -> BTreeMap<String, Arc<AssetShape>> {
-    let index: AssetIndexArtifact = read(&dir.join("assets/index/assets.json"));
-    index
-        .assets
-        .iter()
-        .filter_map(|(uid, record)| {
-            let (s, g) = (record.shapes.as_ref()?, record.geometry.as_ref()?);
-            let artifact: ShapesArtifact = read(&dir.join(&s.file));
-            Some((
-                uid.clone(),
-                Arc::new(AssetShape::new(uid, &artifact, g).expect("shape")),
-            ))
-        })
-        .collect()
 }
 
 /// A drop-test scene: every object's convex parts placed by the layout.
@@ -391,7 +355,8 @@ fn check_agrees_with_the_meshes_on_demo_scenes() {
     );
     let mut drops = Vec::new();
     for (dir, checked) in datasets {
-        let shapes = shapes(&dir);
+        let shapes = dataset_shapes(&dir);
+        let index: AssetIndexArtifact = read_json(&dir.join("assets/index/assets.json"));
         for c in checked {
             // MuJoCo takes about 10 s a layout on 2 cores: the drop test runs on one scene
             // per table type of seed 8, as its coarse layout (the control) and its settled
@@ -403,7 +368,7 @@ fn check_agrees_with_the_meshes_on_demo_scenes() {
                 drops.push(drop_scene(&c.key, &c.layout, &shapes));
             }
             let path = glbs.join(format!("{}.glb", c.key.replace('/', "_")));
-            scene_glb(&dir, &c.layout, &path);
+            scene_glb(&dir, &index, &c.layout, &path);
             jobs.push(serde_json::json!({
                 "key": c.key,
                 "glb": path,

@@ -471,3 +471,41 @@ pub fn all_files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     }
     out
 }
+
+/// A JSON file read into `T`, panicking with the path on any problem.
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> T {
+    serde_json::from_slice(
+        &std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+    )
+    .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Every scene folder of a dataset (`scenes/<table_type>/<scene_id>`), sorted.
+pub fn scene_dirs(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for table in std::fs::read_dir(dir.join("scenes")).expect("scenes") {
+        for scene in std::fs::read_dir(table.expect("entry").path()).expect("table") {
+            out.push(scene.expect("entry").path());
+        }
+    }
+    out.sort();
+    out
+}
+
+/// The dataset's collision shapes by uid, read from the asset index as `mesa check` reads them.
+pub fn dataset_shapes(dir: &Path) -> BTreeMap<String, Arc<mesa_stages::check::AssetShape>> {
+    let index: mesa_schemas::artifacts::AssetIndexArtifact =
+        read_json(&dir.join("assets/index/assets.json"));
+    index
+        .assets
+        .iter()
+        .filter_map(|(uid, record)| {
+            let (s, g) = (record.shapes.as_ref()?, record.geometry.as_ref()?);
+            let artifact: mesa_schemas::artifacts::ShapesArtifact = read_json(&dir.join(&s.file));
+            Some((
+                uid.clone(),
+                Arc::new(mesa_stages::check::AssetShape::new(uid, &artifact, g).expect("shape")),
+            ))
+        })
+        .collect()
+}

@@ -44,6 +44,11 @@ pub struct AdaptiveParams {
 }
 
 impl AdaptiveParams {
+    /// How far apart [`measured_deviation`] samples a hull face: twice the tolerance.
+    fn sample_spacing_m(&self) -> f64 {
+        2.0 * self.tolerance_m.max(1e-4)
+    }
+
     fn out_of_time(&self) -> bool {
         self.deadline.is_some_and(|d| Instant::now() >= d)
     }
@@ -651,8 +656,7 @@ pub fn decompose(
     };
     let mut pending: BinaryHeap<Pending> = BinaryHeap::new();
     let mut sequence = 0u64;
-    let spacing_m = 2.0 * params.tolerance_m.max(1e-4);
-    if let Some(root) = Pending::new(&mesh, root, spacing_m, &mut sequence) {
+    if let Some(root) = Pending::new(&mesh, root, params.sample_spacing_m(), &mut sequence) {
         pending.push(root);
     }
     let mut parts = Vec::new();
@@ -833,7 +837,7 @@ fn split(
     let (low, high) = split_piece(&piece.piece, axis, cut, on_plane(mesh, piece, axis, cut));
     [low, high]
         .into_iter()
-        .filter_map(|half| Pending::new(mesh, half, 2.0 * params.tolerance_m.max(1e-4), sequence))
+        .filter_map(|half| Pending::new(mesh, half, params.sample_spacing_m(), sequence))
         .collect()
 }
 
