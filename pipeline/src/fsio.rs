@@ -179,7 +179,7 @@ pub fn process_start_ticks(pid: u32) -> Option<u64> {
 
 /// SHA-256 of bytes, as lowercase hex.
 pub fn sha256_hex(bytes: &[u8]) -> String {
-    hex(&Sha256::digest(bytes))
+    mesa_stages::sha256_hex(bytes)
 }
 
 /// The most bytes mesa reads or hashes of one kind of file, so a stray huge file (a sparse
@@ -356,16 +356,7 @@ pub fn sha256_file(path: &Path) -> io::Result<String> {
         }
         hasher.update(&buf[..n]);
     }
-    Ok(hex(&hasher.finalize()))
-}
-
-fn hex(bytes: &[u8]) -> String {
-    use std::fmt::Write as _;
-    let mut s = String::with_capacity(bytes.len() * 2);
-    for b in bytes {
-        let _ = write!(s, "{b:02x}");
-    }
-    s
+    Ok(mesa_stages::hex(&hasher.finalize()))
 }
 
 /// Digests of files shared by many scenes (asset index, annotations), computed once per run.

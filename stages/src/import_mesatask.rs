@@ -168,7 +168,7 @@ pub fn import_layout(
     let mut notes = ImportNotes {
         schema: IMPORT_SCHEMA.to_owned(),
         source: file.to_owned(),
-        source_sha256: sha256_hex(bytes),
+        source_sha256: crate::sha256_hex(bytes),
         objects_released: objects.len(),
         objects_kept: 0,
         dropped: Vec::new(),
@@ -386,12 +386,6 @@ pub fn import_layout(
         ));
     }
     Ok((layout, notes))
-}
-
-fn sha256_hex(bytes: &[u8]) -> String {
-    use sha2::{Digest, Sha256};
-    let digest = Sha256::digest(bytes);
-    digest.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// The text fields of an annotation, in the order one is taken as `description`: mesa's and

@@ -56,3 +56,14 @@ pub mod retrieve;
 pub mod seeding;
 pub mod tasks;
 pub mod text;
+
+/// Bytes as lowercase hex.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// SHA-256 of bytes, as lowercase hex (the digests of markers, packs and imports).
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    hex(&Sha256::digest(bytes))
+}

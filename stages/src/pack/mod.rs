@@ -519,7 +519,7 @@ pub fn pack_scene(request: &PackRequest<'_>, config: &PackConfig) -> Result<Pack
         glb: glb_name.clone(),
         reference: request.photo.map(|_| "reference.png".to_owned()),
         layout: request.layout_rel.to_owned(),
-        layout_sha256: hex(&Sha256::digest(request.layout_bytes)),
+        layout_sha256: crate::sha256_hex(request.layout_bytes),
         zone_cm: layout.zone_cm,
         restricted_zone_cm: layout.restricted_zone_cm,
         table: PackTable {
@@ -584,10 +584,6 @@ pub fn pack_scene(request: &PackRequest<'_>, config: &PackConfig) -> Result<Pack
         index,
         warnings,
     })
-}
-
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// Why the zip of a pack cannot be written.
