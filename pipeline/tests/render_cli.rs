@@ -227,6 +227,19 @@ fn render_never_falls_back_to_the_coarse_layout_and_names_what_is_wrong() {
         .stderr(predicate::str::contains(format!(
         "$.objects[1] ({instance}): asset 0123456789abcdef0123456789abcdef: not in the asset index"
     )));
+    // The same uid, recorded by `mesa import` as named by a release that does not ship its GLB:
+    // the object is left out with a warning naming it, and the scene is drawn.
+    std::fs::write(
+        ws.join("assets/import.json"),
+        r#"{"uids_missing_glb": ["0123456789abcdef0123456789abcdef"]}"#,
+    )
+    .expect("import summary");
+    render(&ws, &["--scenes", "kitchen_counter_0001"])
+        .success()
+        .stderr(predicate::str::contains(format!(
+            "not drawn: no GLB in assets/library for {instance} (0123456789abcdef0123456789abcdef)"
+        )));
+    std::fs::remove_file(ws.join("assets/import.json")).expect("remove");
     // A layout of the LLM form has no assets to draw.
     let llm = ws
         .join("scenes")

@@ -9,7 +9,7 @@
 //! (`assets/renders/<uid>/view_<azimuth>.png` and camera files), skipped while the asset's
 //! GLB, front alignment and the `[render]` settings are unchanged (`views.json` records them).
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::Path;
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
@@ -20,7 +20,7 @@ use clap::Args as ClapArgs;
 use mesa_schemas::artifacts::AssetIndexArtifact;
 use mesa_schemas::json::to_sorted_pretty;
 use mesa_schemas::DatasetLayout;
-use mesa_stages::paths::dataset::{asset_glb, ASSET_RENDERS, INDEX, LIBRARY};
+use mesa_stages::paths::dataset::{asset_glb, ASSET_RENDERS, IMPORT_SUMMARY, INDEX, LIBRARY};
 use mesa_stages::paths::scene::RENDER_DIR;
 use mesa_stages::render::{
     asset_view_name, load_render_asset, place_layout, render_asset_view, LayoutChoice, LayoutScene,
@@ -172,6 +172,17 @@ impl AssetCache {
 /// What rendering reads once per dataset and run.
 struct Library {
     index: AssetIndexArtifact,
+    /// Uids a release names but does not ship (`assets/import.json`'s `uids_missing_glb`,
+    /// written by `mesa import`). Only these are left out of pictures; any other uid missing
+    /// from the index is an error.
+    unshipped: BTreeSet<String>,
+}
+
+/// The part of `assets/import.json` render reads.
+#[derive(serde::Deserialize)]
+struct ImportSummaryUids {
+    #[serde(default)]
+    uids_missing_glb: Vec<String>,
 }
 
 /// The `render` stage.
@@ -224,7 +235,17 @@ impl RenderStage {
     fn library(&self, dataset: &Path) -> anyhow::Result<Arc<Library>> {
         self.libraries.get_or_load(dataset, || {
             let index = read_json(&dataset.join(INDEX), "run `mesa assets` to write it")?;
-            Ok(Library { index })
+            let summary = dataset.join(IMPORT_SUMMARY);
+            let unshipped = if summary.is_file() {
+                let uids: ImportSummaryUids = read_json(
+                    &summary,
+                    "written by `mesa import`; import again to rewrite it",
+                )?;
+                uids.uids_missing_glb.into_iter().collect()
+            } else {
+                BTreeSet::new()
+            };
+            Ok(Library { index, unshipped })
         })
     }
 
@@ -274,11 +295,11 @@ impl RenderStage {
         layout: &DatasetLayout,
     ) -> anyhow::Result<(Vec<mesa_stages::render::RenderedView>, Vec<String>)> {
         let library = self.library(dataset)?;
-        // Objects whose GLB the library lacks (assets a release could not ship, flagged by
-        // `mesa import`) are left out of the pictures with a warning; the scene is drawn.
+        // Objects whose GLB a release could not ship (flagged by `mesa import`) are left out
+        // of the pictures with a warning; the scene is drawn. Any other unknown uid fails.
         let (kept, absent): (Vec<_>, Vec<_>) = layout.objects.iter().partition(|o| {
-            o.retrieved_uid.is_empty()
-                || library.index.assets.contains_key(&o.retrieved_uid)
+            library.index.assets.contains_key(&o.retrieved_uid)
+                || !library.unshipped.contains(&o.retrieved_uid)
                 || dataset.join(asset_glb(&o.retrieved_uid)).exists()
         });
         let mut warnings = Vec::new();
