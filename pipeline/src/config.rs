@@ -45,6 +45,8 @@ pub struct Config {
     pub records: mesa_stages::records::RecordsConfig,
     /// `mesa render`: pictures of each scene's layout (and of single assets with --assets).
     pub render: mesa_stages::render::RenderConfig,
+    /// `mesa release`: the MesaTask-10K tree (layouts, pictures, annotations, assets).
+    pub release: mesa_stages::release::ReleaseConfig,
 }
 
 /// The `[run]` section.

@@ -25,30 +25,9 @@ use serde_json::{json, Value};
 const SCENE: &str = "scenes/office_table/office_table_0001";
 const ID: &str = "office_table_0001";
 
-fn blender_python() -> Option<PathBuf> {
-    let candidates = ["MESA_BLENDER_PYTHON", "MESA_PYTHON"];
-    candidates.iter().find_map(|var| {
-        let python = PathBuf::from(std::env::var_os(var)?);
-        Process::new(&python)
-            .args(["-c", "import bpy"])
-            .output()
-            .is_ok_and(|o| o.status.success())
-            .then_some(python)
-    })
-}
-
 /// Blender, or a skip (a failure under MESA_REQUIRE_TOOLS).
 fn blender() -> Option<PathBuf> {
-    let found = blender_python();
-    if found.is_none() {
-        let how = "set MESA_BLENDER_PYTHON to a Python with bpy 4.3; scripts/test.sh installs one";
-        assert!(
-            std::env::var_os("MESA_REQUIRE_TOOLS").is_none(),
-            "Blender is missing and MESA_REQUIRE_TOOLS is set ({how})"
-        );
-        eprintln!("SKIPPED: Blender round trip ({how})");
-    }
-    found
+    common::blender("Blender round trip")
 }
 
 fn script() -> PathBuf {

@@ -20,15 +20,71 @@ use common::{gallery, mesa, shared};
 use mesa_schemas::convert::dataset_from_llm;
 use serde_json::{json, Value};
 
-/// GLBs of ../shared/realdata/glb used as the release's assets (uid = file stem).
-const GLBS: [&str; 6] = [
+/// GLBs of ../shared/realdata/glb used as the release's assets (uid = file stem), and one
+/// made here ([`CM_AUTHORED`]).
+const GLBS: [&str; 7] = [
     "Box",
     "Duck",
     "mug_tinkercad",
     "BoxTextured",
     "monkey",
     "laptop_blender16",
+    CM_AUTHORED,
 ];
+
+/// An asset authored in centimetres under an empty root scaled by 0.01, as exporters write
+/// them: MesaTask's reconstruction leaves that root in place and misplaces it unless the
+/// release flattens it.
+const CM_AUTHORED: &str = "cm_authored_under_centi_root";
+
+/// The GLB of a library uid.
+fn glb_bytes(uid: &str) -> Vec<u8> {
+    use mesa_stages::glb_write::{GlbBuilder, MaterialSpec, NodeSpec};
+    use mesa_stages::mesh::{Affine3, TriMesh};
+    if uid != CM_AUTHORED {
+        let path = shared().join(format!("realdata/glb/{uid}.glb"));
+        return std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    }
+    let mut b = GlbBuilder::new("test: centimetres under a 0.01 root");
+    let paint = b.add_material(&MaterialSpec::plain("paint", [0.2, 0.4, 0.7], 0.5));
+    let body = b
+        .add_mesh("body", &[(&TriMesh::cuboid([8.0, 20.0, 6.0]), paint)])
+        .expect("mesh");
+    let lid = b
+        .add_mesh(
+            "lid",
+            &[(
+                &TriMesh::cuboid([9.0, 2.0, 7.0])
+                    .transformed(&Affine3::from_translation([1.0, 0.0, 0.0])),
+                paint,
+            )],
+        )
+        .expect("mesh");
+    let body = b
+        .add_node(
+            NodeSpec::new("body")
+                .with_mesh(body)
+                .with_translation([0.0, 10.0, 0.0]),
+        )
+        .expect("node");
+    let lid = b
+        .add_node(
+            NodeSpec::new("lid")
+                .with_mesh(lid)
+                .with_translation([0.0, 21.0, 0.0])
+                .with_rotation_xyzw([0.0, 0.258_819, 0.0, 0.965_926]),
+        )
+        .expect("node");
+    let root = b
+        .add_node(
+            NodeSpec::new("centimetre_root")
+                .with_scale([0.01; 3])
+                .with_children(vec![body, lid]),
+        )
+        .expect("node");
+    b.set_scene("scene", vec![root]);
+    b.finish().expect("glb")
+}
 
 /// Uids the layouts use that the library does not ship (copyright-withheld assets).
 const MISSING: [&str; 2] = ["withheld_a", "withheld_b"];
@@ -66,13 +122,12 @@ fn bbox_form(k: usize) -> Value {
 
 /// Builds the release tree in `src`; the uids of every annotated asset, in order.
 fn build_release(src: &Path, python: Option<&Path>) -> Vec<String> {
-    let realdata = shared().join("realdata");
     // Each GLB's extents (glTF Y-up, metres): the scale_factor MesaTask's layouts hold is the
     // size over them, per axis of the object frame (x, depth = glTF z, height = glTF y).
     let extents: BTreeMap<&str, [f64; 3]> = GLBS
         .iter()
         .map(|uid| {
-            let bytes = std::fs::read(realdata.join(format!("glb/{uid}.glb"))).expect("glb");
+            let bytes = glb_bytes(uid);
             let mesh = mesa_stages::glb_read::read_glb(&bytes).expect("reads");
             let mut lo = [f64::INFINITY; 3];
             let mut hi = [f64::NEG_INFINITY; 3];
@@ -148,10 +203,9 @@ fn build_release(src: &Path, python: Option<&Path>) -> Vec<String> {
         }
         annotations.insert(uid.clone(), entry);
         if !MISSING.contains(&uid.as_str()) {
-            let glb = realdata.join(format!("glb/{uid}.glb"));
             write(
                 &src.join(format!("Assets_library/{uid}.glb")),
-                &std::fs::read(&glb).expect("glb"),
+                &glb_bytes(uid),
             );
         }
     }
@@ -459,4 +513,142 @@ fn release_import_release_gives_identical_layouts_and_annotations() {
     let text = String::from_utf8_lossy(&out.stderr);
     assert!(text.contains("6 of 7 scenes released"), "{text}");
     assert_ne!(release_files(&r3), first);
+}
+
+/// Runs scripts/mesatask_reconstruct.py (MesaTask's placement, in Blender) on a release: the
+/// record of each object, by "scene/instance".
+fn reconstruct(blender: &Path, release: &Path) -> BTreeMap<String, Value> {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/mesatask_reconstruct.py");
+    let out = Command::new(blender)
+        .arg(script)
+        .arg(release)
+        .output()
+        .expect("blender");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let records: Vec<Value> = stdout
+        .lines()
+        .filter(|l| l.starts_with('{'))
+        .map(|l| serde_json::from_str(l).expect("json line"))
+        .collect();
+    let summary = records.last().expect("summary");
+    assert!(
+        summary["objects"].as_u64().expect("objects") > 0,
+        "{stdout}"
+    );
+    records[..records.len() - 1]
+        .iter()
+        .map(|r| {
+            (
+                format!(
+                    "{}/{}",
+                    r["scene"].as_str().expect("scene"),
+                    r["instance"].as_str().expect("instance")
+                ),
+                r.clone(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn mesatask_reconstruction_places_every_released_object_within_a_millimetre() {
+    let Some(blender) = common::blender("MesaTask's reconstruction of a release") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let src = tmp.path().join("release");
+    build_release(&src, None);
+    let (ds, out, linked) = (
+        tmp.path().join("dataset"),
+        tmp.path().join("out"),
+        tmp.path().join("linked"),
+    );
+    let p = |p: &Path| p.to_str().expect("utf8").to_owned();
+    run_ok(&["import", "mesatask", &p(&src), &p(&ds), "--progress", "off"]);
+    let text = run_ok(&["release", &p(&ds), &p(&out), "--progress", "off"]);
+    assert!(text.contains("7 of 7 scenes released"), "{text}");
+    // The hierarchy is flattened, the plain files linked, the withheld ones counted.
+    let library = |dir: &Path, uid: &str| dir.join(format!("Assets_library/{uid}.glb"));
+    let cm_release = std::fs::read(library(&out, CM_AUTHORED)).expect("released");
+    assert_ne!(cm_release, glb_bytes(CM_AUTHORED), "{text}");
+    #[cfg(unix)]
+    {
+        // The GLBs MesaTask places right as they are are hard links to the library's.
+        use std::os::unix::fs::MetadataExt as _;
+        let node = |path: &Path| {
+            let m = std::fs::metadata(path).expect("metadata");
+            (m.dev(), m.ino())
+        };
+        let linked = GLBS
+            .iter()
+            .filter(|uid| node(&library(&src, uid)) == node(&library(&out, uid)))
+            .count();
+        assert!(
+            linked >= 1 && text.contains(&format!("{linked} hard-linked")),
+            "{text}"
+        );
+    }
+    assert!(
+        text.contains("2 used assets have no GLB in the library (withheld_a, withheld_b)"),
+        "{text}"
+    );
+    for glb in [
+        "3cc47c3f78d34985bf4314de2f8196dd.glb",
+        "sink_cube.glb",
+        "Duck.glb",
+    ] {
+        assert!(out.join("Assets_library").join(glb).is_file(), "{glb}");
+    }
+
+    let placed = reconstruct(&blender, &out);
+    let mut cm_authored = 0;
+    for (key, record) in &placed {
+        let uid = record["uid"].as_str().expect("uid");
+        match record["error_cm"].as_f64() {
+            Some(error) => assert!(error <= 0.1, "{key}: {record}"),
+            // Only the withheld assets cannot be placed.
+            None => assert!(MISSING.contains(&uid), "{key}: {record}"),
+        }
+        cm_authored += usize::from(uid == CM_AUTHORED);
+    }
+    assert!(
+        cm_authored >= 3,
+        "the centimetre-authored asset is used {cm_authored} times"
+    );
+    assert!(placed.keys().filter(|k| k.ends_with("/table")).count() == 7);
+
+    // Control: the same release with the library's files as they are misplaces the
+    // centimetre-authored asset (at 1/100 of its place) and every other GLB `auto` flattened
+    // (glTF exporters put a turn or scale on an empty root); the ones `auto` linked stay right.
+    let text = run_ok(&[
+        "release",
+        &p(&ds),
+        &p(&linked),
+        "--assets",
+        "link",
+        "--progress",
+        "off",
+    ]);
+    assert!(text.contains("0 flattened"), "{text}");
+    for (key, record) in reconstruct(&blender, &linked) {
+        let (uid, error) = (
+            record["uid"].as_str().expect("uid"),
+            record["error_cm"].as_f64(),
+        );
+        if uid == CM_AUTHORED {
+            assert!(error.expect("placed") > 1.0, "{key}: {record}");
+        } else if let (Some(error), false) = (
+            error,
+            ["table", "sink"].contains(&record["instance"].as_str().expect("instance")),
+        ) {
+            let flattened = std::fs::read(library(&out, uid)).expect("auto")
+                != std::fs::read(library(&src, uid)).expect("source");
+            assert_eq!(error > 0.1, flattened, "{key}: {record}");
+        }
+    }
 }

@@ -4,7 +4,20 @@
 //! OUT/Layout_info/<table_type>/<scene_id>/layout.json   the scene's layout
 //! OUT/Layout_info/<table_type>/<scene_id>/front.png     its front view
 //! OUT/Asset_annotation.json                             the annotations of the assets used
+//! OUT/Assets_library/<uid>.glb                          each asset used, flattened
+//! OUT/Assets_library/3cc47c3f78d34985bf4314de2f8196dd.glb   the table MesaTask's config names
+//! OUT/Assets_library/sink_cube.glb                      the sink it names
 //! ```
+//!
+//! MesaTask's reconstruction (`reconstruct_blender.py`) imports `<uid>.glb`, applies and joins
+//! the transforms of the *mesh* objects only, scales the joined mesh to `size` and places it at
+//! `position`; an empty parent node stays in place and still transforms its children, so a GLB
+//! authored in centimetres under a root scaled by 0.01 lands at 1/100 of its place.
+//! [`flat_asset_glb`] therefore writes each asset as one node without a transform drawing one
+//! mesh whose vertices carry every node transform (the pack's bake, without the front turn:
+//! the asset keeps its own axes, which `rotation` refers to), centred on its bounding box,
+//! with its materials, textures and samplers. [`zone_box_glb`] writes the table and sink: a
+//! 1 m cube each, which the reconstruction scales to the zone (1 cm and 0.5 cm thick).
 //!
 //! A released `layout.json` is the dataset layout without mesa's `schema` field, as the
 //! released MesaTask-10K files are (mesa reads a file without it as `mesa.layout/1`, so the
@@ -16,12 +29,62 @@
 //! does not know). The official reader silently skips an object without `retrieved_uid` or
 //! with a `scale_factor` that is not three numbers: [`release_layout`] refuses them instead.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use mesa_schemas::json::to_sorted_pretty;
 use mesa_schemas::DatasetLayout;
 use serde_json::Value;
 use thiserror::Error;
+
+use crate::glb_write::{GlbBuilder, GlbWriteError, MaterialSpec, NodeSpec};
+use crate::mesh::TriMesh;
+use crate::pack::bake::bake_asset;
+use crate::pack::{add_asset, PackError};
+
+/// How a release writes `Assets_library/`.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum ReleaseAssets {
+    /// Hard-link each used GLB that MesaTask's reconstruction places right as it is
+    /// ([`placed_right_by_mesatask`]); write the others flattened ([`flat_asset_glb`]).
+    #[default]
+    Auto,
+    /// Write every used GLB flattened.
+    Bake,
+    /// Hard-link every used GLB as it is (MesaTask misplaces GLBs with transformed parents).
+    Link,
+    /// No `Assets_library/` (layouts and annotations only).
+    None,
+}
+
+/// The `[release]` section of `mesa.toml`.
+#[derive(
+    Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+)]
+#[serde(default, deny_unknown_fields)]
+pub struct ReleaseConfig {
+    /// How `Assets_library/` is written: "auto" (hard-link the GLBs MesaTask's reconstruction
+    /// places right as they are, flatten the others: node transforms baked into the vertices),
+    /// "bake" (flatten all), "link" (hard-link all as they are) or "none". The table and sink
+    /// GLBs MesaTask's config names are written unless "none". `mesa release --assets`
+    /// overrides it.
+    pub assets: ReleaseAssets,
+}
+
+/// The table GLB MesaTask's `config.yaml` names (`table_model_path`), a file stem.
+pub const TABLE_GLB_UID: &str = "3cc47c3f78d34985bf4314de2f8196dd";
+/// The sink GLB it names (`sink_model_path`), a file stem.
+pub const SINK_GLB_UID: &str = "sink_cube";
 
 /// Why a layout or the annotations cannot be released.
 #[derive(Debug, Error, PartialEq)]
@@ -105,6 +168,75 @@ pub fn release_annotations(
     to_sorted_pretty(&out).map_err(|e| ReleaseError::Json(e.to_string()))
 }
 
+/// The release copy of the library GLB `bytes` of asset `uid`: one node without a transform,
+/// one mesh with every node transform baked into its vertices, centred on its bounding box
+/// (see the module documentation).
+pub fn flat_asset_glb(uid: &str, bytes: &[u8]) -> Result<Vec<u8>, PackError> {
+    let baked = bake_asset(bytes, 0.0).map_err(|source| PackError::Asset {
+        uid: uid.to_owned(),
+        instance: "(release)".to_owned(),
+        source,
+    })?;
+    let mut b = GlbBuilder::new(concat!("mesa release ", env!("CARGO_PKG_VERSION")));
+    let mut images = HashMap::new();
+    let mesh = add_asset(&mut b, uid, &baked, &mut images)?;
+    let node = b.add_node(NodeSpec::new(uid).with_mesh(mesh))?;
+    b.set_scene(uid, vec![node]);
+    Ok(b.finish()?)
+}
+
+/// Whether MesaTask's reconstruction places the GLB `bytes` right as it is: every node of its
+/// default scene either has no transform, or is a root node drawing a mesh with no children
+/// (its transform is one the reconstruction applies). Otherwise (a transform on an empty
+/// parent, or on a node with children) the release needs [`flat_asset_glb`].
+pub fn placed_right_by_mesatask(bytes: &[u8]) -> Result<bool, crate::glb_read::GlbError> {
+    let document = crate::glb_read::open_glb(bytes)?;
+    let root = document.root();
+    let scene = root
+        .scene
+        .map(|s| s.value())
+        .or((!root.scenes.is_empty()).then_some(0));
+    let Some(scene) = scene.and_then(|s| root.scenes.get(s)) else {
+        return Ok(false);
+    };
+    let moves = |node: &gltf_json::Node| {
+        let identity = [
+            1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+        ];
+        node.matrix.is_some_and(|m| m != identity)
+            || node.translation.is_some_and(|t| t != [0.0; 3])
+            || node.rotation.is_some_and(|r| r.0 != [0.0, 0.0, 0.0, 1.0])
+            || node.scale.is_some_and(|s| s != [1.0; 3])
+    };
+    let mut stack: Vec<(usize, bool)> = scene.nodes.iter().map(|n| (n.value(), true)).collect();
+    let mut seen = BTreeSet::new();
+    while let Some((index, top)) = stack.pop() {
+        let Some(node) = root.nodes.get(index) else {
+            return Ok(false);
+        };
+        if !seen.insert(index) {
+            continue;
+        }
+        let children = node.children.as_deref().unwrap_or_default();
+        if moves(node) && !(top && node.mesh.is_some() && children.is_empty()) {
+            return Ok(false);
+        }
+        stack.extend(children.iter().map(|c| (c.value(), false)));
+    }
+    Ok(true)
+}
+
+/// A 1 m cube named `name` in `linear_rgb`, centred on the origin: the table or sink GLB of a
+/// release (MesaTask's reconstruction scales it to its zone).
+pub fn zone_box_glb(name: &str, linear_rgb: [f32; 3]) -> Result<Vec<u8>, GlbWriteError> {
+    let mut b = GlbBuilder::new(concat!("mesa release ", env!("CARGO_PKG_VERSION")));
+    let material = b.add_material(&MaterialSpec::plain(name, linear_rgb, 0.8));
+    let mesh = b.add_mesh(name, &[(&TriMesh::cuboid([1.0, 1.0, 1.0]), material)])?;
+    let node = b.add_node(NodeSpec::new(name).with_mesh(mesh))?;
+    b.set_scene(name, vec![node]);
+    b.finish()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -150,6 +282,71 @@ mod tests {
         l.objects[0].scale_factor.0 = [1.0, 0.0, 1.0];
         let err = release_layout(&l).expect_err("zero scale");
         assert!(err.to_string().contains("scale_factor"), "{err}");
+    }
+
+    fn bounds(positions: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in positions {
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        (lo, hi)
+    }
+
+    #[test]
+    fn a_released_asset_is_one_node_without_a_transform_drawing_the_baked_hierarchy() {
+        use crate::glb_read::read_glb;
+        use crate::pack::testing::{hierarchy_asset, split_glb, textured_asset};
+        let source = hierarchy_asset();
+        let flat = flat_asset_glb("lamp", &source).expect("flattens");
+        let (root, _) = split_glb(&flat);
+        assert_eq!(root.nodes.len(), 1);
+        let node = &root.nodes[0];
+        assert!(node.translation.is_none() && node.rotation.is_none() && node.scale.is_none());
+        // The same triangles in the same places, up to the shift that centres them.
+        let (a, b) = (
+            read_glb(&source).expect("source"),
+            read_glb(&flat).expect("flat"),
+        );
+        assert_eq!(a.triangles.len(), b.triangles.len());
+        let (lo_a, hi_a) = bounds(&a.positions_m);
+        let (lo_b, hi_b) = bounds(&b.positions_m);
+        for axis in 0..3 {
+            let size = hi_a[axis] - lo_a[axis];
+            assert!(
+                (size - (hi_b[axis] - lo_b[axis])).abs() < 1e-6,
+                "axis {axis}"
+            );
+            assert!(
+                (lo_b[axis] + hi_b[axis]).abs() < 1e-6,
+                "centred on axis {axis}"
+            );
+        }
+        // Control: the source is not flat (the root scales its children by 2).
+        let (source_root, _) = split_glb(&source);
+        assert!(source_root.nodes.iter().any(|n| n.scale.is_some()));
+        // Textures, materials and samplers are kept.
+        let (textured, _) = split_glb(&flat_asset_glb("mug", &textured_asset()).expect("mug"));
+        assert_eq!(textured.images.len(), 1);
+        assert_eq!(textured.materials.len(), 2);
+        assert!(flat_asset_glb("junk", b"not a glb").is_err());
+        // MesaTask places the flat one and the plain one right, not the hierarchy.
+        assert!(placed_right_by_mesatask(&flat).expect("flat"));
+        assert!(placed_right_by_mesatask(&textured_asset()).expect("plain"));
+        assert!(!placed_right_by_mesatask(&source).expect("hierarchy"));
+    }
+
+    #[test]
+    fn the_zone_boxes_are_unit_cubes() {
+        let bytes = zone_box_glb("table", [0.5, 0.4, 0.3]).expect("box");
+        let mesh = crate::glb_read::read_glb(&bytes).expect("reads");
+        let (lo, hi) = bounds(&mesh.positions_m);
+        for axis in 0..3 {
+            assert!((lo[axis] + 0.5).abs() < 1e-6 && (hi[axis] - 0.5).abs() < 1e-6);
+        }
     }
 
     #[test]

@@ -15,8 +15,17 @@
 //! `asset-annotations` kinds of `mesa validate`). A scene that cannot be released is reported
 //! and left out; the others are written.
 //!
+//! `OUT/Assets_library/` holds `<uid>.glb` for every asset the released layouts use that the
+//! library has, as `[release] assets` (or `--assets`) says: by default hard-linked when
+//! MesaTask's reconstruction places the file right as it is, else written flattened (node
+//! transforms baked into the vertices: [`mesa_stages::release::flat_asset_glb`]); a hard link
+//! that the file system refuses (another device) becomes a copy, counted as such. Beside them
+//! the table and sink GLBs MesaTask's `config.yaml` names. Uids whose GLB the library lacks
+//! (assets a release could not ship) are counted and named in the summary.
+//!
 //! OUT must be new, empty, or an earlier release (nothing but `Layout_info/`,
-//! `Asset_annotation.json` and `sbert_text_features.pkl`), which is replaced.
+//! `Assets_library/`, `Asset_annotation.json` and `sbert_text_features.pkl`), which is
+//! replaced.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -30,8 +39,12 @@ use mesa_schemas::Kind;
 use mesa_stages::release::{release_annotations, release_layout};
 
 use clap::Args as ClapArgs;
-use mesa_stages::paths::dataset::{ANNOTATIONS, SCENES, TEXT_FEATURES, TEXT_UIDS};
+use mesa_stages::paths::dataset::{asset_glb, ANNOTATIONS, SCENES, TEXT_FEATURES, TEXT_UIDS};
 use mesa_stages::paths::scene::{IMPORT_FRONT, IMPORT_NOTES, RENDER_DIR};
+use mesa_stages::release::{
+    flat_asset_glb, placed_right_by_mesatask, zone_box_glb, ReleaseAssets, SINK_GLB_UID,
+    TABLE_GLB_UID,
+};
 use serde::Serialize;
 
 use super::render::{no_layout, present_layouts};
@@ -39,7 +52,8 @@ use crate::cli::{DatasetArgs, Global, LayoutArg};
 use crate::config::Config;
 use crate::exit::UsageError;
 use crate::fsio::{
-    read_bounded, read_text_bounded, sweep_tmp_for, write_atomic, IMAGE_LIMIT, JSON_LIMIT,
+    read_bounded, read_text_bounded, sweep_tmp_for, write_atomic, GLB_LIMIT, IMAGE_LIMIT,
+    JSON_LIMIT,
 };
 use crate::layouts::read_dataset_layout;
 use crate::runner::{
@@ -62,6 +76,34 @@ pub struct Args {
     /// Only scenes whose "<table_type>/<scene_id>" or "<scene_id>" matches this glob.
     #[arg(long, value_name = "GLOB")]
     pub scenes: Option<String>,
+    /// How Assets_library/ is written (default: `[release] assets`, "auto": hard-link the GLBs
+    /// MesaTask places right as they are, flatten the others).
+    #[arg(long, value_enum)]
+    pub assets: Option<AssetsArg>,
+}
+
+/// `--assets`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum AssetsArg {
+    /// Hard-link the GLBs MesaTask's reconstruction places right; flatten the others.
+    Auto,
+    /// Flatten every GLB (node transforms baked into the vertices).
+    Bake,
+    /// Hard-link every GLB as it is.
+    Link,
+    /// No Assets_library/.
+    None,
+}
+
+impl From<AssetsArg> for ReleaseAssets {
+    fn from(value: AssetsArg) -> Self {
+        match value {
+            AssetsArg::Auto => Self::Auto,
+            AssetsArg::Bake => Self::Bake,
+            AssetsArg::Link => Self::Link,
+            AssetsArg::None => Self::None,
+        }
+    }
 }
 
 /// Runs `mesa release`.
@@ -70,6 +112,9 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
     resolved.options.scenes = args.scenes;
     if let Some(layout) = args.layout {
         resolved.config.render.layout = layout.into();
+    }
+    if let Some(assets) = args.assets {
+        resolved.config.release.assets = assets.into();
     }
     resolved.run_dataset(&ReleaseStage {
         out: Some(args.out),
@@ -127,6 +172,8 @@ pub const LAYOUT_INFO: &str = "Layout_info";
 pub const ASSET_ANNOTATION: &str = "Asset_annotation.json";
 /// The text features of a release (MesaTask's retrieval loads it with `compress_pickle`).
 pub const TEXT_FEATURES_PKL: &str = "sbert_text_features.pkl";
+/// The asset GLBs of a release.
+pub const ASSETS_LIBRARY: &str = "Assets_library";
 
 /// What a release run wrote.
 #[derive(Debug, Serialize)]
@@ -141,6 +188,14 @@ pub struct ReleaseSummary {
     pub assets: usize,
     /// Rows of `sbert_text_features.pkl` (0: the dataset has no text features).
     pub text_features: usize,
+    /// `Assets_library/` GLBs hard-linked to the dataset's library.
+    pub assets_linked: usize,
+    /// `Assets_library/` GLBs written flattened.
+    pub assets_flattened: usize,
+    /// `Assets_library/` GLBs copied because a hard link was refused (another file system).
+    pub assets_copied: usize,
+    /// Uids the released layouts use whose GLB the dataset's library does not have.
+    pub assets_missing: Vec<String>,
     /// What could not be released, with why (`<table_type>/<scene_id>`, or the annotation
     /// file).
     pub failed: Vec<(String, String)>,
@@ -161,7 +216,14 @@ fn prepare_out(out: &Path) -> anyhow::Result<()> {
         let mut others = Vec::new();
         for entry in std::fs::read_dir(out).with_context(|| format!("{}", out.display()))? {
             let name = entry?.file_name().to_string_lossy().into_owned();
-            if name != LAYOUT_INFO && name != ASSET_ANNOTATION && name != TEXT_FEATURES_PKL {
+            if ![
+                LAYOUT_INFO,
+                ASSETS_LIBRARY,
+                ASSET_ANNOTATION,
+                TEXT_FEATURES_PKL,
+            ]
+            .contains(&name.as_str())
+            {
                 others.push(name);
             }
         }
@@ -175,11 +237,13 @@ fn prepare_out(out: &Path) -> anyhow::Result<()> {
             ))
             .into());
         }
-        let layouts = out.join(LAYOUT_INFO);
-        if layouts.is_dir() {
-            std::fs::remove_dir_all(&layouts).with_context(|| {
-                format!("{}: cannot remove the earlier release", layouts.display())
-            })?;
+        for folder in [LAYOUT_INFO, ASSETS_LIBRARY] {
+            let folder = out.join(folder);
+            if folder.is_dir() {
+                std::fs::remove_dir_all(&folder).with_context(|| {
+                    format!("{}: cannot remove the earlier release", folder.display())
+                })?;
+            }
         }
         for file in [ASSET_ANNOTATION, TEXT_FEATURES_PKL] {
             let path = out.join(file);
@@ -379,6 +443,10 @@ pub fn write_release(
         released: 0,
         assets: 0,
         text_features: 0,
+        assets_linked: 0,
+        assets_flattened: 0,
+        assets_copied: 0,
+        assets_missing: Vec::new(),
         failed: Vec::new(),
         elapsed_s: 0.0,
     };
@@ -392,6 +460,14 @@ pub fn write_release(
             Err(e) => summary.failed.push((scene.key(), format!("{e:#}"))),
         }
     }
+    write_assets_library(
+        dataset,
+        out,
+        config.release.assets,
+        &uids,
+        exec,
+        &mut summary,
+    )?;
     // Every annotated asset too, not only those the layouts use (MesaTask's retrieval reads
     // the whole library; a release's annotations also cover assets it could not ship), each
     // entry as the release it came from had it.
@@ -435,6 +511,93 @@ pub fn write_release(
     Ok(summary)
 }
 
+/// How one asset went into `Assets_library/`.
+enum Placed {
+    Linked,
+    Flattened,
+    Copied,
+    Missing,
+}
+
+/// One used asset into `Assets_library/`.
+fn release_asset(
+    dataset: &Path,
+    dir: &Path,
+    mode: ReleaseAssets,
+    uid: &str,
+) -> anyhow::Result<Placed> {
+    let source = dataset.join(asset_glb(uid));
+    if !source.exists() {
+        return Ok(Placed::Missing);
+    }
+    let dest = dir.join(format!("{uid}.glb"));
+    let bytes =
+        || read_bounded(&source, GLB_LIMIT).map_err(|e| anyhow!("{}: {e}", source.display()));
+    let link = match mode {
+        ReleaseAssets::Link => true,
+        ReleaseAssets::Bake | ReleaseAssets::None => false,
+        ReleaseAssets::Auto => {
+            placed_right_by_mesatask(&bytes()?).map_err(|e| anyhow!("{}: {e}", source.display()))?
+        }
+    };
+    if link {
+        // The file itself, not a symlink the library may hold in its place.
+        let target = std::fs::canonicalize(&source)
+            .with_context(|| format!("{}: cannot resolve", source.display()))?;
+        return match std::fs::hard_link(&target, &dest) {
+            Ok(()) => Ok(Placed::Linked),
+            Err(_) => {
+                std::fs::copy(&target, &dest).with_context(|| {
+                    format!("{}: cannot copy to {}", target.display(), dest.display())
+                })?;
+                Ok(Placed::Copied)
+            }
+        };
+    }
+    let flat = flat_asset_glb(uid, &bytes()?).map_err(|e| anyhow!("{}: {e}", source.display()))?;
+    write(&dest, &flat)?;
+    Ok(Placed::Flattened)
+}
+
+/// `Assets_library/`: every used asset the library has, and the table and sink GLBs.
+fn write_assets_library(
+    dataset: &Path,
+    out: &Path,
+    mode: ReleaseAssets,
+    uids: &BTreeSet<String>,
+    exec: &Executor<'_>,
+    summary: &mut ReleaseSummary,
+) -> anyhow::Result<()> {
+    if mode == ReleaseAssets::None {
+        return Ok(());
+    }
+    let dir = out.join(ASSETS_LIBRARY);
+    std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    for (uid, rgb) in [
+        (TABLE_GLB_UID, [0.36, 0.23, 0.13]),
+        (SINK_GLB_UID, [0.8, 0.8, 0.82]),
+    ] {
+        let bytes = zone_box_glb(uid, rgb).map_err(|e| anyhow!("{uid}.glb: {e}"))?;
+        write(&dir.join(format!("{uid}.glb")), &bytes)?;
+    }
+    let uids: Vec<&String> = uids.iter().collect();
+    let outcomes = exec.map("assets", &uids, |uid| {
+        release_asset(dataset, &dir, mode, uid)
+    });
+    for (uid, outcome) in uids.into_iter().zip(outcomes) {
+        match outcome {
+            Ok(Placed::Linked) => summary.assets_linked += 1,
+            Ok(Placed::Flattened) => summary.assets_flattened += 1,
+            Ok(Placed::Copied) => summary.assets_copied += 1,
+            Ok(Placed::Missing) => summary.assets_missing.push(uid.clone()),
+            Err(e) => summary
+                .failed
+                .push((format!("{ASSETS_LIBRARY}/{uid}.glb"), format!("{e:#}"))),
+        }
+    }
+    Ok(())
+}
+
 /// The human summary of a release run.
 pub fn format_release_summary(summary: &ReleaseSummary) -> String {
     use std::fmt::Write as _;
@@ -449,6 +612,35 @@ pub fn format_release_summary(summary: &ReleaseSummary) -> String {
         summary.elapsed_s,
         summary.out.display()
     );
+    let glbs = summary.assets_linked + summary.assets_flattened + summary.assets_copied;
+    if glbs > 0 || !summary.assets_missing.is_empty() {
+        let _ = writeln!(
+            out,
+            "  {ASSETS_LIBRARY}: {glbs} GLBs ({} hard-linked, {} flattened, {} copied where a \
+             hard link was refused), {} used assets have no GLB in the library{}",
+            summary.assets_linked,
+            summary.assets_flattened,
+            summary.assets_copied,
+            summary.assets_missing.len(),
+            if summary.assets_missing.is_empty() {
+                String::new()
+            } else {
+                let shown: Vec<&str> = summary
+                    .assets_missing
+                    .iter()
+                    .take(8)
+                    .map(String::as_str)
+                    .collect();
+                let more = summary.assets_missing.len() - shown.len();
+                let more = if more > 0 {
+                    format!(" and {more} more")
+                } else {
+                    String::new()
+                };
+                format!(" ({}{more})", shown.join(", "))
+            }
+        );
+    }
     for (what, error) in &summary.failed {
         let _ = writeln!(out, "  failed {what}: {error}");
     }

@@ -22,6 +22,31 @@ pub fn mesa() -> Command {
 }
 
 /// `../shared` beside the repository (or `$MESA_SHARED`).
+/// A Python with `bpy` (Blender 4.3 as a module: `MESA_BLENDER_PYTHON`, which scripts/test.sh
+/// sets, or `MESA_PYTHON`), or a skip naming `what` (a failure under MESA_REQUIRE_TOOLS).
+#[allow(dead_code)]
+pub fn blender(what: &str) -> Option<PathBuf> {
+    let found = ["MESA_BLENDER_PYTHON", "MESA_PYTHON"]
+        .iter()
+        .find_map(|var| {
+            let python = PathBuf::from(std::env::var_os(var)?);
+            std::process::Command::new(&python)
+                .args(["-c", "import bpy"])
+                .output()
+                .is_ok_and(|o| o.status.success())
+                .then_some(python)
+        });
+    if found.is_none() {
+        let how = "set MESA_BLENDER_PYTHON to a Python with bpy 4.3; scripts/test.sh installs one";
+        assert!(
+            std::env::var_os("MESA_REQUIRE_TOOLS").is_none(),
+            "Blender is missing and MESA_REQUIRE_TOOLS is set ({how})"
+        );
+        eprintln!("SKIPPED: {what} ({how})");
+    }
+    found
+}
+
 pub fn shared() -> PathBuf {
     std::env::var_os("MESA_SHARED")
         .map(PathBuf::from)

@@ -286,7 +286,7 @@ pub(crate) fn add_materials(
 }
 
 /// Adds one baked asset's images, textures, materials and mesh to the GLB; returns the mesh.
-fn add_asset(
+pub(crate) fn add_asset(
     b: &mut GlbBuilder,
     uid: &str,
     baked: &BakedAsset,
