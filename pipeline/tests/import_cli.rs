@@ -389,6 +389,21 @@ fn a_release_imports_and_runs_to_records_and_report() {
     assert!(ds
         .join("release/Layout_info/office_table/office_table_0002/front.png")
         .is_file());
+    // The report counts the imported scenes and the objects without a GLB, as the notes do.
+    let stats = read_json(&ds.join("report/stats.json"));
+    let (mut objects, mut scenes) = (0, 0);
+    for dir in common::scene_dirs(&ds) {
+        let n = read_json(&dir.join("imported/import.json"))["missing_glbs"]
+            .as_array()
+            .expect("list")
+            .len();
+        objects += n;
+        scenes += usize::from(n > 0);
+    }
+    assert!(objects > 0);
+    assert_eq!(stats["imported"], json!(7));
+    assert_eq!(stats["objects_missing_glb"], json!(objects));
+    assert_eq!(stats["scenes_with_missing_glb"], json!(scenes));
     // Objects without a GLB are skipped with a warning naming them, never the scene.
     assert!(text.contains("withheld_"), "{text}");
 }
@@ -473,7 +488,10 @@ fn release_import_release_gives_identical_layouts_and_annotations() {
              a = pickle.load(open(r'{}', 'rb')); b = pickle.load(open(r'{}', 'rb'))\n\
              assert a['uids'] == b['uids']\n\
              assert a['text_features'].dtype == b['text_features'].dtype\n\
-             assert a['text_features'].tobytes() == b['text_features'].tobytes()\n",
+             assert a['text_features'].tobytes() == b['text_features'].tobytes()\n\
+             import compress_pickle\n\
+             c = compress_pickle.load(r'{1}')\n\
+             assert c['uids'] == a['uids'] and c['text_features'].tobytes() == a['text_features'].tobytes()\n",
             src.join("sbert_text_features.pkl").display(),
             r1.join("sbert_text_features.pkl").display(),
         );

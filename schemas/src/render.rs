@@ -103,6 +103,16 @@ pub struct ReportStats {
     pub tasks: u64,
     /// Scenes whose last run of a stage failed, by stage.
     pub failed: BTreeMap<String, u64>,
+    /// Scenes that entered by `mesa import` (`imported/import.json`).
+    #[serde(default)]
+    pub imported: u64,
+    /// Objects of imported scenes whose GLB the release does not ship (left out of the stages
+    /// that need meshes).
+    #[serde(default)]
+    pub objects_missing_glb: u64,
+    /// Imported scenes with at least one such object.
+    #[serde(default)]
+    pub scenes_with_missing_glb: u64,
 }
 
 /// A distribution of counts.

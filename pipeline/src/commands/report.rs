@@ -12,7 +12,7 @@
 
 use mesa_stages::paths::dataset::REPORT_DIR;
 use mesa_stages::paths::scene::{
-    CHECK, GRAPH_JSON, GRAPH_TXT, IMAGE, RENDER_DIR, SETTLED_LAYOUT, TASKS,
+    CHECK, GRAPH_JSON, GRAPH_TXT, IMAGE, IMPORT_NOTES, RENDER_DIR, SETTLED_LAYOUT, TASKS,
 };
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -169,6 +169,22 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
                 }
             }
             Err(e) => facts.failed.push(("layout".into(), format!("{rel}: {e}"))),
+        }
+    }
+    if let Ok(text) = read_text_bounded(&scene.path(IMPORT_NOTES), JSON_LIMIT) {
+        match serde_json::from_str::<mesa_stages::import_mesatask::ImportNotes>(&text) {
+            Ok(notes) => {
+                facts.imported = true;
+                facts.missing_glbs = notes
+                    .missing_glbs
+                    .into_iter()
+                    .map(|m| (m.instance, m.uid))
+                    .collect();
+            }
+            Err(e) => facts.failed.push((
+                "import".into(),
+                format!("{IMPORT_NOTES} cannot be read: {e}"),
+            )),
         }
     }
     if let Ok(text) = read_text_bounded(&scene.path(GRAPH_JSON), JSON_LIMIT) {

@@ -84,6 +84,10 @@ pub struct SceneFacts {
     pub warnings: BTreeMap<String, u64>,
     /// The scene's files worth opening.
     pub links: Vec<SceneLink>,
+    /// Whether the scene entered by `mesa import`.
+    pub imported: bool,
+    /// Objects whose GLB the imported release does not ship: (instance, uid).
+    pub missing_glbs: Vec<(String, String)>,
 }
 
 impl SceneFacts {
@@ -218,6 +222,10 @@ pub fn compute_stats(scenes: &[SceneFacts]) -> ReportStats {
         scenes_rendered: scenes.iter().filter(|s| s.rendered.len() == VIEWS).count() as u64,
         tasks: scenes.iter().map(|s| s.tasks).sum(),
         failed,
+        imported: scenes.iter().filter(|s| s.imported).count() as u64,
+        objects_missing_glb: scenes.iter().map(|s| s.missing_glbs.len() as u64).sum(),
+        scenes_with_missing_glb: scenes.iter().filter(|s| !s.missing_glbs.is_empty()).count()
+            as u64,
     }
 }
 
@@ -226,6 +234,22 @@ pub fn flags(scene: &SceneFacts) -> Vec<(&'static str, String)> {
     let mut out = Vec::new();
     for (stage, error) in &scene.failed {
         out.push(("bad", format!("{stage} failed: {error}")));
+    }
+    if !scene.missing_glbs.is_empty() {
+        let named: Vec<String> = scene
+            .missing_glbs
+            .iter()
+            .map(|(instance, uid)| format!("{instance} ({uid})"))
+            .collect();
+        out.push((
+            "warn",
+            format!(
+                "{} objects without a GLB (the release does not ship it; left out of check \
+                 and render): {}",
+                named.len(),
+                named.join(", ")
+            ),
+        ));
     }
     if scene.layout.is_none() {
         out.push(("bad", "no layout".to_owned()));

@@ -106,6 +106,14 @@ pub fn html(stats: &ReportStats, scenes: &[SceneFacts], plots: &[(String, String
         stats.tasks,
         escape(&collisions)
     );
+    if stats.imported > 0 {
+        let _ = writeln!(
+            out,
+            "<p class=\"summary\">{} scenes imported; {} objects in {} of them have no GLB (the \
+             release does not ship their assets).</p>",
+            stats.imported, stats.objects_missing_glb, stats.scenes_with_missing_glb
+        );
+    }
     out.push_str("<div class=\"plots\">\n");
     for (name, svg) in plots {
         let _ = writeln!(
