@@ -305,10 +305,12 @@ def run_coacd(vertices, faces, options: dict, timeout_s: float):
     return result
 
 
-def mesa_parts(mesa: Path, glb: Path, work: Path) -> dict:
+def mesa_parts(mesa: Path, glb: Path, work: Path, config: Path | None) -> dict:
     dataset = work / "dataset"
     shutil.rmtree(dataset, ignore_errors=True)
     (dataset / "assets/library").mkdir(parents=True)
+    if config is not None:
+        shutil.copyfile(config, dataset / "mesa.toml")
     shutil.copyfile(glb, dataset / "assets/library" / glb.name)
     started = time.perf_counter()
     done = subprocess.run(
@@ -371,6 +373,12 @@ def main() -> int:
     parser.add_argument("--coacd-resolution", type=int, default=1000)
     parser.add_argument("--coacd-max-triangles", type=int, default=0)
     parser.add_argument("--only", nargs="*", help="GLB stems to run (default: all)")
+    parser.add_argument(
+        "--mesa-config", type=Path, help="a mesa.toml for the datasets (default: none)"
+    )
+    parser.add_argument(
+        "--mesa-only", action="store_true", help="measure mesa's parts only (no V-HACD, CoACD)"
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -381,7 +389,7 @@ def main() -> int:
     for glb in glbs:
         work = args.out / glb.stem
         work.mkdir(parents=True, exist_ok=True)
-        ours = mesa_parts(args.mesa, glb, work)
+        ours = mesa_parts(args.mesa, glb, work, args.mesa_config)
         if not ours["valid"]:
             skipped.append((glb.name, ours["reason_code"]))
             print(f"{glb.name}: skipped, invalid for mesa ({ours['reason_code']})", flush=True)
@@ -414,14 +422,21 @@ def main() -> int:
             else dec.get("max_deviation_m")
         )
         row["mesa"]["method"] = dec["method"]
+        row["mesa"]["part_budget"] = dec.get("part_budget")
+        row["mesa"]["over_tolerance"] = dec.get("over_tolerance")
         row["mesa"]["max_parts"] = dec["max_parts"]
         row["mesa"]["reach_warnings"] = [w for w in ours["warnings"] if "outside" in w]
 
-        vh_parts, vh_time = run_vhacd(vertices, faces.astype(np.uint32))
-        row["vhacd"] = measure(vh_parts, mesh, mesh_cloud, winding, mesh_points, SEED)
-        row["vhacd"]["time_s"] = vh_time
+        if args.mesa_only:
+            row["vhacd"] = {"skipped": "not run"}
+        else:
+            vh_parts, vh_time = run_vhacd(vertices, faces.astype(np.uint32))
+            row["vhacd"] = measure(vh_parts, mesh, mesh_cloud, winding, mesh_points, SEED)
+            row["vhacd"]["time_s"] = vh_time
 
-        if args.coacd_max_triangles and len(faces) > args.coacd_max_triangles:
+        if args.mesa_only:
+            row["coacd"] = {"skipped": "not run"}
+        elif args.coacd_max_triangles and len(faces) > args.coacd_max_triangles:
             row["coacd"] = {"skipped": f"over {args.coacd_max_triangles} triangles"}
         else:
             options = {
