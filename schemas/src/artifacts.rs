@@ -405,8 +405,19 @@ pub struct Decomposition {
     /// is its one part); `hull` when the decomposition failed and the parts are the single hull
     /// (the asset's warnings say why).
     pub method: String,
-    /// Most parts allowed.
+    /// Most parts allowed: for `adaptive`, the first part budget (`decomposition_max_parts`).
     pub max_parts: u32,
+    /// Adaptive: the part budget the decomposition ended with, grown from `max_parts` (up to
+    /// `decomposition_most_parts`) as far as the shape needed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part_budget: Option<u32>,
+    /// Adaptive: why `max_deviation_m` exceeds `tolerance_m`, when it does: `part_cap` (the
+    /// budget grew to `decomposition_most_parts` and ran out), `no_gain` (two doublings of the
+    /// budget had not lowered the largest deviation by a quarter), `min_size` (the piece is too small
+    /// to cut, or no cut splits it), `out_of_time` (`[assets.budget] seconds`). The asset has
+    /// a warning saying the same.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub over_tolerance: Option<String>,
     /// Adaptive: the most a part may reach outside the object, metres.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tolerance_m: Option<f64>,

@@ -17,6 +17,16 @@
 //!    its content, and each half is treated the same way (breadth first, so that a part budget
 //!    runs out evenly); otherwise it is a part.
 //!
+//! The part budget grows with what the shape needs: it starts at
+//! [`AdaptiveParams::max_parts`] and doubles, up to [`AdaptiveParams::most_parts`], as long as
+//! the last two doublings lowered the largest deviation by at least a quarter
+//! ([`BUDGET_GAIN`]; one doubling alone may not: a bowl's first quarters still bridge its
+//! cavity). A box or a bowl stops well below the first
+//! budget; a detailed asset (an engine of 80 pieces) gets the parts its detail needs; a shape
+//! whose deviation no longer falls (noise, a surface thinner than the cuts can follow) stops
+//! growing instead of spending parts for nothing. Why a decomposition ends beyond the
+//! tolerance is returned ([`OverTolerance`]).
+//!
 //! Every step is deterministic: the same mesh gives the same parts, unless the time budget
 //! ([`AdaptiveParams::deadline`]) runs out: cutting then stops (checked before each cut and
 //! between the trial cuts of a piece, never by stopping a thread) and the pieces left are
@@ -35,8 +45,10 @@ use parry3d::transformation::try_convex_hull;
 pub struct AdaptiveParams {
     /// The most a part may reach outside the object, metres.
     pub tolerance_m: f64,
-    /// The most parts.
+    /// The first part budget.
     pub max_parts: usize,
+    /// The most the part budget may grow to (at least `max_parts`).
+    pub most_parts: usize,
     /// Pieces smaller than this along every side are not cut again, metres.
     pub min_size_m: f64,
     /// When cutting stops whatever the deviation (the time budget of one asset).
@@ -51,6 +63,39 @@ impl AdaptiveParams {
 
     fn out_of_time(&self) -> bool {
         self.deadline.is_some_and(|d| Instant::now() >= d)
+    }
+}
+
+/// The part budget doubles when the worst deviation as it runs out is at most this fraction
+/// of the worst deviation when the budget two doublings before ran out (the first two
+/// doublings are free).
+pub const BUDGET_GAIN: f64 = 0.75;
+
+/// Why a decomposition ended with a part beyond the tolerance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OverTolerance {
+    /// The part budget grew to [`AdaptiveParams::most_parts`] and ran out.
+    PartCap,
+    /// Two doublings of the part budget had not lowered the worst deviation by a quarter:
+    /// more parts would not follow the shape (noise, walls thinner than the cuts).
+    NoGain,
+    /// The piece beyond the tolerance is smaller than [`AdaptiveParams::min_size_m`] on every
+    /// side, or no cut splits it: cutting it again cannot help (a surface with gaps, or
+    /// folded on itself).
+    MinSize,
+    /// The deadline stopped the cutting.
+    OutOfTime,
+}
+
+impl OverTolerance {
+    /// The code recorded in the index (`decomposition.over_tolerance`).
+    pub fn code(self) -> &'static str {
+        match self {
+            Self::PartCap => "part_cap",
+            Self::NoGain => "no_gain",
+            Self::MinSize => "min_size",
+            Self::OutOfTime => "out_of_time",
+        }
     }
 }
 
@@ -77,6 +122,10 @@ pub struct Decomposed {
     /// Whether the deadline stopped the cutting while some piece was still beyond the
     /// tolerance.
     pub out_of_time: bool,
+    /// The part budget at the end (grown from `max_parts` as the shape needed).
+    pub part_budget: usize,
+    /// Why the largest deviation exceeds the tolerance, when it does.
+    pub over_tolerance: Option<OverTolerance>,
 }
 
 /// A mesh welded, split into connected pieces; each closed, consistently oriented piece is a
@@ -662,29 +711,62 @@ pub fn decompose(
     let mut parts = Vec::new();
     let mut max_deviation: f64 = 0.0;
     let mut out_of_time = false;
+    let mut budget = params.max_parts.max(1);
+    let most_parts = params.most_parts.max(budget);
+    // The worst deviation each time a budget ran out, and whether the budget may still grow.
+    let mut worst_at_budgets: Vec<f64> = Vec::new();
+    let mut growing = true;
+    // Why the worst part kept beyond the tolerance was kept, with its deviation.
+    let mut over_tolerance: Option<(f64, OverTolerance)> = None;
     // The worst piece first, so that a part budget goes where the deviation is.
     while let Some(worst) = pending.pop() {
-        let room = parts.len() + pending.len() + 2 <= params.max_parts;
+        let beyond = worst.deviation > params.tolerance_m;
+        let mut room = parts.len() + pending.len() + 2 <= budget;
+        if beyond && !room && growing {
+            // A single doubling may not lower the worst deviation (a bowl's first quarters
+            // still bridge its cavity): the gain is judged over two.
+            let paid_off = worst_at_budgets
+                .len()
+                .checked_sub(2)
+                .is_none_or(|i| worst.deviation <= BUDGET_GAIN * worst_at_budgets[i]);
+            worst_at_budgets.push(worst.deviation);
+            if budget < most_parts && paid_off {
+                budget = (budget * 2).min(most_parts);
+                room = parts.len() + pending.len() + 2 <= budget;
+            } else {
+                // Pieces popped later deviate less: the budget is settled here.
+                growing = false;
+            }
+        }
         let large = worst
             .candidate
             .extent()
             .iter()
             .any(|e| *e > params.min_size_m);
-        if worst.deviation > params.tolerance_m && room && large {
+        if beyond && room && large {
             if out_of_time || params.out_of_time() {
                 out_of_time = true;
-                max_deviation = max_deviation.max(worst.deviation);
-                let volume_m3 = worst.candidate.volume();
-                parts.push(Part {
-                    points_m: worst.candidate.hull_points,
-                    volume_m3,
-                });
-                continue;
+            } else {
+                let halves = split(&mesh, &worst, params, &mut sequence);
+                if !halves.is_empty() {
+                    pending.extend(halves);
+                    continue;
+                }
             }
-            let halves = split(&mesh, &worst, params, &mut sequence);
-            if !halves.is_empty() {
-                pending.extend(halves);
-                continue;
+        }
+        if beyond {
+            let why = if out_of_time {
+                OverTolerance::OutOfTime
+            } else if !room && budget >= most_parts {
+                OverTolerance::PartCap
+            } else if !room {
+                OverTolerance::NoGain
+            } else {
+                // Too small to cut, or no cut gave two pieces.
+                OverTolerance::MinSize
+            };
+            if over_tolerance.is_none_or(|(d, _)| worst.deviation > d) {
+                over_tolerance = Some((worst.deviation, why));
             }
         }
         max_deviation = max_deviation.max(worst.deviation);
@@ -699,6 +781,8 @@ pub fn decompose(
         solid: mesh.has_solids(),
         max_deviation_m: max_deviation,
         out_of_time,
+        part_budget: budget,
+        over_tolerance: over_tolerance.map(|(_, why)| why),
     })
 }
 
@@ -850,6 +934,7 @@ mod tests {
         AdaptiveParams {
             tolerance_m: 0.001,
             max_parts: 256,
+            most_parts: 256,
             min_size_m: 0.002,
             deadline: None,
         }
@@ -883,5 +968,40 @@ mod tests {
         assert!(!d.solid);
         assert!(d.parts.len() > 1);
         assert!(d.max_deviation_m <= 0.001, "{}", d.max_deviation_m);
+    }
+
+    #[test]
+    fn the_part_budget_grows_with_what_the_shape_needs() {
+        let bowl = Synthetic::vessel(0.08, 0.06, 0.006, 0.008);
+        let small = AdaptiveParams {
+            max_parts: 4,
+            most_parts: 4,
+            ..params()
+        };
+        // Control: a budget that cannot grow leaves the bowl's parts bridging its cavity.
+        let capped = decompose(&bowl.positions, &bowl.triangles, &small).expect("parts");
+        assert!(capped.parts.len() <= 4);
+        assert!(capped.max_deviation_m > 0.001, "{}", capped.max_deviation_m);
+        assert_eq!(capped.over_tolerance, Some(OverTolerance::PartCap));
+        assert_eq!(capped.part_budget, 4);
+        // The same first budget, free to grow: as many parts as the bowl needs, no more.
+        let grown = decompose(
+            &bowl.positions,
+            &bowl.triangles,
+            &AdaptiveParams {
+                most_parts: 1024,
+                ..small
+            },
+        )
+        .expect("parts");
+        assert!(grown.max_deviation_m <= 0.001, "{}", grown.max_deviation_m);
+        assert_eq!(grown.over_tolerance, None);
+        assert!(grown.parts.len() > 4);
+        assert!(grown.part_budget > 4 && grown.part_budget < 1024);
+        assert!(grown.parts.len() <= grown.part_budget);
+        // A box needs one part whatever the budget may grow to.
+        let cube = Synthetic::cuboid([0.1, 0.05, 0.2]);
+        let one = decompose(&cube.positions, &cube.triangles, &small).expect("parts");
+        assert_eq!((one.parts.len(), one.part_budget), (1, 4));
     }
 }

@@ -42,7 +42,7 @@ use budget::{glb_cost, AssetBudget, Verdict};
 
 /// Bumped when the indexing of an unchanged asset would give another record: every asset is
 /// then re-indexed.
-pub const INDEX_VERSION: u32 = 3;
+pub const INDEX_VERSION: u32 = 4;
 
 /// How an asset's front is brought to face the observer (-y in the table frame).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
@@ -91,8 +91,17 @@ pub struct AssetsConfig {
     pub decomposition: DecompositionMethod,
     /// Adaptive decomposition: the most a convex part may reach outside the object, metres.
     pub decomposition_tolerance_m: f64,
-    /// Adaptive decomposition: most convex parts per asset.
+    /// Adaptive decomposition: the first part budget of an asset. It doubles, up to
+    /// decomposition_most_parts, as long as two doublings lower the largest reach outside the
+    /// mesh by at least a quarter: a box stays at 1 part, a detailed asset gets what its
+    /// detail needs.
     pub decomposition_max_parts: u32,
+    /// Adaptive decomposition: the most the part budget may grow to (default 128, the first
+    /// budget: no growth, since more parts cost time and the `[assets.budget] seconds` cut-off
+    /// makes the output depend on the machine; 1024 suits detailed real assets). An asset
+    /// still beyond decomposition_tolerance_m there is kept with its measured reach, the
+    /// reason in the index (`decomposition.over_tolerance`) and a warning.
+    pub decomposition_most_parts: u32,
     /// V-HACD voxel resolution (voxels along the longest axis) of the convex decomposition.
     pub vhacd_resolution: u32,
     /// V-HACD maximum concavity of a part (lower: more, tighter parts).
@@ -119,6 +128,7 @@ impl Default for AssetsConfig {
             decomposition: DecompositionMethod::Adaptive,
             decomposition_tolerance_m: 0.001,
             decomposition_max_parts: 128,
+            decomposition_most_parts: 128,
             vhacd_resolution: 64,
             vhacd_concavity: 0.01,
             vhacd_max_parts: 32,

@@ -11,7 +11,7 @@ use parry3d::transformation::try_convex_hull;
 use parry3d::transformation::vhacd::{VHACDParameters, VHACD};
 use parry3d::transformation::voxelization::FillMode;
 
-use super::decompose::{decompose, AdaptiveParams};
+use super::decompose::{decompose, AdaptiveParams, OverTolerance};
 use super::{AssetsConfig, DecompositionMethod};
 
 /// The hull and the parts of one asset.
@@ -169,6 +169,8 @@ pub fn collision_shapes_until(
         concavity: Some(config.vhacd_concavity),
         out_of_time: None,
         simplified: None,
+        part_budget: None,
+        over_tolerance: None,
     };
     if hull.volume_m3 > 0.0
         && closed_volume(positions_m, triangles).is_some_and(|v| v >= CONVEX_FILL * hull.volume_m3)
@@ -266,6 +268,10 @@ fn adaptive_shapes(
     let params = AdaptiveParams {
         tolerance_m: config.decomposition_tolerance_m,
         max_parts: config.decomposition_max_parts.max(1) as usize,
+        most_parts: config
+            .decomposition_most_parts
+            .max(config.decomposition_max_parts)
+            .max(1) as usize,
         // Below a fifth of the tolerance, cutting again cannot help.
         min_size_m: config.decomposition_tolerance_m / 5.0,
         deadline,
@@ -281,6 +287,8 @@ fn adaptive_shapes(
         concavity: None,
         out_of_time: None,
         simplified: None,
+        part_budget: None,
+        over_tolerance: None,
     };
     let decomposed = decompose(positions_m, triangles, &params);
     let Some(decomposed) = decomposed.filter(|d| !d.parts.is_empty()) else {
@@ -315,6 +323,8 @@ fn adaptive_shapes(
         config.shape_precision_m / 10.0,
     ));
     decomposition.solid = Some(decomposed.solid);
+    decomposition.part_budget = Some(decomposed.part_budget as u32);
+    decomposition.over_tolerance = decomposed.over_tolerance.map(|w| w.code().to_owned());
     if decomposed.out_of_time {
         decomposition.out_of_time = Some(true);
         let warning = format!(
@@ -334,12 +344,30 @@ fn adaptive_shapes(
             warning: Some(warning),
         };
     }
-    let warning = (decomposed.max_deviation_m > config.decomposition_tolerance_m).then(|| {
+    let warning = decomposed.over_tolerance.map(|why| {
+        let because = match why {
+            OverTolerance::PartCap => format!(
+                "the part budget grew to decomposition_most_parts = {} and ran out (raise it)",
+                config.decomposition_most_parts
+            ),
+            OverTolerance::NoGain => format!(
+                "two doublings of the part budget (now {}) did not lower the reach by a \
+                 quarter: the mesh has detail the parts cannot follow (noise, walls thinner than the \
+                 cuts; repair or decimate the asset)",
+                decomposed.part_budget
+            ),
+            OverTolerance::MinSize => "a piece beyond it is too small to cut again (a \
+                                       surface with gaps or folded on itself: repair the \
+                                       asset)"
+                .to_owned(),
+            // Handled above.
+            OverTolerance::OutOfTime => "its time budget ran out".to_owned(),
+        };
         format!(
-            "the collision shape's {} convex parts (decomposition_max_parts) reach up to {:.1} \
-             mm outside the mesh, more than decomposition_tolerance_m ({:.1} mm): `mesa check` \
-             may see contacts with this asset as collisions",
-            config.decomposition_max_parts,
+            "the collision shape's {} convex parts reach up to {:.1} mm outside the mesh, more \
+             than decomposition_tolerance_m ({:.1} mm): {because}; `mesa check` may see \
+             contacts with this asset as collisions",
+            parts.len(),
             decomposed.max_deviation_m * 1000.0,
             config.decomposition_tolerance_m * 1000.0
         )

@@ -570,3 +570,42 @@ fn the_worst_assets_are_indexed_within_the_default_budget() {
         assert!(simplified.reach_m.is_finite());
     }
 }
+
+/// An asset whose parts cannot get within the tolerance keeps its measured reach, the reason
+/// in the index and a warning; the same asset with a budget free to grow needs none.
+#[test]
+fn an_asset_beyond_the_tolerance_records_why_and_warns() {
+    let bowl = Mesh::vessel(0.08, 0.06, 0.006, 0.008);
+    let capped = AssetsConfig {
+        decomposition_max_parts: 4,
+        decomposition_most_parts: 4,
+        ..AssetsConfig::default()
+    };
+    let indexed = index(&bowl, None, &capped);
+    let shapes = indexed.shapes.expect("shapes");
+    let d = &shapes.decomposition;
+    let reach = d.max_deviation_m.expect("reach");
+    assert!(reach > 0.001, "{reach}");
+    assert_eq!(d.over_tolerance.as_deref(), Some("part_cap"));
+    assert_eq!(d.part_budget, Some(4));
+    assert!(
+        indexed.warnings.iter().any(|w| w.contains(&format!(
+            "reach up to {:.1} mm outside the mesh, more than decomposition_tolerance_m (1.0 \
+             mm): the part budget grew to decomposition_most_parts = 4 and ran out",
+            reach * 1000.0
+        ))),
+        "{:?}",
+        indexed.warnings
+    );
+    // Control: the same first budget, free to grow, gets the bowl within the tolerance.
+    let growing = AssetsConfig {
+        decomposition_max_parts: 4,
+        ..AssetsConfig::default()
+    };
+    let indexed = index(&bowl, None, &growing);
+    let d = indexed.shapes.expect("shapes").decomposition;
+    assert!(d.max_deviation_m.expect("reach") <= 0.001);
+    assert_eq!(d.over_tolerance, None);
+    assert!(d.part_budget.expect("budget") > 4);
+    assert!(indexed.warnings.is_empty(), "{:?}", indexed.warnings);
+}
