@@ -121,7 +121,15 @@ fn bbox_form(k: usize) -> Value {
 }
 
 /// Builds the release tree in `src`; the uids of every annotated asset, in order.
-fn build_release(src: &Path, python: Option<&Path>) -> Vec<String> {
+/// How the release's `sbert_text_features.pkl` is written: (numpy dtype, pickle protocol).
+type PickleForm = (&'static str, u8);
+
+/// The main test's form.
+const FLOAT16_P5: PickleForm = ("float16", 5);
+/// The round-trip test's form.
+const FLOAT32_P2: PickleForm = ("float32", 2);
+
+fn build_release(src: &Path, python: Option<&Path>, form: PickleForm) -> Vec<String> {
     // Each GLB's extents (glTF Y-up, metres): the scale_factor MesaTask's layouts hold is the
     // size over them, per axis of the object frame (x, depth = glTF z, height = glTF y).
     let extents: BTreeMap<&str, [f64; 3]> = GLBS
@@ -217,12 +225,14 @@ fn build_release(src: &Path, python: Option<&Path>) -> Vec<String> {
         let code = format!(
             "import pickle, numpy as np, json\n\
              uids = json.loads(r'''{}''')\n\
-             f = np.random.default_rng(3).standard_normal((len(uids), 768)).astype(np.float16)\n\
-             pickle.dump({{'uids': uids, 'text_features': f}}, open(r'{}', 'wb'), protocol=5)\n\
+             f = np.random.default_rng(3).standard_normal((len(uids), 768)).astype(np.{dtype})\n\
+             pickle.dump({{'uids': uids, 'text_features': f}}, open(r'{}', 'wb'), protocol={protocol})\n\
              open(r'{}', 'wb').write(np.ascontiguousarray(f).tobytes())\n",
             serde_json::to_string(&uids).expect("json"),
             src.join("sbert_text_features.pkl").display(),
             src.join("expected_features.bin").display(),
+            dtype = form.0,
+            protocol = form.1,
         );
         let out = Command::new(python)
             .arg("-c")
@@ -266,7 +276,7 @@ fn a_release_imports_and_runs_to_records_and_report() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let src = tmp.path().join("release");
     let ds = tmp.path().join("dataset");
-    build_release(&src, python.as_deref());
+    build_release(&src, python.as_deref(), FLOAT16_P5);
     let (s, d) = (src.to_str().expect("utf8"), ds.to_str().expect("utf8"));
     let out = run_ok(&["import", "mesatask", s, d, "--progress", "off"]);
     assert!(out.contains("7 scenes imported, 0 failed"), "{out}");
@@ -425,7 +435,7 @@ fn a_release_without_layout_info_is_a_usage_error() {
 fn one_bad_scene_does_not_stop_the_others() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let src = tmp.path().join("release");
-    build_release(&src, None);
+    build_release(&src, None, FLOAT16_P5);
     write(
         &src.join("Layout_info/office_table/broken_0001/layout.json"),
         b"{\"objects\": [",
@@ -462,7 +472,7 @@ fn release_import_release_gives_identical_layouts_and_annotations() {
     let python = python();
     let tmp = tempfile::tempdir().expect("tempdir");
     let src = tmp.path().join("release");
-    build_release(&src, python.as_deref());
+    build_release(&src, python.as_deref(), FLOAT32_P2);
     let d0 = tmp.path().join("d0");
     let (r1, d1, r2) = (
         tmp.path().join("r1"),
@@ -471,6 +481,10 @@ fn release_import_release_gives_identical_layouts_and_annotations() {
     );
     let p = |p: &Path| p.to_str().expect("utf8").to_owned();
     run_ok(&["import", "mesatask", &p(&src), &p(&d0), "--progress", "off"]);
+    if python.is_some() {
+        let summary = read_json(&d0.join("assets/import.json"));
+        assert_eq!(summary["text_features"]["dtype"], "float32");
+    }
     // Released from the imported layouts (the release's own front.png shows them).
     let out = run_ok(&["release", &p(&d0), &p(&r1), "--progress", "off"]);
     assert!(out.contains("7 of 7 scenes released"), "{out}");
@@ -580,7 +594,7 @@ fn mesatask_reconstruction_places_every_released_object_within_a_millimetre() {
     };
     let tmp = tempfile::tempdir().expect("tempdir");
     let src = tmp.path().join("release");
-    build_release(&src, None);
+    build_release(&src, None, FLOAT16_P5);
     let (ds, out, linked) = (
         tmp.path().join("dataset"),
         tmp.path().join("out"),
