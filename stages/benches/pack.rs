@@ -3,9 +3,9 @@
 //! with the photo and the instance masks (so the snapshots are made too). Ingest reads the
 //! edited GLB the simulated annotator writes for it.
 //!
-//! `bench/pack_vs_blender.sh` times the official approach (Blender importing each asset GLB,
-//! transforming it, exporting the scene, as MesaTask's `reconstruct_blender.py` does) on the
-//! same scene.
+//! `bench/compare_blender_pack.py` times the official approach (Blender importing each asset
+//! GLB, transforming it, exporting the scene, as MesaTask's `reconstruct_blender.py` does) on
+//! the same scene, against this bench's estimate.
 
 use std::collections::BTreeMap;
 use std::path::Path;
