@@ -168,6 +168,13 @@ pub fn release_annotations(
     to_sorted_pretty(&out).map_err(|e| ReleaseError::Json(e.to_string()))
 }
 
+/// Whether `uid` names a file of `Assets_library/` and nothing else: not empty, not `.` or
+/// `..`, no path separator, no NUL, no leading dot. A layout's `retrieved_uid` is outside input:
+/// a release writes `Assets_library/<uid>.glb` only for such names.
+pub fn plain_uid(uid: &str) -> bool {
+    !uid.is_empty() && !uid.starts_with('.') && !uid.contains(['/', '\\', '\0']) && uid.len() <= 200
+}
+
 /// The release copy of the library GLB `bytes` of asset `uid`: one node without a transform,
 /// one mesh with every node transform baked into its vertices, centred on its bounding box
 /// (see the module documentation).
@@ -337,6 +344,22 @@ mod tests {
         assert!(placed_right_by_mesatask(&flat).expect("flat"));
         assert!(placed_right_by_mesatask(&textured_asset()).expect("plain"));
         assert!(!placed_right_by_mesatask(&source).expect("hierarchy"));
+    }
+
+    #[test]
+    fn only_plain_uids_name_release_files() {
+        for good in [
+            "Duck",
+            "3cc47c3f78d34985bf4314de2f8196dd",
+            "mug_tinkercad",
+            "a.b",
+        ] {
+            assert!(plain_uid(good), "{good}");
+        }
+        for bad in ["", ".", "..", "../x", "a/b", "a\\b", ".hidden", "a\0b"] {
+            assert!(!plain_uid(bad), "{bad:?}");
+        }
+        assert!(!plain_uid(&"x".repeat(201)));
     }
 
     #[test]

@@ -42,7 +42,7 @@ use clap::Args as ClapArgs;
 use mesa_stages::paths::dataset::{asset_glb, ANNOTATIONS, SCENES, TEXT_FEATURES, TEXT_UIDS};
 use mesa_stages::paths::scene::{IMPORT_FRONT, IMPORT_NOTES, RENDER_DIR};
 use mesa_stages::release::{
-    flat_asset_glb, placed_right_by_mesatask, zone_box_glb, ReleaseAssets, SINK_GLB_UID,
+    flat_asset_glb, placed_right_by_mesatask, plain_uid, zone_box_glb, ReleaseAssets, SINK_GLB_UID,
     TABLE_GLB_UID,
 };
 use serde::Serialize;
@@ -526,6 +526,12 @@ fn release_asset(
     mode: ReleaseAssets,
     uid: &str,
 ) -> anyhow::Result<Placed> {
+    if !plain_uid(uid) {
+        bail!(
+            "retrieved_uid {uid:?} is not a plain file name (expected the stem of a GLB in \
+             assets/library, without path separators or a leading dot)"
+        );
+    }
     let source = dataset.join(asset_glb(uid));
     if !source.exists() {
         return Ok(Placed::Missing);
