@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command as Process;
 
-use common::mesa;
+use common::{mesa, scene_dirs};
 use mesa_schemas::annotation::{IngestDiffArtifact, PackIndexArtifact};
 use mesa_schemas::layout::DatasetLayout;
 use mesa_schemas::rotation::{tilt_deg_from_quat_xyzw, yaw_deg_from_quat_xyzw};
@@ -29,17 +29,6 @@ fn run(args: &[&str], dir: &Path) -> (Option<i32>, String) {
         out.status.code(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
-}
-
-fn scene_dirs(dir: &Path) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    for table in std::fs::read_dir(dir.join("scenes")).expect("scenes") {
-        for scene in std::fs::read_dir(table.expect("entry").path()).expect("table") {
-            out.push(scene.expect("entry").path());
-        }
-    }
-    out.sort();
-    out
 }
 
 fn scene_id(scene: &Path) -> String {

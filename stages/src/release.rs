@@ -292,15 +292,8 @@ mod tests {
     }
 
     fn bounds(positions: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for p in positions {
-            for a in 0..3 {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
-            }
-        }
-        (lo, hi)
+        let b = crate::mesh::Aabb::from_points(positions.iter().copied()).expect("points");
+        (b.min, b.max)
     }
 
     #[test]
