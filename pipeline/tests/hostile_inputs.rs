@@ -659,3 +659,90 @@ fn a_duplicate_key_in_camera_json_fails_that_scene_only() {
     let lifted = ws.join("scenes").join(&scenes[1]).join("coarse/lift.json");
     assert!(lifted.is_file(), "the other scene is lifted: {stderr}");
 }
+
+/// A `.npy` file of float32 whose header claims `shape`, followed by only `data_bytes` bytes.
+fn npy_claiming(shape: &str, data_bytes: usize) -> Vec<u8> {
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
+    // numpy pads the header with spaces and a newline to a multiple of 64 bytes.
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&u16::try_from(header.len()).expect("short").to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    bytes.resize(bytes.len() + data_bytes, 0);
+    bytes
+}
+
+/// Issue #20 item 1 at run level: a 1 KB depth.npy whose header claims 100000×100000, and an
+/// RLE mask whose `size` claims the same, each fail their own scene with a message naming the
+/// file; `mesa lift` is not aborted (no allocation failure) and the other scenes are lifted.
+#[test]
+fn sizes_claimed_by_a_header_fail_their_scene_and_the_others_finish() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (ws, scenes) = demo(dir.path());
+    let huge_depth = copy_scene_as(&ws, &scenes[0], os("huge_depth_0001"));
+    let huge_rle = copy_scene_as(&ws, &scenes[0], os("huge_rle_0001"));
+
+    for name in ["depth.png", "depth.npy"] {
+        let _ = std::fs::remove_file(huge_depth.join("input").join(name));
+    }
+    std::fs::write(
+        huge_depth.join("input/depth.npy"),
+        npy_claiming("(100000, 100000)", 1024),
+    )
+    .expect("write depth.npy");
+
+    let input = huge_rle.join("input");
+    let _ = std::fs::remove_file(input.join("masks.png"));
+    let _ = std::fs::remove_dir_all(input.join("masks"));
+    let mut instances: Value =
+        serde_json::from_slice(&std::fs::read(input.join("instances.json")).expect("read"))
+            .expect("json");
+    for instance in instances["instances"].as_array_mut().expect("array") {
+        instance["rle"] = serde_json::json!({"size": [100000, 100000], "counts": "0"});
+    }
+    std::fs::write(
+        input.join("instances.json"),
+        serde_json::to_vec_pretty(&instances).expect("json"),
+    )
+    .expect("write instances.json");
+
+    let started = Instant::now();
+    let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
+    let stderr = stderr_of(&out);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "two scenes fail, not abort: {stderr}"
+    );
+    assert!(!stderr.contains("panicked") && !stderr.contains("memory allocation"));
+    assert!(stderr.contains("4 scenes: 2 done"), "{stderr}");
+    assert!(stderr.contains("2 failed"), "{stderr}");
+    for part in [
+        "depth.npy",
+        "has shape [100000, 100000], 40000000000 bytes",
+        "instances.json",
+        "instances[0].rle: size [100000, 100000] has more than 268435456 pixels",
+    ] {
+        assert!(stderr.contains(part), "missing {part:?}: {stderr}");
+    }
+    assert!(started.elapsed() < DEADLINE);
+    for scene in &scenes {
+        let lifted = ws.join("scenes").join(scene).join("coarse/lift.json");
+        assert!(lifted.is_file(), "{scene} is lifted: {stderr}");
+    }
+    for bad in [&huge_depth, &huge_rle] {
+        assert!(!bad.join("coarse").exists(), "{}", bad.display());
+    }
+
+    // Control: the same copies with their inputs as the demo wrote them lift like the others.
+    for bad in [&huge_depth, &huge_rle] {
+        std::fs::remove_dir_all(bad).expect("remove");
+    }
+    copy_scene_as(&ws, &scenes[0], os("huge_depth_0001"));
+    copy_scene_as(&ws, &scenes[0], os("huge_rle_0001"));
+    let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr_of(&out));
+}
