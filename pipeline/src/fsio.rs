@@ -148,9 +148,42 @@ pub fn sweep_tmp_for(path: &Path) -> io::Result<()> {
         else {
             continue;
         };
-        let owner = rest.split('-').next().and_then(|p| p.parse::<u32>().ok());
-        let in_use = owner.is_some_and(|pid| pid == std::process::id() || process_running(pid));
-        if !in_use {
+        if !tmp_in_use(&rest) {
+            let _ = fs::remove_file(entry.path());
+        }
+    }
+    Ok(())
+}
+
+/// Whether the temporary file whose name continues with `rest` after [`TMP_MARK`]
+/// (`<pid>-<n>`) belongs to a process that may still be writing it.
+fn tmp_in_use(rest: &str) -> bool {
+    let owner = rest.split('-').next().and_then(|p| p.parse::<u32>().ok());
+    owner.is_some_and(|pid| pid == std::process::id() || process_running(pid))
+}
+
+/// [`sweep_tmp_for`] for every file of `dir` at once: removes the temporary files of dead
+/// writers, whatever file they were writing, in one listing of the folder. For a folder that
+/// takes one file a scene (a stage's markers of a table type: thousands of files), sweeping it
+/// once before the scenes costs one listing, where sweeping beside each file would list the
+/// folder once a scene.
+pub fn sweep_dead_tmp_in(dir: &Path) -> io::Result<()> {
+    let entries = match fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e),
+    };
+    for entry in entries {
+        let entry = entry?;
+        let file_name = entry.file_name();
+        let name = file_name.to_string_lossy();
+        let Some(rest) = name
+            .strip_prefix('.')
+            .and_then(|n| n.rfind(TMP_MARK).map(|at| &n[at + TMP_MARK.len()..]))
+        else {
+            continue;
+        };
+        if !tmp_in_use(rest) {
             let _ = fs::remove_file(entry.path());
         }
     }
@@ -432,6 +465,41 @@ mod tests {
             live.exists(),
             "a live writer's temporary file is left alone"
         );
+    }
+
+    #[test]
+    fn a_folder_sweep_removes_every_dead_writers_leftover_and_nothing_else() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let dead = dead_pid();
+        let strays: Vec<PathBuf> = ["a.json", "b.json", "name.with.dots.json"]
+            .iter()
+            .map(|n| dir.path().join(format!(".{n}{TMP_MARK}{dead}-3")))
+            .collect();
+        for stray in &strays {
+            fs::write(stray, b"half").expect("stray");
+        }
+        let live = dir
+            .path()
+            .join(format!(".a.json{TMP_MARK}{}-1", std::process::id()));
+        let kept = [
+            dir.path().join("a.json"),
+            // Not temporary names: no leading dot, or no mark.
+            dir.path().join(format!("a.json{TMP_MARK}{dead}-0")),
+            dir.path().join(".hidden.json"),
+            live.clone(),
+        ];
+        for file in &kept {
+            fs::write(file, b"keep").expect("write");
+        }
+        sweep_dead_tmp_in(dir.path()).expect("sweep");
+        for stray in &strays {
+            assert!(!stray.exists(), "{} is swept", stray.display());
+        }
+        for file in &kept {
+            assert!(file.exists(), "{} is left alone", file.display());
+        }
+        // A folder that does not exist has nothing to sweep.
+        sweep_dead_tmp_in(&dir.path().join("none")).expect("missing folder");
     }
 
     /// The pid of a process that has exited and been reaped.

@@ -129,6 +129,39 @@ fn only_temporary_files_of_dead_writers_are_swept() {
     );
     assert!(!dead.exists(), "a dead writer's leftover is swept");
     assert!(live.exists(), "a running writer's file is left alone");
+
+    // The markers' folder (a file a scene) is swept once a run, before the scenes: a killed
+    // run's half-written marker goes even when every scene is skipped.
+    let markers = first_marker_folder(dir.path());
+    let live = markers.join(format!(".x.json.mesa-tmp-{}-0", std::process::id()));
+    let dead = markers.join(format!(".x.json.mesa-tmp-{}-0", dead_pid()));
+    std::fs::write(&live, b"another run's half-written marker").expect("live");
+    std::fs::write(&dead, b"a killed run's marker").expect("dead");
+    let out = mesa()
+        .args(["graph", "--progress", "off"])
+        .arg(dir.path())
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("0 done") && stderr.contains("skipped"),
+        "{stderr}"
+    );
+    assert!(!dead.exists(), "a dead writer's marker is swept");
+    assert!(live.exists(), "a running writer's marker is left alone");
+}
+
+/// The folder of the graph stage's markers of the first table type.
+fn first_marker_folder(dataset: &std::path::Path) -> std::path::PathBuf {
+    let root = dataset.join(".mesa/markers/graph");
+    let mut folders: Vec<_> = std::fs::read_dir(&root)
+        .expect("markers")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.is_dir())
+        .collect();
+    folders.sort();
+    folders.remove(0)
 }
 
 #[test]
