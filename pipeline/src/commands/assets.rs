@@ -43,7 +43,7 @@ use serde::Serialize;
 use crate::cli::{DatasetStageArgs, Global};
 use crate::config::Config;
 use crate::exit::UsageError;
-use crate::fsio::{sha256_hex, sweep_tmp_for, write_atomic};
+use crate::fsio::{sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic};
 use crate::runner::{
     digest_of, DatasetReport, DatasetStage, Executor, Shard, StageContext, RUN_DIR,
 };
@@ -326,7 +326,6 @@ fn index_one(
         let target = dataset.join(&rel);
         // Compact: shapes are numbers, read by programs, and there are thousands of them.
         let bytes = serde_json::to_vec(&shapes).context("serialising shapes")?;
-        sweep_tmp_for(&target).with_context(|| format!("{}: sweeping", target.display()))?;
         write_atomic(&target, &bytes)
             .with_context(|| format!("{}: cannot write", target.display()))?;
         record.shapes = Some(ShapesRef {
@@ -402,6 +401,10 @@ fn index_uids(
     exec: &Executor<'_>,
     force: bool,
 ) -> anyhow::Result<Vec<Outcome>> {
+    // One file an asset: swept of dead writers' temp files once, not beside each file (a
+    // listing of the folder an asset, quadratic in the library).
+    let shapes = dataset.join(SHAPES_DIR);
+    sweep_dead_tmp_in(&shapes).with_context(|| format!("{}: sweeping", shapes.display()))?;
     exec.map("assets", uids, |uid| {
         index_one(
             dataset,
