@@ -133,33 +133,7 @@ pub fn sweep_tmp_for(path: &Path) -> io::Result<()> {
         return Ok(());
     };
     let prefix = format!(".{}{}", name.to_string_lossy(), TMP_MARK);
-    let entries = match fs::read_dir(dir) {
-        Ok(entries) => entries,
-        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
-        Err(e) => return Err(e),
-    };
-    for entry in entries {
-        let entry = entry?;
-        let file_name = entry.file_name();
-        let Some(rest) = file_name
-            .to_string_lossy()
-            .strip_prefix(&prefix)
-            .map(str::to_owned)
-        else {
-            continue;
-        };
-        if !tmp_in_use(&rest) {
-            let _ = fs::remove_file(entry.path());
-        }
-    }
-    Ok(())
-}
-
-/// Whether the temporary file whose name continues with `rest` after [`TMP_MARK`]
-/// (`<pid>-<n>`) belongs to a process that may still be writing it.
-fn tmp_in_use(rest: &str) -> bool {
-    let owner = rest.split('-').next().and_then(|p| p.parse::<u32>().ok());
-    owner.is_some_and(|pid| pid == std::process::id() || process_running(pid))
+    sweep_dead_tmp(dir, |file| file.strip_prefix(prefix.as_str()))
 }
 
 /// [`sweep_tmp_for`] for every file of `dir` at once: removes the temporary files of dead
@@ -168,6 +142,15 @@ fn tmp_in_use(rest: &str) -> bool {
 /// once before the scenes costs one listing, where sweeping beside each file would list the
 /// folder once a scene.
 pub fn sweep_dead_tmp_in(dir: &Path) -> io::Result<()> {
+    sweep_dead_tmp(dir, |file| {
+        file.strip_prefix('.')
+            .and_then(|n| n.rfind(TMP_MARK).map(|at| &n[at + TMP_MARK.len()..]))
+    })
+}
+
+/// Removes the files of `dir` that `owner_part` takes for temporary files (giving what follows
+/// [`TMP_MARK`] in their name, `<pid>-<n>`) and whose writer no longer runs.
+fn sweep_dead_tmp(dir: &Path, owner_part: impl Fn(&str) -> Option<&str>) -> io::Result<()> {
     let entries = match fs::read_dir(dir) {
         Ok(entries) => entries,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
@@ -176,14 +159,12 @@ pub fn sweep_dead_tmp_in(dir: &Path) -> io::Result<()> {
     for entry in entries {
         let entry = entry?;
         let file_name = entry.file_name();
-        let name = file_name.to_string_lossy();
-        let Some(rest) = name
-            .strip_prefix('.')
-            .and_then(|n| n.rfind(TMP_MARK).map(|at| &n[at + TMP_MARK.len()..]))
-        else {
+        let Some(rest) = owner_part(&file_name.to_string_lossy()).map(str::to_owned) else {
             continue;
         };
-        if !tmp_in_use(rest) {
+        let owner = rest.split('-').next().and_then(|p| p.parse::<u32>().ok());
+        let in_use = owner.is_some_and(|pid| pid == std::process::id() || process_running(pid));
+        if !in_use {
             let _ = fs::remove_file(entry.path());
         }
     }
