@@ -205,6 +205,17 @@ fn the_test_references_succeed_and_agree_with_check_and_their_graphs() {
         m.physics.colliding_pairs, m.physics.pairs, scene_pairs
     );
     assert!(m.physics.objects_unchecked == 0, "{:#?}", m.physics);
+    eprintln!(
+        "references: {} samples, success {}, graph precision {:.4} recall {:.4}, coverage {:.4}, \
+         implausible sizes {:.4}, CKL {:?}",
+        m.samples,
+        m.success_rate,
+        m.graph.precision,
+        m.graph.recall,
+        m.task_coverage.coverage,
+        m.size.share,
+        m.ckl_mean
+    );
     assert!(
         m.graph.precision >= 0.99 && m.graph.recall >= 0.99,
         "{:#?}",
@@ -245,6 +256,44 @@ fn the_test_references_succeed_and_agree_with_check_and_their_graphs() {
         Some("no_marker")
     );
     assert!(samples[2].success);
+    let page = std::fs::read_to_string(data.join("eval/broken/index.html")).expect("page");
+    assert!(page.contains("no: no_marker"), "the page flags the failure");
+
+    // The same bytes for one thread as for several.
+    let file = data.join("refs.jsonl");
+    let (_, one) = eval(data, &file, "refs_one_thread", &["--jobs", "1"]);
+    assert_eq!(one, eval(data, &file, "refs", &["--jobs", "3"]).1);
+    assert_eq!(
+        std::fs::read(data.join("eval/refs_one_thread/samples.jsonl")).expect("read"),
+        std::fs::read(data.join("eval/refs/samples.jsonl")).expect("read")
+    );
+
+    // --compare puts the runs side by side.
+    let table = ok(&[
+        "eval",
+        data.to_str().expect("utf-8"),
+        "--compare",
+        "refs,broken",
+    ]);
+    let rows: Vec<&str> = table
+        .lines()
+        .filter(|l| l.starts_with("| refs") || l.starts_with("| broken"))
+        .collect();
+    assert_eq!(rows.len(), 2, "{table}");
+    assert!(rows[0].contains("| 100.0 % |"), "{table}");
+    assert!(!rows[1].contains("| 100.0 % |"), "{table}");
+    assert!(data.join("eval/compare.md").is_file());
+    let missing = mesa()
+        .args([
+            "eval",
+            data.to_str().expect("utf-8"),
+            "--compare",
+            "refs,nobody",
+        ])
+        .output()
+        .expect("runs");
+    assert!(!missing.status.success());
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("nobody"));
 }
 
 /// The corruption of a rejected output, from how it differs from the chosen one.
@@ -290,6 +339,17 @@ fn each_dpo_corruption_moves_its_metric() {
         assert_eq!(mc.succeeded, chosen.len() as u64);
         assert_eq!(mr.succeeded, rejected.len() as u64);
         results.insert(*kind, (mc, mr));
+    }
+    for (kind, (c, r)) in &results {
+        eprintln!(
+            "{kind}: collision rate {:.4} → {:.4}, coverage {:.4} → {:.4}, graph F1 {:.4} → {:.4}",
+            c.physics.collision_rate,
+            r.physics.collision_rate,
+            c.task_coverage.coverage,
+            r.task_coverage.coverage,
+            c.graph.f1,
+            r.graph.f1
+        );
     }
     let (c, r) = &results["collision"];
     assert!(
@@ -554,8 +614,20 @@ fn fid_and_kid_come_from_feature_files_through_the_cli() {
             real.to_str().expect("utf-8"),
             "--generated-features",
             gen.to_str().expect("utf-8"),
+            "--render",
         ],
     );
+    // --render drew the scene and the page shows it.
+    let front = data.join("eval/features/render/0_front.png");
+    assert!(
+        std::fs::read(&front)
+            .expect("front view")
+            .starts_with(b"\x89PNG"),
+        "{}",
+        front.display()
+    );
+    let page = std::fs::read_to_string(data.join("eval/features/index.html")).expect("page");
+    assert!(page.contains("<img src=\"render/0_front.png\""), "{page}");
     let f = m.features.expect("features");
     // Same covariance, means 1 apart in 6 dimensions.
     assert!((f.fid - 6.0).abs() < 1e-6, "{}", f.fid);

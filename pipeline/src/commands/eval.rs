@@ -80,6 +80,10 @@ pub struct Args {
     /// Features of the model's renders (N × D `.npy`) for FID and KID.
     #[arg(long, value_name = "FILE", requires = "real_features")]
     pub generated_features: Option<PathBuf>,
+    /// Also draw each successful sample's scene (front and perspective views, `mesa render`'s
+    /// renderer and `[render]` settings) into eval/<name>/render/ and show them on the page.
+    #[arg(long)]
+    pub render: bool,
     /// Print the metrics of earlier runs side by side (names, comma-separated) and write
     /// DATASET/eval/compare.md.
     #[arg(long, value_name = "A,B,...")]
@@ -227,8 +231,20 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
         write_atomic(&path, &to_sorted_pretty(scene)?)
             .with_context(|| format!("{}: cannot write", path.display()))?;
     }
+    let pictures = if args.render {
+        render_samples(
+            &dataset,
+            &resolved.config.render,
+            &out_dir,
+            &samples,
+            &scenes,
+            &pool,
+        )?
+    } else {
+        BTreeMap::new()
+    };
     let page_path = out_dir.join("index.html");
-    write_atomic(&page_path, page(&metrics, &samples).as_bytes())
+    write_atomic(&page_path, page(&metrics, &samples, &pictures).as_bytes())
         .with_context(|| format!("{}: cannot write", page_path.display()))?;
     if !global.quiet {
         println!("{}", summary(&metrics));
@@ -240,6 +256,59 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
         );
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Draws the front and perspective views of every successful sample's scene (objects without
+/// an asset left out) into `out_dir/render/<id>_<view>.png`. Returns per sample id the
+/// pictures' paths relative to `out_dir`, or why the scene could not be drawn (one failure
+/// never stops the others).
+fn render_samples(
+    dataset: &Path,
+    config: &mesa_stages::render::RenderConfig,
+    out_dir: &Path,
+    samples: &[EvalSample],
+    scenes: &[Option<DatasetLayout>],
+    pool: &rayon::ThreadPool,
+) -> anyhow::Result<BTreeMap<String, Result<Vec<String>, String>>> {
+    let renderer = crate::commands::render::RenderStage::new();
+    let render_dir = out_dir.join("render");
+    match std::fs::remove_dir_all(&render_dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => bail!(
+            "{}: cannot remove the earlier renders: {e}",
+            render_dir.display()
+        ),
+    }
+    let drawn: Vec<(String, Result<Vec<String>, String>)> = pool.install(|| {
+        samples
+            .par_iter()
+            .zip(scenes.par_iter())
+            .filter_map(|(sample, scene)| {
+                let mut scene = scene.clone()?;
+                scene.objects.retain(|o| !o.retrieved_uid.is_empty());
+                let stem = file_stem_of(&sample.id);
+                let result = renderer
+                    .render_layout(dataset, config, &scene)
+                    .map_err(|e| format!("{e:#}"))
+                    .and_then(|(views, _)| {
+                        let mut files = Vec::new();
+                        for view in views
+                            .iter()
+                            .filter(|v| v.name == "front" || v.name == "perspective")
+                        {
+                            let rel = format!("render/{stem}_{}.png", view.name);
+                            write_atomic(&out_dir.join(&rel), &view.png)
+                                .map_err(|e| format!("{rel}: cannot write: {e}"))?;
+                            files.push(rel);
+                        }
+                        Ok(files)
+                    });
+                Some((sample.id.clone(), result))
+            })
+            .collect()
+    });
+    Ok(drawn.into_iter().collect())
 }
 
 /// A sample id as a file name: characters other than ASCII letters, digits, `-`, `_` and `.`
@@ -603,7 +672,11 @@ fn escape(text: &str) -> String {
 }
 
 /// `eval/<name>/index.html`: the numbers, then one row per sample with its flags.
-fn page(m: &EvalMetrics, samples: &[EvalSample]) -> String {
+fn page(
+    m: &EvalMetrics,
+    samples: &[EvalSample],
+    pictures: &BTreeMap<String, Result<Vec<String>, String>>,
+) -> String {
     let mut html = String::new();
     let _ = write!(
         html,
@@ -613,7 +686,7 @@ fn page(m: &EvalMetrics, samples: &[EvalSample]) -> String {
          <h1>mesa eval: {name}</h1>\n<pre>{summary}</pre>\n<table><tr><th>id</th><th>table \
          type</th><th>success</th><th>objects</th><th>collisions</th><th>floating</th>\
          <th>outside zone</th><th>graph (written/extracted/matched)</th><th>missing task \
-         types</th><th>implausible sizes</th></tr>\n",
+         types</th><th>implausible sizes</th><th>views</th></tr>\n",
         name = escape(&m.name),
         summary = escape(&summary(m))
     );
@@ -627,7 +700,7 @@ fn page(m: &EvalMetrics, samples: &[EvalSample]) -> String {
         let _ = writeln!(
             html,
             "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}/{}/{}</td><td>{}</td><td>{}</td></tr>",
+             <td>{}/{}/{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             if flagged { " class=\"bad\"" } else { "" },
             escape(&s.id),
             escape(s.table_type.as_deref().unwrap_or("")),
@@ -644,6 +717,14 @@ fn page(m: &EvalMetrics, samples: &[EvalSample]) -> String {
             s.graph_counts[2],
             escape(&s.missing_task_types.join(", ")),
             escape(&s.implausible_size.join("; ")),
+            match pictures.get(&s.id) {
+                None => String::new(),
+                Some(Ok(files)) => files
+                    .iter()
+                    .map(|f| format!("<img src=\"{}\" width=\"192\">", escape(f)))
+                    .collect::<String>(),
+                Some(Err(why)) => escape(&format!("not drawn: {why}")),
+            },
         );
     }
     html.push_str("</table></body></html>\n");
