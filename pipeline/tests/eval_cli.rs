@@ -40,13 +40,18 @@ fn ok(args: &[&str]) -> String {
     stdout
 }
 
-/// The demo dataset, built once for every test of this file (a temporary folder kept for the
-/// process; the split puts most scenes in test and dpo).
+/// The demo dataset, built once for every test of this file under cargo's temporary folder
+/// for tests (`target/tmp/eval_cli/`, rebuilt by each run; the split puts most scenes in test
+/// and dpo).
 fn dataset() -> &'static Path {
-    static DIR: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
-    &DIR.get_or_init(|| {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let path = dir.path().join("demo");
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let root = Path::new(env!("CARGO_TARGET_TMPDIR")).join("eval_cli");
+        if root.exists() {
+            std::fs::remove_dir_all(&root).expect("remove the last run's dataset");
+        }
+        std::fs::create_dir_all(&root).expect("mkdir");
+        let path = root.join("demo");
         let p = path.to_str().expect("utf-8");
         ok(&["demo", p, "--scenes", "6", "--seed", "5"]);
         let config = path.join("mesa.toml");
@@ -62,9 +67,8 @@ fn dataset() -> &'static Path {
             "mesa run: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        (dir, path)
+        path
     })
-    .1
 }
 
 /// `(id, output)` pairs.
@@ -393,7 +397,7 @@ fn broken_mesatask_inference_folders_are_failures_with_reasons() {
     };
     std::fs::create_dir_all(out.join("task_000")).expect("mkdir");
     std::fs::write(
-        out.join("task_000/task_info.json"),
+        out.join("task_000/office_task.json"),
         serde_json::to_string(&info).expect("json"),
     )
     .expect("write");
@@ -442,7 +446,8 @@ fn broken_mesatask_inference_folders_are_failures_with_reasons() {
     .map(|(k, v)| (k.to_owned(), v))
     .collect();
     assert_eq!(m.failures, expected);
-    // The good sample read its task info from the task folder.
+    // The good sample read its task info from the task folder's only JSON file, as MesaTask's
+    // inference.py takes it (any name).
     assert_eq!(m.task_coverage.samples, 1);
 }
 

@@ -63,7 +63,8 @@ pub struct Args {
     #[arg(long, value_name = "FILE", conflicts_with_all = ["mesatask", "compare"])]
     pub outputs: Option<PathBuf>,
     /// MesaTask's inference folder instead: `task_NNN/scene_NNN/scene_layout.txt` (the model
-    /// output) with `task_info.json` beside it or in `task_NNN/`; each scene is a sample.
+    /// output) with `task_info.json` beside it or in `task_NNN/` (or the task folder's only
+    /// `.json` file, as MesaTask's inference.py reads it); each scene is a sample.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["outputs", "compare"])]
     pub mesatask: Option<PathBuf>,
     /// The prompts, relative to the dataset or absolute: alpaca records (`records/test.json`,
@@ -570,7 +571,8 @@ fn read_mesatask_dir(dir: &Path) -> anyhow::Result<Vec<Prompt>> {
             );
             let info_path = [scene.join("task_info.json"), task.join("task_info.json")]
                 .into_iter()
-                .find(|p| p.is_file());
+                .find(|p| p.is_file())
+                .or_else(|| only_json_in(&task));
             let task_info = info_path.and_then(|p| {
                 read_bounded(&p, JSON_LIMIT)
                     .ok()
@@ -588,6 +590,21 @@ fn read_mesatask_dir(dir: &Path) -> anyhow::Result<Vec<Prompt>> {
         }
     }
     Ok(prompts)
+}
+
+/// The one `.json` file of a folder (MesaTask's `inference.py` takes the task info file of
+/// any name from the task folder), or None when there are none or several.
+fn only_json_in(dir: &Path) -> Option<PathBuf> {
+    let files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.is_file() && p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    match files.as_slice() {
+        [one] => Some(one.clone()),
+        _ => None,
+    }
 }
 
 fn read_features(path: &Path) -> anyhow::Result<Features> {
