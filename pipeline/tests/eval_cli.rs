@@ -651,3 +651,81 @@ fn fid_and_kid_come_from_feature_files_through_the_cli() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.npy"));
 }
+
+/// An output with its layout JSON changed by `edit`.
+fn edited(output: &str, edit: impl Fn(&mut Value)) -> String {
+    let at = output.find(FINAL_ANSWER_MARKER).expect("marker");
+    let (head, tail) = output.split_at(at);
+    let mut layout: Value =
+        serde_json::from_str(&tail[FINAL_ANSWER_MARKER.len()..]).expect("layout JSON");
+    edit(&mut layout);
+    format!("{head}{FINAL_ANSWER_MARKER}{layout}")
+}
+
+#[test]
+fn oversized_objects_and_foreign_categories_move_size_and_ckl() {
+    let data = dataset();
+    let tests: Vec<SftRecord> = read(&data.join("records/test.json"));
+    let refs: Outputs = tests
+        .iter()
+        .enumerate()
+        .map(|(i, r)| (i.to_string(), r.output.clone()))
+        .collect();
+    let file = data.join("sizes_refs.jsonl");
+    write_outputs(&file, &refs);
+    let (base, _) = eval(data, &file, "sizes_refs", &[]);
+    assert_eq!(base.size.implausible, 0, "{:?}", base.size);
+    assert!(base.size.objects > 0);
+
+    // The first object of every output five times its size.
+    let grown: Outputs = refs
+        .iter()
+        .map(|(id, o)| {
+            let out = edited(o, |layout| {
+                let size = &mut layout["objects"][0]["size"];
+                for v in size.as_array_mut().expect("size") {
+                    *v = json!(v.as_f64().expect("number") * 5.0);
+                }
+            });
+            (id.clone(), out)
+        })
+        .collect();
+    let file = data.join("sizes_grown.jsonl");
+    write_outputs(&file, &grown);
+    let (m, samples) = eval(data, &file, "sizes_grown", &[]);
+    assert_eq!(m.size.implausible, refs.len() as u64, "{:?}", m.size);
+    for s in &samples {
+        let first = &s.objects[0].instance;
+        assert!(
+            s.implausible_size
+                .iter()
+                .any(|w| w.starts_with(first.as_str())),
+            "{:?}",
+            s.implausible_size
+        );
+    }
+
+    // Every object renamed to one category the dataset has little of: CKL grows.
+    let renamed: Outputs = refs
+        .iter()
+        .map(|(id, o)| {
+            let out = edited(o, |layout| {
+                for (i, object) in layout["objects"]
+                    .as_array_mut()
+                    .expect("objects")
+                    .iter_mut()
+                    .enumerate()
+                {
+                    object["instance"] = json!(format!("widget_{i}"));
+                }
+            });
+            (id.clone(), out)
+        })
+        .collect();
+    let file = data.join("ckl_renamed.jsonl");
+    write_outputs(&file, &renamed);
+    let (m, _) = eval(data, &file, "ckl_renamed", &[]);
+    let (before, after) = (base.ckl_mean.expect("ckl"), m.ckl_mean.expect("ckl"));
+    eprintln!("CKL: references {before:.4}, renamed {after:.4}");
+    assert!(after > before + 1.0, "CKL {before} → {after}");
+}
