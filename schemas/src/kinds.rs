@@ -8,6 +8,7 @@ use serde_json::Value;
 
 use crate::annotation::*;
 use crate::artifacts::*;
+use crate::eval::{EvalMetrics, EvalSample, EVAL_METRICS_SCHEMA, EVAL_SAMPLE_SCHEMA};
 use crate::layout::{DatasetLayout, LAYOUT_SCHEMA};
 use crate::llm::{GalleryRecord, LlmLayout, TaskInfo};
 use crate::render::{
@@ -186,6 +187,22 @@ pub fn kinds() -> &'static [Kind] {
                 form: FileForm::Json,
                 summary: "qa/check.json (collisions, floating, zone violations, settling)",
                 generate: schema_of::<CheckArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "eval-metrics",
+                schema_id: Some(EVAL_METRICS_SCHEMA),
+                form: FileForm::Json,
+                summary: "eval/<name>/metrics.json (the benchmark's numbers, `mesa eval`)",
+                generate: schema_of::<EvalMetrics>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "eval-sample",
+                schema_id: Some(EVAL_SAMPLE_SCHEMA),
+                form: FileForm::JsonLines,
+                summary: "eval/<name>/samples.jsonl (one evaluated sample per line, `mesa eval`)",
+                generate: schema_of::<EvalSample>,
                 semantic: no_semantics,
             },
             Kind {

@@ -19,6 +19,7 @@
 pub mod annotation;
 pub mod artifacts;
 pub mod convert;
+pub mod eval;
 pub mod json;
 pub mod kinds;
 pub mod layout;

@@ -111,6 +111,11 @@ impl ShapeLibrary {
         if uid.is_empty() {
             return Err("no retrieved_uid (run `mesa retrieve` and `mesa place`)".to_owned());
         }
+        self.shape_of_uid(dataset, uid)
+    }
+
+    /// The collision shape of an asset, or why there is none.
+    pub fn shape_of_uid(&self, dataset: &Path, uid: &str) -> Result<Arc<AssetShape>, String> {
         let mut cache = self
             .shapes
             .lock()

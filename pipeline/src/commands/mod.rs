@@ -10,6 +10,7 @@
 pub mod assets;
 pub mod check;
 pub mod demo;
+pub mod eval;
 pub mod files;
 pub mod graph;
 pub mod import;
@@ -132,6 +133,11 @@ commands! {
     /// {layout.json, front.png} from each scene's refined (or settled) layout and its front
     /// render, and Asset_annotation.json for the assets they use.
     Release(release::Args) => release::run,
+    /// Evaluate a task-to-scene model on the dataset's test prompts (docs/eval.md): success
+    /// rate, collisions on meshes, CKL, scene-graph self-consistency, task coverage, size
+    /// plausibility, FID/KID from feature files (eval/<name>/metrics.json, samples.jsonl,
+    /// index.html); --compare puts runs side by side.
+    Eval(eval::Args) => eval::run,
     /// Read a released dataset (the MesaTask-10K tree) into a mesa dataset whose scenes enter
     /// at the refined stage (docs/import.md)
     Import(import::Args) => import::run,

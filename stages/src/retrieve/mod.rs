@@ -458,15 +458,18 @@ fn by_final(candidates: &mut [RetrievalCandidate]) {
     });
 }
 
-/// Retrieves every lifted instance of a scene; `queries[i]` is the query of
-/// `lift.instances[i]`.
-pub fn retrieve_scene(
-    lift: &LiftArtifact,
+/// Retrieves an asset for every instance, MesaTask's recipe (the module's steps 1 to 5 and the
+/// fallback); `queries[i]` is the query of `instances[i]`, whose `size_cm` is the target size.
+/// Only `instance`, `mask_id`, `label`, `description` and `size_cm` of an instance are read
+/// (`mesa eval` retrieves for a model's layout objects this way). Returns the instances in
+/// order and the warnings.
+pub fn retrieve_instances(
+    instances: &[LiftedInstance],
     queries: &[Query],
     scorer: &TextScorer,
     catalog: &Catalog,
     config: &RetrieveConfig,
-) -> Result<RetrievalOutput, RetrieveError> {
+) -> Result<(Vec<RetrievedInstance>, Vec<String>), RetrieveError> {
     config
         .check()
         .map_err(|e| RetrieveError::Config(e.to_string()))?;
@@ -478,14 +481,14 @@ pub fn retrieve_scene(
                 .to_owned(),
         ));
     }
-    if queries.len() != lift.instances.len() {
+    if queries.len() != instances.len() {
         return Err(RetrieveError::Config(format!(
             "internal error: {} queries for {} instances",
             queries.len(),
-            lift.instances.len()
+            instances.len()
         )));
     }
-    for (instance, query) in lift.instances.iter().zip(queries) {
+    for (instance, query) in instances.iter().zip(queries) {
         if let Some(problem) = scorer.check_query(query) {
             return Err(RetrieveError::Instance {
                 instance: instance.instance.clone(),
@@ -497,8 +500,8 @@ pub fn retrieve_scene(
     let refs: Vec<&Query> = queries.iter().collect();
     let ranked = scorer.top_k(&refs, k);
     let mut warnings = Vec::new();
-    let mut out = Vec::with_capacity(lift.instances.len());
-    for ((instance, query), top) in lift.instances.iter().zip(queries).zip(ranked) {
+    let mut out = Vec::with_capacity(instances.len());
+    for ((instance, query), top) in instances.iter().zip(queries).zip(ranked) {
         let target = instance.size_cm.0;
         let mut candidates: Vec<RetrievalCandidate> = top
             .iter()
@@ -571,6 +574,20 @@ pub fn retrieve_scene(
             fallback: fell_back,
         });
     }
+    Ok((out, warnings))
+}
+
+/// Retrieves every lifted instance of a scene; `queries[i]` is the query of
+/// `lift.instances[i]`.
+pub fn retrieve_scene(
+    lift: &LiftArtifact,
+    queries: &[Query],
+    scorer: &TextScorer,
+    catalog: &Catalog,
+    config: &RetrieveConfig,
+) -> Result<RetrievalOutput, RetrieveError> {
+    let (out, warnings) = retrieve_instances(&lift.instances, queries, scorer, catalog, config)?;
+    let uids = scorer.uids();
     Ok(RetrievalOutput {
         artifact: RetrievalArtifact {
             schema: RETRIEVAL_SCHEMA.to_owned(),

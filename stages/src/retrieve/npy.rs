@@ -108,6 +108,42 @@ pub fn read_matrix(path: &Path) -> Result<Matrix, NpyError> {
 /// Parses the bytes of a `.npy` file holding a 2-D `<f2`/`<f4` array in C order (a 1-D array
 /// is one row).
 pub fn parse_matrix(bytes: &[u8]) -> Result<Matrix, NpyError> {
+    let (rows, cols, width, body) = parse_body(bytes, false)?;
+    let data = if width == 2 {
+        body.chunks_exact(2)
+            .map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32())
+            .collect()
+    } else {
+        body.chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect()
+    };
+    Ok(Matrix { rows, cols, data })
+}
+
+/// Parses the bytes of a `.npy` file holding a 2-D `<f2`, `<f4` or `<f8` array in C order into
+/// f64 values (what `mesa eval` reads feature files with): `(rows, cols, values)`.
+pub fn parse_matrix_f64(bytes: &[u8]) -> Result<(usize, usize, Vec<f64>), NpyError> {
+    let (rows, cols, width, body) = parse_body(bytes, true)?;
+    let data = match width {
+        2 => body
+            .chunks_exact(2)
+            .map(|b| f64::from(half::f16::from_le_bytes([b[0], b[1]]).to_f32()))
+            .collect(),
+        4 => body
+            .chunks_exact(4)
+            .map(|b| f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])))
+            .collect(),
+        _ => body
+            .chunks_exact(8)
+            .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
+            .collect(),
+    };
+    Ok((rows, cols, data))
+}
+
+/// The shape, element width and data bytes of a `.npy` file (float64 accepted when `wide`).
+fn parse_body(bytes: &[u8], wide: bool) -> Result<(usize, usize, usize, &[u8]), NpyError> {
     if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
         return Err(NpyError::NotNpy);
     }
@@ -143,6 +179,7 @@ pub fn parse_matrix(bytes: &[u8]) -> Result<Matrix, NpyError> {
     let width = match descr {
         "<f2" | "|f2" => 2,
         "<f4" => 4,
+        "<f8" if wide => 8,
         other => return Err(NpyError::Dtype(other.to_owned())),
     };
     if field("fortran_order")?.starts_with("True") {
@@ -180,16 +217,7 @@ pub fn parse_matrix(bytes: &[u8]) -> Result<Matrix, NpyError> {
             needed,
         });
     }
-    let data = if width == 2 {
-        body.chunks_exact(2)
-            .map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32())
-            .collect()
-    } else {
-        body.chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect()
-    };
-    Ok(Matrix { rows, cols, data })
+    Ok((rows, cols, width, body))
 }
 
 /// The bytes of a `.npy` file of a 2-D array (float32, or float16 when `half` is set), as
