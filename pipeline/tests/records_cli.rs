@@ -118,15 +118,16 @@ fn check_sft<'a>(dir: &Path, records: impl IntoIterator<Item = &'a SftRecord>) {
         assert!(parsed.dropped_objects.is_empty());
         let scene = scene_of(&layouts, &parsed.layout);
         assert_eq!(parsed.layout, layouts[scene], "{scene}");
-        let graph = std::fs::read_to_string(
-            files
-                .keys()
-                .find(|k| k.contains(scene) && k.ends_with("graph/graph.txt"))
-                .map(|k| dir.join(k))
-                .expect("graph.txt"),
-        )
-        .expect("read");
-        assert_eq!(parsed.graph_lines, graph.lines().collect::<Vec<_>>());
+        // The graph lines are those of the layout as written (rounded): graph.txt's when no
+        // object sits on a band's edge.
+        let graph_json = files
+            .keys()
+            .find(|k| k.contains(scene) && k.ends_with("graph/graph.json"))
+            .expect("graph.json");
+        assert_eq!(
+            parsed.graph_lines,
+            graph_of(&dir.join(graph_json), &parsed.layout)
+        );
         // The instruction is the prompt file; the input the task info with the layout's zones.
         assert_eq!(record.instruction, instruction);
         let input: Value = serde_json::from_str(&record.input).expect("input JSON");
@@ -685,4 +686,119 @@ fn scenes_whose_check_failed_are_left_out_and_counted_unless_kept() {
     let stderr = ok(&["records", "--progress", "off"], dir.path());
     assert!(stderr.contains("records: 7 scenes"), "{stderr}");
     assert!(!stderr.contains("left out"), "{stderr}");
+}
+
+/// The y of an object, near the back band's edge of `zone`, whose band differs before and
+/// after rounding to 0.1 cm (none when the edge falls on a rounding tie).
+fn band_flipping_y(zone: [f64; 4]) -> Option<f64> {
+    let back = |y: f64| (y - zone[2]) / (zone[3] - zone[2]) > 0.85;
+    let edge = zone[2] + 0.85 * (zone[3] - zone[2]);
+    (-49..=49)
+        .map(|k| edge + f64::from(k) * 0.001)
+        .find(|y| back(*y) != back(mesa_stages::records::round_to(*y, 1)))
+}
+
+/// A record teaches the scene graph of the layout it writes (rounded to 0.1 cm), not that of
+/// graph/graph.txt (the unrounded layout): an object on a band's edge, where the rounding
+/// flips its `is at` band, gets the band of its rounded position, so a model's graph and its
+/// layout agree (`mesa eval`'s self-consistency of the dataset's own references is 1).
+#[test]
+fn the_records_graph_is_that_of_the_layout_they_write() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    common::gallery_dataset(dir.path());
+    std::fs::write(
+        dir.path().join("mesa.toml"),
+        "[records.split]\ntrain = 0.6\ndpo = 0.25\ntest = 0.15\n",
+    )
+    .expect("config");
+    // Every scene's first object onto its zone's back edge, where rounding flips the band.
+    let mut moved = 0;
+    for (rel, _) in common::all_files(dir.path()) {
+        if !rel.ends_with("refined/layout.json") {
+            continue;
+        }
+        let path = dir.path().join(&rel);
+        let mut layout: Value = read(&path);
+        let zone: [f64; 4] =
+            serde_json::from_value(layout["item_placement_zone"].clone()).expect("the zone");
+        let Some(y) = band_flipping_y(zone) else {
+            continue;
+        };
+        layout["objects"][0]["position"][1] = json!(y);
+        std::fs::write(&path, serde_json::to_vec_pretty(&layout).expect("json")).expect("write");
+        moved += 1;
+    }
+    assert!(moved >= 5, "{moved} scenes with an object on the edge");
+    ok(&["graph", "--progress", "off"], dir.path());
+    ok(&["tasks", "--progress", "off"], dir.path());
+    ok(&["records", "--progress", "off"], dir.path());
+
+    let records = dir.path().join("records");
+    let mut outputs: Vec<String> = Vec::new();
+    for file in ["sft.json", "test.json"] {
+        let sft: Vec<SftRecord> = read(&records.join(file));
+        outputs.extend(sft.into_iter().map(|r| r.output));
+    }
+    let dpo: Vec<DpoRecord> = read(&records.join("dpo.json"));
+    outputs.extend(dpo.into_iter().map(|r| r.chosen));
+    let files = common::all_files(dir.path());
+    let mut flipped = BTreeSet::new();
+    for output in &outputs {
+        let parsed = parse_model_output(output).expect("a success");
+        let name = &parsed.layout.objects[0].instance;
+        // The scene: the one whose graph.json names the same objects in the same order.
+        let (graph_json, _): (String, Value) = files
+            .keys()
+            .filter(|k| k.ends_with("graph/graph.json"))
+            .map(|k| (k.clone(), read::<Value>(&dir.path().join(k))))
+            .find(|(_, g)| {
+                let names: Vec<&str> = g["nodes"]
+                    .as_array()
+                    .expect("nodes")
+                    .iter()
+                    .map(|n| n["instance"].as_str().expect("instance"))
+                    .collect();
+                names
+                    == parsed
+                        .layout
+                        .objects
+                        .iter()
+                        .map(|o| o.instance.as_str())
+                        .collect::<Vec<_>>()
+            })
+            .expect("the scene of the record");
+        let own = graph_of(&dir.path().join(&graph_json), &parsed.layout);
+        assert_eq!(parsed.graph_lines, own, "{graph_json}: {name}");
+        // The control: graph.txt, of the unrounded layout, puts the moved object elsewhere.
+        let txt = std::fs::read_to_string(dir.path().join(graph_json.replace(".json", ".txt")))
+            .expect("graph.txt");
+        let txt: Vec<String> = txt.lines().map(str::to_owned).collect();
+        if txt != own {
+            flipped.insert(graph_json);
+        }
+    }
+    assert!(
+        flipped.len() >= 5,
+        "graph.txt differs from the records' graph in {} scenes",
+        flipped.len()
+    );
+}
+
+/// The scene-graph lines of `layout` with the containers of the scene's graph.json.
+fn graph_of(graph_json: &Path, layout: &LlmLayout) -> Vec<String> {
+    use mesa_stages::graph::{extract_graph, GraphOptions, GraphScene};
+    let graph: Value = read(graph_json);
+    let containers: Vec<bool> = graph["nodes"]
+        .as_array()
+        .expect("nodes")
+        .iter()
+        .map(|n| n["container"].as_bool().expect("container"))
+        .collect();
+    extract_graph(
+        &GraphScene::from_llm(layout),
+        &containers,
+        &GraphOptions::default(),
+    )
+    .expect("graph")
+    .triplet_lines()
 }

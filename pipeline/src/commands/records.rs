@@ -24,7 +24,7 @@ use mesa_schemas::artifacts::{
     SPLIT_SCHEMA,
 };
 use mesa_schemas::json::to_sorted_pretty;
-use mesa_stages::graph::GraphOptions;
+use mesa_stages::graph::{extract_graph, GraphOptions, GraphScene};
 use mesa_stages::records::split::{assign, Split};
 use mesa_stages::records::write::{
     dataset_info, JsonArrayWriter, JsonLinesWriter, DPO_FILE, SFT_FILE, TEST_FILE, TRL_DPO_FILE,
@@ -350,11 +350,20 @@ fn build_scene(scene: &Scene, split: Split, shared: &Shared<'_>) -> Result<Scene
     } else {
         Collider::Boxes
     };
+    let layout = round_layout(&docs.layout, shared.records.decimals);
+    let containers: Vec<bool> = docs.graph.nodes.iter().map(|n| n.container).collect();
+    // The scene graph of the layout as the record writes it (rounded), not of graph/graph.txt's
+    // unrounded one: an object on the edge of a position band (y = 55.33 of a 65.08 cm zone is
+    // back_middle, 55.3 of 65.1 is center) would otherwise teach a graph its own layout
+    // contradicts. The corrupted completions are made the same way.
+    let graph_lines = extract_graph(&GraphScene::from_llm(&layout), &containers, &shared.graph)
+        .map_err(|e| format!("the scene graph of the rounded layout: {e}"))?
+        .triplet_lines();
     let input = SceneRecordsInput {
         scene_id: scene.scene_id.clone(),
-        layout: round_layout(&docs.layout, shared.records.decimals),
-        graph_lines: docs.graph_lines,
-        containers: docs.graph.nodes.iter().map(|n| n.container).collect(),
+        layout,
+        graph_lines,
+        containers,
         tasks,
         collider,
     };
