@@ -34,6 +34,7 @@ pub mod annotations;
 pub mod assets;
 pub mod check;
 pub mod demo;
+pub mod export;
 pub mod glb_read;
 pub mod glb_write;
 pub mod gltf_frames;

@@ -107,6 +107,12 @@ pub mod scene {
     pub const IMPORT_NOTES: &str = "imported/import.json";
     /// The released scene's `front.png`, kept as its reference picture (`mesa import`).
     pub const IMPORT_FRONT: &str = "imported/front.png";
+    /// The simulator export's folder (`mesa export`).
+    pub const SIM_DIR: &str = "sim";
+    /// The simulator export's manifest.
+    pub const EXPORT_MANIFEST: &str = "sim/export.json";
+    /// The MJCF export: `scene.xml` and `meshes/`.
+    pub const MJCF_DIR: &str = "sim/mjcf";
     /// The demo's true layout.
     pub const TRUTH_LAYOUT: &str = "truth/layout.json";
     /// The demo's true instances.

@@ -1,0 +1,420 @@
+//! `mesa export` end to end on demo datasets, checked with the real simulator.
+//!
+//! - Without Python: the manifest validates, the bytes are the same when exported again, a
+//!   rerun skips, and a bad `[export]` setting is a usage error naming its key.
+//! - With MuJoCo (`MESA_PYTHON`, else the repository's `.venv-tools`; SKIPPED without it, a
+//!   failure under `MESA_REQUIRE_TOOLS`): every exported MJCF loads with one body per object,
+//!   named its instance, and one collision geom per convex part; 2 s of simulation keep the
+//!   settled scenes still, while the coarse layouts and a deliberately sunk object move (the
+//!   controls); an apple dropped into an exported bowl stays in its cavity, and sits on top
+//!   when the bowl is exported as a single convex hull (the control).
+
+mod common;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use common::{mesa, read_json, scene_dirs};
+use mesa_schemas::artifacts::{AssetIndexArtifact, ExportArtifact};
+use serde_json::{json, Value};
+
+fn ok(args: &[&str], dir: &Path) -> String {
+    let out = mesa().args(args).arg(dir).output().expect("runs");
+    assert!(
+        out.status.success(),
+        "mesa {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr)
+}
+
+/// A demo dataset of `scenes` scenes run through `mesa run`.
+fn demo(root: &Path, scenes: u32, seed: u64) -> PathBuf {
+    let dir = root.join(format!("seed{seed}"));
+    mesa()
+        .args([
+            "demo",
+            "--scenes",
+            &scenes.to_string(),
+            "--seed",
+            &seed.to_string(),
+            "-q",
+        ])
+        .arg(&dir)
+        .assert()
+        .success();
+    ok(&["run", "--progress", "off", "-q"], &dir);
+    dir
+}
+
+/// The sim/ files of every scene, by path.
+fn sim_files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    common::all_files(dir)
+        .into_iter()
+        .filter(|(k, _)| k.contains("/sim/"))
+        .collect()
+}
+
+#[test]
+fn export_writes_valid_deterministic_files_and_skips_when_done() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("seed3");
+    mesa()
+        .args(["demo", "--scenes", "2", "--seed", "3", "-q"])
+        .arg(&dir)
+        .assert()
+        .success();
+    for stage in ["assets", "lift", "retrieve", "place"] {
+        ok(&[stage, "--progress", "off"], &dir);
+    }
+    let first = ok(&["export", "--layout", "coarse", "--progress", "off"], &dir);
+    assert!(first.contains("export summary: 2 scenes"), "{first}");
+    let files = sim_files(&dir);
+    assert!(!files.is_empty());
+    for scene in scene_dirs(&dir) {
+        let manifest = scene.join("sim/export.json");
+        mesa()
+            .args(["validate", "--kind", "export"])
+            .arg(&manifest)
+            .assert()
+            .success();
+        let artifact: ExportArtifact = read_json(&manifest);
+        assert_eq!(artifact.formats, ["mjcf"]);
+        for file in &artifact.files {
+            assert!(scene.join(file).is_file(), "{file} listed but missing");
+        }
+        let xml = std::fs::read_to_string(scene.join("sim/mjcf/scene.xml")).expect("xml");
+        for object in &artifact.objects {
+            assert!(xml.contains(&format!("<body name=\"{}\"", object.instance)));
+            assert!(object.mass_kg > 0.0 && object.collision_parts > 0);
+        }
+    }
+    // A rerun skips; a forced one writes the same bytes.
+    let again = ok(&["export", "--layout", "coarse", "--progress", "off"], &dir);
+    assert!(again.contains("2 skipped"), "{again}");
+    ok(
+        &[
+            "export",
+            "--layout",
+            "coarse",
+            "--force",
+            "--progress",
+            "off",
+        ],
+        &dir,
+    );
+    assert!(sim_files(&dir) == files, "a forced export changed bytes");
+
+    // A bad setting is a usage error that names its key.
+    std::fs::write(dir.join("mesa.toml"), "[export]\ndensity_kg_m3 = -1.0\n").expect("toml");
+    let out = mesa()
+        .args(["export", "--layout", "coarse", "--progress", "off"])
+        .arg(&dir)
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("[export] density_kg_m3"));
+}
+
+/// A Python with the modules, or None (SKIPPED; a failure under MESA_REQUIRE_TOOLS).
+fn python_with(modules: &str, what: &str) -> Option<PathBuf> {
+    let candidates = [
+        std::env::var_os("MESA_PYTHON").map(PathBuf::from),
+        Some(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.venv-tools/bin/python")),
+    ];
+    let found = candidates.into_iter().flatten().find(|p| {
+        std::process::Command::new(p)
+            .args(["-c", &format!("import {modules}")])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    });
+    if found.is_none() {
+        assert!(
+            std::env::var_os("MESA_REQUIRE_TOOLS").is_none(),
+            "{what} needs MESA_PYTHON with {modules} (scripts/test.sh installs it) and \
+             MESA_REQUIRE_TOOLS is set"
+        );
+        eprintln!("SKIPPED: {what} (set MESA_PYTHON to a Python with {modules})");
+    }
+    found
+}
+
+/// Runs scripts/sim_export.py on the scenes: its JSON by scene folder.
+fn simulate(python: &Path, sim: &str, scenes: &[PathBuf]) -> BTreeMap<String, Value> {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scripts/sim_export.py");
+    let out = std::process::Command::new(python)
+        .arg(script)
+        .args([sim, "2.0"])
+        .args(scenes)
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "sim_export.py: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("JSON from sim_export.py")
+}
+
+/// Per layout kind: objects, moved ≥ 1 cm, fell; prints a line per scene.
+fn stillness(kind: &str, results: &BTreeMap<String, Value>) -> (usize, usize, usize) {
+    let (mut objects, mut moved, mut fell) = (0, 0, 0);
+    for (scene, r) in results {
+        assert_eq!(r["loaded"], true, "{scene}: {}", r["error"]);
+        let name = Path::new(scene)
+            .file_name()
+            .expect("a scene")
+            .to_string_lossy()
+            .into_owned();
+        let obj = r["objects"].as_object().expect("objects");
+        let mut movers: Vec<(String, f64)> = obj
+            .iter()
+            .map(|(n, o)| (n.clone(), o["moved_cm"].as_f64().expect("moved_cm")))
+            .filter(|(_, m)| *m >= 1.0)
+            .collect();
+        movers.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let f = obj.values().filter(|o| o["fell"] == true).count();
+        let worst = obj
+            .values()
+            .map(|o| o["moved_cm"].as_f64().expect("moved_cm"))
+            .fold(0.0, f64::max);
+        let listed: Vec<String> = movers.iter().map(|(n, m)| format!("{n} {m:.1}")).collect();
+        println!(
+            "{kind} | {name} | {} objects | {} moved >= 1 cm | {f} fell | worst {worst:.2} cm | {}",
+            obj.len(),
+            movers.len(),
+            listed.join(", ")
+        );
+        objects += obj.len();
+        moved += movers.len();
+        fell += f;
+    }
+    println!(
+        "{kind}: {objects} objects, {moved} moved >= 1 cm in 2 s ({:.1} % still), {fell} fell",
+        100.0 * (objects - moved) as f64 / objects.max(1) as f64
+    );
+    (objects, moved, fell)
+}
+
+/// Every scene loads with its bodies named after its instances and one collision geom per
+/// part (as the manifest says).
+fn assert_structure(results: &BTreeMap<String, Value>) {
+    for (scene, r) in results {
+        assert_eq!(r["loaded"], true, "{scene}: {}", r["error"]);
+        let manifest: ExportArtifact = read_json(&Path::new(scene).join("sim/export.json"));
+        let bodies: BTreeSet<String> = r["bodies"]
+            .as_array()
+            .expect("bodies")
+            .iter()
+            .map(|b| b.as_str().expect("a name").to_owned())
+            .collect();
+        let instances: BTreeSet<String> = manifest
+            .objects
+            .iter()
+            .map(|o| o.instance.clone())
+            .collect();
+        assert_eq!(bodies, instances, "{scene}");
+        for o in &manifest.objects {
+            assert_eq!(
+                r["colliders"][&o.instance].as_u64(),
+                Some(o.collision_parts),
+                "{scene}: {}",
+                o.instance
+            );
+        }
+    }
+}
+
+#[test]
+fn exported_scenes_load_and_stay_still_in_mujoco() {
+    let Some(python) = python_with("mujoco, numpy", "the MuJoCo export test") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let scenes: u32 = std::env::var("MESA_EXPORT_TEST_SCENES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(4);
+    let dir = demo(tmp.path(), scenes, 7);
+    ok(&["check", "--settle", "--progress", "off", "-q"], &dir);
+    let all = scene_dirs(&dir);
+    let mut kinds = BTreeMap::new();
+    for layout in ["coarse", "refined", "auto"] {
+        let started = std::time::Instant::now();
+        ok(
+            &["export", "--layout", layout, "--progress", "off", "-q"],
+            &dir,
+        );
+        let exported = started.elapsed().as_secs_f64();
+        let results = simulate(&python, "mujoco", &all);
+        println!(
+            "export --layout {layout}: {exported:.1} s for {} scenes",
+            all.len()
+        );
+        assert_structure(&results);
+        let kind = if layout == "auto" { "settled" } else { layout };
+        kinds.insert(kind, stillness(kind, &results));
+    }
+    // Settled layouts: at least 99 % of objects move less than 1 cm, none falls.
+    let (objects, moved, fell) = kinds["settled"];
+    assert!(
+        (moved as f64) <= 0.01 * objects as f64 && fell == 0,
+        "settled layouts: {moved} of {objects} moved >= 1 cm, {fell} fell"
+    );
+    // The control: unsettled coarse layouts move.
+    let (objects, moved, fell) = kinds["coarse"];
+    assert!(
+        moved as f64 > 0.01 * objects as f64 || fell > 0,
+        "coarse layouts pass the stillness test: {moved} of {objects} moved"
+    );
+    // The second control: an object sunk 3 cm into the table moves.
+    let scene = &all[0];
+    let path = scene.join("qa/layout.json");
+    let mut layout: Value = read_json(&path);
+    let sunk = layout["objects"][0]["instance"]
+        .as_str()
+        .expect("an instance")
+        .to_owned();
+    let z = layout["objects"][0]["position"][2]
+        .as_f64()
+        .expect("a position");
+    layout["objects"][0]["position"][2] = json!(z - 3.0);
+    std::fs::write(
+        &path,
+        serde_json::to_vec_pretty(&layout).expect("serialises"),
+    )
+    .expect("writes");
+    ok(&["export", "--progress", "off", "-q"], &dir);
+    let results = simulate(&python, "mujoco", std::slice::from_ref(scene));
+    let moved = results
+        .values()
+        .next()
+        .expect("a scene")
+        .pointer(&format!("/objects/{sunk}/moved_cm"))
+        .and_then(Value::as_f64)
+        .expect("the sunk object");
+    println!("control: {sunk} sunk 3 cm into the table moved {moved:.2} cm");
+    assert!(moved >= 1.0, "{sunk} sunk 3 cm moved only {moved:.2} cm");
+}
+
+/// A layout of a bowl at rest on the table and an apple 5 mm above its rim, over its centre.
+fn bowl_and_apple(dir: &Path) -> Value {
+    let index: AssetIndexArtifact = read_json(&dir.join("assets/index/assets.json"));
+    let annotations: Value = read_json(&dir.join("assets/annotations.json"));
+    let find = |category: &str, word: &str| {
+        let uid = annotations
+            .as_object()
+            .expect("annotations")
+            .iter()
+            .find(|(_, a)| {
+                a["category"] == category
+                    && a["description"].as_str().is_some_and(|d| d.contains(word))
+            })
+            .map(|(uid, _)| uid.clone())
+            .unwrap_or_else(|| panic!("no {category} asset with {word}"));
+        let size_m = index.assets[&uid]
+            .geometry
+            .as_ref()
+            .expect("geometry")
+            .size_m;
+        (uid, size_m.map(|v| v * 100.0))
+    };
+    let (bowl, bowl_cm) = find("bowl", "wooden");
+    let (apple, apple_cm) = find("fruit", "apple");
+    let object = |instance: &str, uid: &str, size: [f64; 3], z: f64| {
+        json!({
+            "instance": instance, "category": instance.trim_end_matches("_0"),
+            "description": instance, "retrieved_uid": uid,
+            "position": [50.0, 40.0, z], "rotation": [0.0, 0.0, 0.0, 1.0],
+            "size": size, "scale_factor": [1.0, 1.0, 1.0]
+        })
+    };
+    println!(
+        "bowl {bowl}: {:.1} × {:.1} × {:.1} cm; apple {apple}: {:.1} cm high",
+        bowl_cm[0], bowl_cm[1], bowl_cm[2], apple_cm[2]
+    );
+    json!({
+        "schema": "mesa.layout/1",
+        "item_placement_zone": [0.0, 100.0, 0.0, 80.0],
+        "objects": [
+            object("bowl_0", &bowl, bowl_cm, bowl_cm[2] / 2.0),
+            object("apple_0", &apple, apple_cm, bowl_cm[2] + apple_cm[2] / 2.0 + 0.5),
+        ]
+    })
+}
+
+#[test]
+fn an_apple_dropped_into_an_exported_bowl_stays_inside() {
+    let Some(python) = python_with("mujoco, numpy", "the MuJoCo bowl test") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("bowl");
+    mesa()
+        .args(["demo", "--scenes", "1", "--seed", "7", "-q"])
+        .arg(&dir)
+        .assert()
+        .success();
+    ok(&["assets", "--progress", "off", "-q"], &dir);
+    let layout = bowl_and_apple(&dir);
+    let bowl_height_cm = layout["objects"][0]["size"][2].as_f64().expect("a size");
+    let scene = dir.join("scenes/dining_table/bowl_drop");
+    std::fs::create_dir_all(scene.join("refined")).expect("mkdir");
+    std::fs::write(
+        scene.join("refined/layout.json"),
+        serde_json::to_vec_pretty(&layout).expect("serialises"),
+    )
+    .expect("writes");
+    let mut apple_z = BTreeMap::new();
+    for colliders in ["parts", "hull"] {
+        std::fs::write(
+            dir.join("mesa.toml"),
+            format!("[export]\ncolliders = \"{colliders}\"\n"),
+        )
+        .expect("toml");
+        ok(
+            &[
+                "export",
+                "--scenes",
+                "dining_table/bowl_drop",
+                "--progress",
+                "off",
+                "-q",
+            ],
+            &dir,
+        );
+        let results = simulate(&python, "mujoco", std::slice::from_ref(&scene));
+        let r = results.values().next().expect("a scene");
+        assert_eq!(r["loaded"], true, "{}", r["error"]);
+        let manifest: ExportArtifact = read_json(&scene.join("sim/export.json"));
+        println!(
+            "colliders = {colliders}: the bowl has {} collision geoms",
+            manifest.objects[0].collision_parts
+        );
+        let z = r
+            .pointer("/final_z_cm/apple_0")
+            .and_then(Value::as_f64)
+            .expect("the apple's final height");
+        let drift = r
+            .pointer("/final_xy_offset_cm/apple_0")
+            .and_then(Value::as_f64)
+            .expect("the apple's drift");
+        println!(
+            "colliders = {colliders}: the apple's centre ends {z:.2} cm above the table, \
+             {drift:.2} cm from where it was dropped (the bowl's rim: {bowl_height_cm:.2} cm)"
+        );
+        apple_z.insert(colliders, (z, drift));
+    }
+    let (inside_z, inside_drift) = apple_z["parts"];
+    assert!(
+        inside_z < bowl_height_cm && inside_drift < 5.0,
+        "the apple did not stay in the bowl's cavity: centre at {inside_z:.2} cm, rim at \
+         {bowl_height_cm:.2} cm, {inside_drift:.2} cm off"
+    );
+    // The control: a single hull fills the cavity, and the apple stays above the rim.
+    let (hull_z, _) = apple_z["hull"];
+    assert!(
+        hull_z > bowl_height_cm,
+        "with one hull per object the apple still sank into the bowl ({hull_z:.2} cm)"
+    );
+}
