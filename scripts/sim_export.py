@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Loads scenes written by `mesa export` in a simulator and measures how still they stay.
 
-Usage: sim_export.py mujoco SECONDS SCENE_DIR...   (each SCENE_DIR holds sim/export.json)
+Usage: sim_export.py mujoco|pybullet SECONDS SCENE_DIR...   (each SCENE_DIR holds sim/export.json)
 Output: JSON on standard output,
     {scene_dir: {"loaded": bool, "error": str|null, "bodies": [names],
                  "colliders": {instance: count}, "objects": {instance: {"moved_cm": float,
@@ -11,7 +11,11 @@ MuJoCo: sim/mjcf/scene.xml is loaded with `MjModel.from_xml_path`; every body's 
 (group 3) are counted; the scene is stepped for SECONDS of simulated time at the file's
 timestep. An object's displacement is the largest distance any vertex of its convex parts
 (the OBJ files of sim/mjcf/meshes, body frame) moved; it fell when its centre of mass ended
-more than 5 cm below the table top (z = 0). Also per object: the final height of its centre of
+more than 5 cm below the table top (z = 0).
+
+PyBullet: sim/urdf/table.urdf is loaded with a fixed base, every object's URDF at its pose from
+sim/urdf/scene.json with URDF_USE_INERTIA_FROM_FILE; the collision shapes of each base link are
+counted; 2 s at 240 Hz; the same displacement measure (on the base frame PyBullet reports). Also per object: the final height of its centre of
 mass ("final_z_cm") and how far its origin drifted in the plane ("final_xy_offset_cm").
 """
 
@@ -88,10 +92,92 @@ def run_mujoco(scene_dir, seconds):
     }
 
 
+def quat_matrix(q):
+    x, y, z, w = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def run_pybullet(scene_dir, seconds):
+    import pybullet as p
+
+    manifest = json.load(open(os.path.join(scene_dir, "sim", "export.json")))
+    urdf_dir = os.path.join(scene_dir, "sim", "urdf")
+    scene = json.load(open(os.path.join(urdf_dir, "scene.json")))
+    client = p.connect(p.DIRECT)
+    try:
+        p.setGravity(0, 0, -9.81, physicsClientId=client)
+        p.setTimeStep(1.0 / 240.0, physicsClientId=client)
+        t = scene["table"]
+        p.loadURDF(
+            os.path.join(urdf_dir, t["urdf"]),
+            t["position_m"],
+            t["orientation_xyzw"],
+            useFixedBase=True,
+            physicsClientId=client,
+        )
+        mesh_dir = os.path.join(scene_dir, "sim", "mjcf", "meshes")
+        parts = {o["instance"]: o["collision_parts"] for o in manifest["objects"]}
+        bodies, colliders, start = [], {}, {}
+        for o in scene["objects"]:
+            try:
+                body = p.loadURDF(
+                    os.path.join(urdf_dir, o["urdf"]),
+                    o["position_m"],
+                    o["orientation_xyzw"],
+                    flags=p.URDF_USE_INERTIA_FROM_FILE,
+                    physicsClientId=client,
+                )
+            except Exception as e:  # noqa: BLE001 - reported to the Rust test
+                return {"loaded": False, "error": f"{o['urdf']}: {e}"}
+            name = p.getBodyInfo(body, physicsClientId=client)[1].decode()
+            bodies.append(name)
+            colliders[name] = len(p.getCollisionShapeData(body, -1, physicsClientId=client))
+            # The parts' points in the world, then in the base (inertial) frame PyBullet
+            # reports, so the comparison does not depend on where that frame sits.
+            local = part_points(mesh_dir, o["instance"], parts[o["instance"]])
+            world = local @ quat_matrix(o["orientation_xyzw"]).T + np.asarray(o["position_m"])
+            pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=client)
+            r0 = quat_matrix(orn)
+            in_base = (world - np.asarray(pos)) @ r0
+            start[o["instance"]] = (body, in_base, np.asarray(pos), r0)
+        for _ in range(int(round(seconds * 240))):
+            p.stepSimulation(physicsClientId=client)
+        objects, final_z, final_xy = {}, {}, {}
+        for name, (body, local, p0, r0) in start.items():
+            pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=client)
+            p1, r1 = np.asarray(pos), quat_matrix(orn)
+            objects[name] = {"moved_cm": 100.0 * moved(local, p0, r0, p1, r1), "fell": bool(p1[2] < -0.05)}
+            final_z[name] = 100.0 * float(p1[2])
+            final_xy[name] = 100.0 * float(np.linalg.norm(p1[:2] - p0[:2]))
+        return {
+            "loaded": True,
+            "error": None,
+            "bodies": bodies,
+            "colliders": colliders,
+            "objects": objects,
+            "final_z_cm": final_z,
+            "final_xy_offset_cm": final_xy,
+        }
+    finally:
+        p.disconnect(physicsClientId=client)
+
+
 def main():
     sim, seconds, dirs = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
-    runner = {"mujoco": run_mujoco}[sim]
-    json.dump({d: runner(d, seconds) for d in dirs}, sys.stdout)
+    runner = {"mujoco": run_mujoco, "pybullet": run_pybullet}[sim]
+    # The simulators print banners from C (pybullet's build time): standard output is the
+    # JSON alone, everything else goes to standard error.
+    sys.stdout.flush()
+    out = os.dup(1)
+    os.dup2(2, 1)
+    result = json.dumps({d: runner(d, seconds) for d in dirs})
+    os.write(out, result.encode())
 
 
 if __name__ == "__main__":

@@ -33,6 +33,8 @@ pub const TASK_REJECT_SCHEMA: &str = "mesa.task-reject/1";
 pub const SPLIT_SCHEMA: &str = "mesa.split/1";
 /// Schema id of `sim/export.json`.
 pub const EXPORT_SCHEMA: &str = "mesa.export/1";
+/// Schema id of `sim/urdf/scene.json`.
+pub const URDF_SCENE_SCHEMA: &str = "mesa.urdf-scene/1";
 /// Schema id of the runner's done / failed markers.
 pub const MARKER_SCHEMA: &str = "mesa.marker/1";
 
@@ -1405,4 +1407,35 @@ pub struct ExportArtifact {
     pub skipped: Vec<UncheckedObject>,
     /// Things worth knowing (flat parts, a missing visual mesh, ...).
     pub warnings: Vec<String>,
+}
+
+/// Where one URDF of a scene goes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct UrdfPlacement {
+    /// The instance (`table` for the table).
+    pub instance: String,
+    /// The URDF file, relative to `sim/urdf/`.
+    pub urdf: String,
+    /// Position of its root link's frame in the table frame, metres (z up, the table top at
+    /// z = 0).
+    pub position_m: [f64; 3],
+    /// Orientation of its root link, quaternion [x, y, z, w] (PyBullet's order).
+    pub orientation_xyzw: [f64; 4],
+    /// Whether to load it with a fixed base (the table).
+    pub fixed_base: bool,
+}
+
+/// `sim/urdf/scene.json`: the URDFs of a scene and their poses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct UrdfSceneArtifact {
+    /// `mesa.urdf-scene/1`.
+    pub schema: String,
+    /// The scene.
+    pub scene_id: String,
+    /// The table (static).
+    pub table: UrdfPlacement,
+    /// The objects, in layout order.
+    pub objects: Vec<UrdfPlacement>,
 }

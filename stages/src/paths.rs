@@ -113,6 +113,8 @@ pub mod scene {
     pub const EXPORT_MANIFEST: &str = "sim/export.json";
     /// The MJCF export: `scene.xml` and `meshes/`.
     pub const MJCF_DIR: &str = "sim/mjcf";
+    /// The URDF export: a URDF per object, `table.urdf` and `scene.json`.
+    pub const URDF_DIR: &str = "sim/urdf";
     /// The demo's true layout.
     pub const TRUTH_LAYOUT: &str = "truth/layout.json";
     /// The demo's true instances.

@@ -293,7 +293,7 @@ impl SceneStage for ExportStage {
                 skipped,
             },
             &ctx.config.export,
-        );
+        )?;
         for warning in &exported.manifest.warnings {
             out.warn(warning.clone());
         }

@@ -20,6 +20,7 @@
 pub mod mass;
 pub mod mjcf;
 pub mod obj;
+pub mod urdf;
 
 use std::collections::BTreeMap;
 
@@ -37,7 +38,7 @@ use crate::glb_read::GlbMesh;
 pub use self::mass::MassProperties;
 
 /// The MJCF folder, relative to the scene folder.
-pub use crate::paths::scene::{EXPORT_MANIFEST, MJCF_DIR};
+pub use crate::paths::scene::{EXPORT_MANIFEST, MJCF_DIR, URDF_DIR};
 
 /// What an object collides with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
@@ -477,8 +478,11 @@ pub struct SceneExport {
     pub manifest: ExportArtifact,
 }
 
-/// Exports a scene as MJCF (`sim/mjcf/scene.xml` and its meshes).
-pub fn export_scene(request: &ExportRequest<'_>, config: &ExportConfig) -> SceneExport {
+/// Exports a scene as MJCF (`sim/mjcf/scene.xml` and its meshes) and URDF (`sim/urdf/`).
+pub fn export_scene(
+    request: &ExportRequest<'_>,
+    config: &ExportConfig,
+) -> Result<SceneExport, serde_json::Error> {
     let mut warnings = Vec::new();
     let bodies: Vec<BodyModel> = request
         .objects
@@ -494,6 +498,9 @@ pub fn export_scene(request: &ExportRequest<'_>, config: &ExportConfig) -> Scene
     for (rel, bytes) in mjcf::write_mjcf(request.scene_id, &table, &bodies, config) {
         files.insert(format!("{MJCF_DIR}/{rel}"), bytes);
     }
+    for (rel, bytes) in urdf::write_urdf(request.scene_id, &table, &bodies, config)? {
+        files.insert(format!("{URDF_DIR}/{rel}"), bytes);
+    }
     let m = config.table_margin_m;
     let zone = request.layout.zone_cm.0.map(|v| v / 100.0);
     let mut listed: Vec<String> = files.keys().cloned().collect();
@@ -504,7 +511,7 @@ pub fn export_scene(request: &ExportRequest<'_>, config: &ExportConfig) -> Scene
         scene_id: request.scene_id.to_owned(),
         layout: request.layout_file.to_owned(),
         layout_sha256: request.layout_sha256.to_owned(),
-        formats: vec!["mjcf".to_owned()],
+        formats: vec!["mjcf".to_owned(), "urdf".to_owned()],
         files: listed,
         density_kg_m3: config.density_kg_m3,
         table_size_m: [
@@ -521,7 +528,7 @@ pub fn export_scene(request: &ExportRequest<'_>, config: &ExportConfig) -> Scene
         skipped: request.skipped.clone(),
         warnings,
     };
-    SceneExport { files, manifest }
+    Ok(SceneExport { files, manifest })
 }
 
 #[cfg(test)]
