@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Loads scenes written by `mesa export` in a simulator and measures how still they stay.
 
-Usage: sim_export.py mujoco|pybullet SECONDS SCENE_DIR...   (each SCENE_DIR holds sim/export.json)
+Usage: sim_export.py mujoco|pybullet|usd SECONDS SCENE_DIR...   (each SCENE_DIR holds sim/export.json)
 Output: JSON on standard output,
     {scene_dir: {"loaded": bool, "error": str|null, "bodies": [names],
                  "colliders": {instance: count}, "objects": {instance: {"moved_cm": float,
@@ -15,7 +15,12 @@ more than 5 cm below the table top (z = 0).
 
 PyBullet: sim/urdf/table.urdf is loaded with a fixed base, every object's URDF at its pose from
 sim/urdf/scene.json with URDF_USE_INERTIA_FROM_FILE; the collision shapes of each base link are
-counted; 2 s at 240 Hz; the same displacement measure (on the base frame PyBullet reports). Also per object: the final height of its centre of
+counted; 2 s at 240 Hz; the same displacement measure (on the base frame PyBullet reports).
+
+USD (no simulation): sim/usd/scene.usda is opened with usd-core; per rigid body its instance,
+mass, diagonal inertia and the count of its CollisionAPI meshes, the static colliders, and a
+list of problems (up axis, metres per unit, PhysicsScene, MassAPI, MeshCollisionAPI with
+convexHull, a visual mesh bound to a material). Also per object: the final height of its centre of
 mass ("final_z_cm") and how far its origin drifted in the plane ("final_xy_offset_cm").
 """
 
@@ -168,9 +173,64 @@ def run_pybullet(scene_dir, seconds):
         p.disconnect(physicsClientId=client)
 
 
+def run_usd(scene_dir, seconds):
+    """Opens sim/usd/scene.usda with usd-core and reads back what the physics schemas say."""
+    del seconds
+    from pxr import Usd, UsdGeom, UsdPhysics
+
+    path = os.path.join(scene_dir, "sim", "usd", "scene.usda")
+    stage = Usd.Stage.Open(path)
+    if stage is None:
+        return {"loaded": False, "error": f"{path}: usd-core cannot open it"}
+    problems = []
+    if UsdGeom.GetStageUpAxis(stage) != UsdGeom.Tokens.z:
+        problems.append("upAxis is not Z")
+    if UsdGeom.GetStageMetersPerUnit(stage) != 1.0:
+        problems.append("metersPerUnit is not 1")
+    if not any(p.IsA(UsdPhysics.Scene) for p in stage.Traverse()):
+        problems.append("no PhysicsScene")
+    bodies, colliders, masses, inertias, statics = [], {}, {}, {}, 0
+    for prim in stage.Traverse():
+        if prim.HasAPI(UsdPhysics.RigidBodyAPI):
+            instance = prim.GetAttribute("mesa:instance").Get()
+            bodies.append(instance)
+            if not prim.HasAPI(UsdPhysics.MassAPI):
+                problems.append(f"{instance}: no MassAPI")
+            mass_api = UsdPhysics.MassAPI(prim)
+            masses[instance] = float(mass_api.GetMassAttr().Get())
+            inertias[instance] = [float(v) for v in mass_api.GetDiagonalInertiaAttr().Get()]
+            n = 0
+            for child in Usd.PrimRange(prim):
+                if child.HasAPI(UsdPhysics.CollisionAPI):
+                    if not child.HasAPI(UsdPhysics.MeshCollisionAPI):
+                        problems.append(f"{child.GetPath()}: no MeshCollisionAPI")
+                    approx = UsdPhysics.MeshCollisionAPI(child).GetApproximationAttr().Get()
+                    if approx != UsdPhysics.Tokens.convexHull:
+                        problems.append(f"{child.GetPath()}: approximation {approx}")
+                    n += 1
+            colliders[instance] = n
+            visual = prim.GetChild("visual")
+            if not (visual and visual.HasAPI("MaterialBindingAPI")):
+                problems.append(f"{instance}: no visual mesh bound to a material")
+        elif prim.HasAPI(UsdPhysics.CollisionAPI) and not any(
+            a.HasAPI(UsdPhysics.RigidBodyAPI) for a in [prim.GetParent()]
+        ):
+            statics += 1
+    return {
+        "loaded": True,
+        "error": None,
+        "bodies": bodies,
+        "colliders": colliders,
+        "masses": masses,
+        "inertias": inertias,
+        "static_colliders": statics,
+        "problems": problems,
+    }
+
+
 def main():
     sim, seconds, dirs = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
-    runner = {"mujoco": run_mujoco, "pybullet": run_pybullet}[sim]
+    runner = {"mujoco": run_mujoco, "pybullet": run_pybullet, "usd": run_usd}[sim]
     # The simulators print banners from C (pybullet's build time): standard output is the
     # JSON alone, everything else goes to standard error.
     sys.stdout.flush()

@@ -1,5 +1,7 @@
 //! `mesa export` end to end on demo datasets, checked with the real simulator.
 //!
+//! - With usd-core: every scene's USD opens with the physics schemas applied as stated (and a
+//!   file stripped of them is caught).
 //! - Without Python: the manifest validates, the bytes are the same when exported again, a
 //!   rerun skips, and a bad `[export]` setting is a usage error naming its key.
 //! - With PyBullet as well: every URDF set loads (bodies named after the instances, one
@@ -81,7 +83,7 @@ fn export_writes_valid_deterministic_files_and_skips_when_done() {
             .assert()
             .success();
         let artifact: ExportArtifact = read_json(&manifest);
-        assert_eq!(artifact.formats, ["mjcf", "urdf"]);
+        assert_eq!(artifact.formats, ["mjcf", "urdf", "usd"]);
         mesa()
             .args(["validate", "--kind", "urdf-scene"])
             .arg(scene.join("sim/urdf/scene.json"))
@@ -96,6 +98,7 @@ fn export_writes_valid_deterministic_files_and_skips_when_done() {
             assert!(object.mass_kg > 0.0 && object.collision_parts > 0);
         }
     }
+    usd_check(&dir);
     // A rerun skips; a forced one writes the same bytes.
     let again = ok(&["export", "--layout", "coarse", "--progress", "off"], &dir);
     assert!(again.contains("2 skipped"), "{again}");
@@ -121,6 +124,85 @@ fn export_writes_valid_deterministic_files_and_skips_when_done() {
         .expect("runs");
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("[export] density_kg_m3"));
+}
+
+/// Every scene's USD opened with usd-core: the physics schemas as stated, each object's mass
+/// and collider count as the manifest says; and the control: a file stripped of a MassAPI and
+/// of a convexHull approximation is caught.
+fn usd_check(dir: &Path) {
+    let Some(python) = python_with("pxr", "the USD check of the export") else {
+        return;
+    };
+    let scenes = scene_dirs(dir);
+    for (scene, r) in simulate(&python, "usd", &scenes) {
+        assert_eq!(r["loaded"], true, "{scene}: {}", r["error"]);
+        assert_eq!(r["problems"], json!([]), "{scene}");
+        assert!(
+            r["static_colliders"].as_u64() >= Some(1),
+            "{scene}: no table"
+        );
+        let manifest: ExportArtifact = read_json(&Path::new(&scene).join("sim/export.json"));
+        let bodies: BTreeSet<&str> = r["bodies"]
+            .as_array()
+            .expect("bodies")
+            .iter()
+            .filter_map(Value::as_str)
+            .collect();
+        let instances: BTreeSet<&str> = manifest
+            .objects
+            .iter()
+            .map(|o| o.instance.as_str())
+            .collect();
+        assert_eq!(bodies, instances, "{scene}");
+        for o in &manifest.objects {
+            assert_eq!(
+                r["colliders"][&o.instance].as_u64(),
+                Some(o.collision_parts),
+                "{scene}: {}",
+                o.instance
+            );
+            let mass = r["masses"][&o.instance].as_f64().expect("a mass");
+            assert!(
+                (mass - o.mass_kg).abs() <= 1e-5 * o.mass_kg,
+                "{scene}: {}: mass {mass} in the USD, {} in the manifest",
+                o.instance,
+                o.mass_kg
+            );
+        }
+        println!(
+            "usd | {} | {} rigid bodies with MassAPI, {} convex colliders, {} static",
+            Path::new(&scene)
+                .file_name()
+                .expect("a scene")
+                .to_string_lossy(),
+            bodies.len(),
+            manifest
+                .objects
+                .iter()
+                .map(|o| o.collision_parts)
+                .sum::<u64>(),
+            r["static_colliders"]
+        );
+    }
+    // The control.
+    let scene = &scenes[0];
+    let path = scene.join("sim/usd/scene.usda");
+    let text = std::fs::read_to_string(&path).expect("usda");
+    let broken = text
+        .replacen(
+            "[\"PhysicsRigidBodyAPI\", \"PhysicsMassAPI\"]",
+            "[\"PhysicsRigidBodyAPI\"]",
+            1,
+        )
+        .replacen("= \"convexHull\"", "= \"none\"", 1);
+    std::fs::write(&path, broken).expect("writes");
+    let results = simulate(&python, "usd", std::slice::from_ref(scene));
+    let problems = results.values().next().expect("a scene")["problems"]
+        .as_array()
+        .expect("problems")
+        .len();
+    assert_eq!(problems, 2, "the USD check missed a broken file");
+    std::fs::write(&path, text).expect("writes");
 }
 
 /// A Python with the modules, or None (SKIPPED; a failure under MESA_REQUIRE_TOOLS).

@@ -115,6 +115,8 @@ pub mod scene {
     pub const MJCF_DIR: &str = "sim/mjcf";
     /// The URDF export: a URDF per object, `table.urdf` and `scene.json`.
     pub const URDF_DIR: &str = "sim/urdf";
+    /// The USD export, one text file.
+    pub const USD_SCENE: &str = "sim/usd/scene.usda";
     /// The demo's true layout.
     pub const TRUTH_LAYOUT: &str = "truth/layout.json";
     /// The demo's true instances.

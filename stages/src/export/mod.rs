@@ -21,6 +21,7 @@ pub mod mass;
 pub mod mjcf;
 pub mod obj;
 pub mod urdf;
+pub mod usd;
 
 use std::collections::BTreeMap;
 
@@ -38,7 +39,7 @@ use crate::glb_read::GlbMesh;
 pub use self::mass::MassProperties;
 
 /// The MJCF folder, relative to the scene folder.
-pub use crate::paths::scene::{EXPORT_MANIFEST, MJCF_DIR, URDF_DIR};
+pub use crate::paths::scene::{EXPORT_MANIFEST, MJCF_DIR, URDF_DIR, USD_SCENE};
 
 /// What an object collides with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
@@ -478,7 +479,8 @@ pub struct SceneExport {
     pub manifest: ExportArtifact,
 }
 
-/// Exports a scene as MJCF (`sim/mjcf/scene.xml` and its meshes) and URDF (`sim/urdf/`).
+/// Exports a scene as MJCF (`sim/mjcf/scene.xml` and its meshes), URDF (`sim/urdf/`) and USD
+/// (`sim/usd/scene.usda`).
 pub fn export_scene(
     request: &ExportRequest<'_>,
     config: &ExportConfig,
@@ -501,6 +503,10 @@ pub fn export_scene(
     for (rel, bytes) in urdf::write_urdf(request.scene_id, &table, &bodies, config)? {
         files.insert(format!("{URDF_DIR}/{rel}"), bytes);
     }
+    files.insert(
+        USD_SCENE.to_owned(),
+        usd::write_usda(request.scene_id, &table, &bodies).into_bytes(),
+    );
     let m = config.table_margin_m;
     let zone = request.layout.zone_cm.0.map(|v| v / 100.0);
     let mut listed: Vec<String> = files.keys().cloned().collect();
@@ -511,7 +517,7 @@ pub fn export_scene(
         scene_id: request.scene_id.to_owned(),
         layout: request.layout_file.to_owned(),
         layout_sha256: request.layout_sha256.to_owned(),
-        formats: vec!["mjcf".to_owned(), "urdf".to_owned()],
+        formats: vec!["mjcf".to_owned(), "urdf".to_owned(), "usd".to_owned()],
         files: listed,
         density_kg_m3: config.density_kg_m3,
         table_size_m: [

@@ -153,3 +153,33 @@ fn a_flat_polygon_part_is_thickened_and_a_segment_is_left_out() {
     let segment = [[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.005, 0.0, 0.0]];
     assert!(solid_part(&segment, 0.0005).is_none());
 }
+
+#[test]
+fn usd_prim_names_are_identifiers_and_unique() {
+    let mut taken = std::collections::BTreeSet::new();
+    assert_eq!(usd::prim_name("mug_0", &mut taken), "mug_0");
+    assert_eq!(usd::prim_name("mug-0", &mut taken), "mug_0_1");
+    assert_eq!(usd::prim_name("3d_print", &mut taken), "_3d_print");
+    assert_eq!(usd::prim_name("table", &mut taken), "table_object");
+}
+
+#[test]
+fn principal_axes_diagonalise_the_inertia() {
+    // A tensor with a product of inertia: its principal axes turn it diagonal.
+    let inertia = [2.0, 3.0, 4.0, 0.5, 0.0, 0.0];
+    let (d, q) = usd::principal_inertia(inertia);
+    let r = crate::mesh::quat_to_matrix([q[1], q[2], q[3], q[0]]);
+    let m = [[2.0, 0.5, 0.0], [0.5, 3.0, 0.0], [0.0, 0.0, 4.0]];
+    // Rᵀ M R = diag(d).
+    for a in 0..3 {
+        for b in 0..3 {
+            let v: f64 = (0..3)
+                .flat_map(|i| (0..3).map(move |j| (i, j)))
+                .map(|(i, j)| r[i][a] * m[i][j] * r[j][b])
+                .sum();
+            let expected = if a == b { d[a] } else { 0.0 };
+            assert_abs_diff_eq!(v, expected, epsilon = 1e-9);
+        }
+    }
+    assert_abs_diff_eq!(d.iter().sum::<f64>(), 9.0, epsilon = 1e-9);
+}
