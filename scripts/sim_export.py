@@ -118,14 +118,15 @@ def run_pybullet(scene_dir, seconds):
     try:
         p.setGravity(0, 0, -9.81, physicsClientId=client)
         p.setTimeStep(1.0 / 240.0, physicsClientId=client)
-        t = scene["table"]
-        p.loadURDF(
-            os.path.join(urdf_dir, t["urdf"]),
-            t["position_m"],
-            t["orientation_xyzw"],
-            useFixedBase=True,
-            physicsClientId=client,
-        )
+        t = scene.get("table")
+        if t:
+            p.loadURDF(
+                os.path.join(urdf_dir, t["urdf"]),
+                t["position_m"],
+                t["orientation_xyzw"],
+                useFixedBase=True,
+                physicsClientId=client,
+            )
         mesh_dir = os.path.join(scene_dir, "sim", "mjcf", "meshes")
         parts = {o["instance"]: o["collision_parts"] for o in manifest["objects"]}
         bodies, colliders, start = [], {}, {}

@@ -55,7 +55,7 @@ fn demo(root: &Path, scenes: u32, seed: u64) -> PathBuf {
 fn sim_files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     common::all_files(dir)
         .into_iter()
-        .filter(|(k, _)| k.contains("/sim/"))
+        .filter(|(k, _)| k.contains("scenes/") && k.contains("/sim/"))
         .collect()
 }
 
@@ -99,6 +99,7 @@ fn export_writes_valid_deterministic_files_and_skips_when_done() {
         }
     }
     usd_check(&dir);
+    assets_check(&dir);
     // A rerun skips; a forced one writes the same bytes.
     let again = ok(&["export", "--layout", "coarse", "--progress", "off"], &dir);
     assert!(again.contains("2 skipped"), "{again}");
@@ -203,6 +204,73 @@ fn usd_check(dir: &Path) {
         .len();
     assert_eq!(problems, 2, "the USD check missed a broken file");
     std::fs::write(&path, text).expect("writes");
+}
+
+/// `mesa export --assets`: a folder per valid asset with a valid manifest of one object and
+/// no table; a rerun finds them current; with MuJoCo, PyBullet and usd-core, each loads.
+fn assets_check(dir: &Path) {
+    let out = ok(&["export", "--assets", "--progress", "off"], dir);
+    let index: AssetIndexArtifact = read_json(&dir.join("assets/index/assets.json"));
+    let valid: Vec<&String> = index
+        .assets
+        .iter()
+        .filter(|(_, r)| r.valid)
+        .map(|(uid, _)| uid)
+        .collect();
+    assert!(
+        out.contains(&format!("{} assets: {} written", valid.len(), valid.len())),
+        "{out}"
+    );
+    for uid in &valid {
+        let manifest = dir.join(format!("assets/sim/{uid}/export.json"));
+        mesa()
+            .args(["validate", "--kind", "export"])
+            .arg(&manifest)
+            .assert()
+            .success();
+        let artifact: ExportArtifact = read_json(&manifest);
+        assert_eq!(artifact.objects.len(), 1);
+        assert_eq!(artifact.table_size_m, [0.0; 3]);
+        for file in &artifact.files {
+            assert!(
+                dir.join(format!("assets/sim/{uid}/{file}")).is_file(),
+                "{file}"
+            );
+        }
+    }
+    let again = ok(&["export", "--assets", "--progress", "off"], dir);
+    assert!(
+        again.contains(&format!("0 written, {} current", valid.len())),
+        "{again}"
+    );
+    let Some(python) = python_with("mujoco, pybullet, pxr", "loading the single-asset export")
+    else {
+        return;
+    };
+    let script = "import mujoco, os, sys, pybullet as p\n\
+        from pxr import Usd, UsdPhysics\n\
+        p.connect(p.DIRECT)\n\
+        root = sys.argv[1]\n\
+        n = 0\n\
+        for uid in sorted(os.listdir(root)):\n\
+        \x20   m = mujoco.MjModel.from_xml_path(f'{root}/{uid}/mjcf/scene.xml')\n\
+        \x20   assert m.nbody == 2, (uid, m.nbody)\n\
+        \x20   p.loadURDF(f'{root}/{uid}/urdf/{uid}.urdf', flags=p.URDF_USE_INERTIA_FROM_FILE)\n\
+        \x20   s = Usd.Stage.Open(f'{root}/{uid}/usd/scene.usda')\n\
+        \x20   assert sum(x.HasAPI(UsdPhysics.RigidBodyAPI) for x in s.Traverse()) == 1, uid\n\
+        \x20   n += 1\n\
+        print('assets loaded', n)\n";
+    let out = std::process::Command::new(python)
+        .args(["-c", script])
+        .arg(dir.join("assets/sim"))
+        .output()
+        .expect("python runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && text.contains(&format!("assets loaded {}", valid.len())),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 /// A Python with the modules, or None (SKIPPED; a failure under MESA_REQUIRE_TOOLS).

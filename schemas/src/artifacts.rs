@@ -1387,7 +1387,8 @@ pub struct ExportArtifact {
     pub scene_id: String,
     /// The layout exported, relative to the scene folder.
     pub layout: String,
-    /// SHA-256 of the layout's bytes.
+    /// SHA-256 of the layout's bytes (for a single asset, `mesa export --assets`: of the
+    /// asset's inputs: its GLB, its shapes, its annotated mass and the settings).
     pub layout_sha256: String,
     /// The formats written (`mjcf`, ...), each a folder under `sim/`.
     pub formats: Vec<String>,
@@ -1395,7 +1396,8 @@ pub struct ExportArtifact {
     pub files: Vec<String>,
     /// Density used for objects without an annotated mass, kg/m³.
     pub density_kg_m3: f64,
-    /// The table: a static box whose top is z = 0; [width, depth, thickness], metres.
+    /// The table: a static box whose top is z = 0; [width, depth, thickness], metres (zeros in
+    /// a single asset's files, which have no table).
     pub table_size_m: [f64; 3],
     /// The sink of a vanity: a hole in the table top over the restricted zone, with a static
     /// basin floor this far below the top, metres (absent without a restricted zone).
@@ -1434,8 +1436,9 @@ pub struct UrdfSceneArtifact {
     pub schema: String,
     /// The scene.
     pub scene_id: String,
-    /// The table (static).
-    pub table: UrdfPlacement,
+    /// The table (static; absent in a single asset's files, `mesa export --assets`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table: Option<UrdfPlacement>,
     /// The objects, in layout order.
     pub objects: Vec<UrdfPlacement>,
 }

@@ -34,6 +34,8 @@ pub mod dataset {
     pub const TEXT_UIDS: &str = "assets/text_uids.json";
     /// The views around every asset: `assets/renders/<uid>/`.
     pub const ASSET_RENDERS: &str = "assets/renders";
+    /// The simulator files of every asset (`mesa export --assets`): `assets/sim/<uid>/`.
+    pub const ASSET_SIM: &str = "assets/sim";
     /// The dataset's check summary.
     pub const CHECK_SUMMARY: &str = "qa/summary.json";
     /// The training records.

@@ -106,6 +106,11 @@ impl ShapeLibrary {
         self.annotations.as_ref()
     }
 
+    /// The uids of the index, sorted.
+    pub fn uids(&self) -> impl Iterator<Item = &String> {
+        self.index.assets.keys()
+    }
+
     /// The index's record of an asset.
     pub fn record(&self, uid: &str) -> Option<&mesa_schemas::artifacts::AssetRecord> {
         self.index.assets.get(uid)

@@ -9,13 +9,13 @@ use std::path::Path;
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 
-use anyhow::anyhow;
+use anyhow::{anyhow, Context as _};
 use clap::{Args as ClapArgs, ValueEnum};
 use mesa_schemas::artifacts::{ExportArtifact, MassSource, UncheckedObject};
 use mesa_stages::check::{AssetShape, Pose};
 use mesa_stages::export::{export_scene, ExportObject, ExportRequest, VisualMesh};
 use mesa_stages::glb_read::read_glb;
-use mesa_stages::paths::dataset::{ANNOTATIONS, INDEX};
+use mesa_stages::paths::dataset::{ANNOTATIONS, ASSET_SIM, INDEX};
 use mesa_stages::paths::scene::{
     COARSE_LAYOUT, EXPORT_MANIFEST, LAYOUT_CANDIDATES, REFINED_LAYOUT, SETTLED_LAYOUT,
 };
@@ -25,9 +25,13 @@ use super::check::ShapeLibrary;
 use crate::cli::{Global, SceneArgs};
 use crate::dataset_cache::DatasetCache;
 use crate::exit::UsageError;
-use crate::fsio::{read_bounded, read_json, GLB_LIMIT};
+use crate::fsio::{read_bounded, read_json, write_atomic, GLB_LIMIT};
 use crate::layouts::{present_layouts, read_dataset_layout};
-use crate::runner::{digest_of, discover_scenes, Scene, SceneOutput, SceneStage, StageContext};
+use crate::progress::Tick;
+use crate::runner::{
+    digest_of, discover_scenes, DatasetReport, DatasetStage, Executor, Scene, SceneOutput,
+    SceneStage, StageContext,
+};
 
 /// `--layout` of `mesa export`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
@@ -62,13 +66,21 @@ pub struct Args {
     #[command(flatten)]
     pub stage: SceneArgs,
     /// The layout to export (default: the one later stages read, settled else refined).
-    #[arg(long, value_enum, default_value = "auto")]
+    #[arg(long, value_enum, default_value = "auto", conflicts_with = "assets")]
     pub layout: ExportLayoutArg,
+    /// Export every valid library asset on its own instead of scenes: assets/sim/<uid>/
+    /// (MJCF, URDF, USD and export.json; the object's bottom at z = 0, no table), for users
+    /// who compose their own scenes. An asset whose files are current is skipped.
+    #[arg(long)]
+    pub assets: bool,
 }
 
 /// Runs `mesa export`.
 pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
     let resolved = args.stage.resolve(global)?;
+    if args.assets {
+        return resolved.run_dataset(&ExportAssetsStage);
+    }
     resolved.run(&ExportStage::new(args.layout))
 }
 
@@ -291,6 +303,7 @@ impl SceneStage for ExportStage {
                 layout: &layout,
                 objects,
                 skipped,
+                with_table: true,
             },
             &ctx.config.export,
         )?;
@@ -332,4 +345,189 @@ fn summary_line(dataset: &Path) -> anyhow::Result<Option<String>> {
             objects - annotated
         )
     }))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Single assets
+
+/// `mesa export --assets`: every valid library asset on its own, an asset a unit.
+pub struct ExportAssetsStage;
+
+impl DatasetStage for ExportAssetsStage {
+    fn name(&self) -> &'static str {
+        "export"
+    }
+
+    fn preflight(&self, ctx: &StageContext<'_>) -> Result<(), UsageError> {
+        let problems = ctx.config.export.problems();
+        if problems.is_empty() {
+            Ok(())
+        } else {
+            Err(UsageError::new(format!(
+                "mesa.toml: {} (fix the [export] section)",
+                problems.join("; ")
+            )))
+        }
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
+        let started = std::time::Instant::now();
+        let library = ExportLibrary::load(ctx.dataset)?;
+        let uids: Vec<String> = library
+            .shapes
+            .uids()
+            .filter(|uid| library.shapes.record(uid).is_some_and(|r| r.valid))
+            .cloned()
+            .collect();
+        let force = exec.options().force;
+        let outcomes = exec.map_ticked(
+            "assets",
+            &uids,
+            |uid| export_asset(ctx, &library, uid, force).map_err(|e| format!("{e:#}")),
+            |outcome| match outcome {
+                Ok(true) => Tick::Done,
+                Ok(false) => Tick::Skipped,
+                Err(_) => Tick::Failed,
+            },
+        );
+        let (mut written, mut current) = (0, 0);
+        let mut failed = Vec::new();
+        for (uid, outcome) in uids.iter().zip(outcomes) {
+            match outcome {
+                Ok(true) => written += 1,
+                Ok(false) => current += 1,
+                Err(e) => failed.push(format!("asset {uid}: {e}")),
+            }
+        }
+        let mut text = format!(
+            "export --assets: {} assets: {written} written, {current} current, {} failed in {:.2} s ({ASSET_SIM}/<uid>/)\n",
+            uids.len(),
+            failed.len(),
+            started.elapsed().as_secs_f64()
+        );
+        for f in &failed {
+            text.push_str(&format!("  failed {f}\n"));
+        }
+        Ok(DatasetReport {
+            success: failed.is_empty(),
+            text,
+            record: serde_json::json!({
+                "assets": uids.len(), "written": written, "current": current, "failed": failed
+            }),
+        })
+    }
+}
+
+/// Exports one asset; `Ok(false)` when its files were current.
+fn export_asset(
+    ctx: &StageContext<'_>,
+    library: &ExportLibrary,
+    uid: &str,
+    force: bool,
+) -> anyhow::Result<bool> {
+    let record = library
+        .shapes
+        .record(uid)
+        .ok_or_else(|| anyhow!("not in {INDEX} (run `mesa assets`)"))?;
+    let geometry = record
+        .geometry
+        .as_ref()
+        .ok_or_else(|| anyhow!("no geometry in {INDEX} (run `mesa assets --force`)"))?;
+    let mass_kg = library
+        .shapes
+        .annotations()
+        .and_then(|a| a.get(uid))
+        .and_then(|a| a.mass_kg);
+    let inputs = digest_of(&(
+        &record.glb_sha256,
+        record.shapes.as_ref().map(|s| &s.sha256),
+        mass_kg,
+        &ctx.config.export,
+        env!("CARGO_PKG_VERSION"),
+    ));
+    let folder = ctx.dataset.join(ASSET_SIM).join(uid);
+    let manifest_path = folder.join("export.json");
+    if !force && manifest_path.is_file() {
+        let current: Option<ExportArtifact> = read_json(&manifest_path, "").ok();
+        if current.is_some_and(|m| m.layout_sha256 == inputs) {
+            return Ok(false);
+        }
+    }
+    let size_m = geometry.size_m;
+    let layout: mesa_schemas::DatasetLayout = serde_json::from_value(serde_json::json!({
+        "schema": "mesa.layout/1",
+        "item_placement_zone": [0.0, 1.0, 0.0, 1.0],
+        "objects": []
+    }))?;
+    let object = mesa_schemas::LayoutObject {
+        retrieved_uid: uid.to_owned(),
+        ..layout_object(uid, size_m)?
+    };
+    let shape = library
+        .shapes
+        .shape_of(ctx.dataset, &object)
+        .map_err(|e| anyhow!("{e}"))?;
+    let visual = library.visual(ctx.dataset, uid);
+    let exported = export_scene(
+        &ExportRequest {
+            scene_id: uid,
+            layout_file: "",
+            layout_sha256: &inputs,
+            layout: &layout,
+            objects: vec![ExportObject {
+                instance: uid,
+                uid,
+                pose: Pose::of_object(&object),
+                shape: &shape,
+                visual: visual.as_ref().as_ref().ok(),
+                annotated_mass_kg: mass_kg,
+            }],
+            skipped: Vec::new(),
+            with_table: false,
+        },
+        &ctx.config.export,
+    )?;
+    let mut manifest = exported.manifest;
+    if let Err(reason) = visual.as_ref() {
+        manifest.warnings.push(format!("no visual mesh: {reason}"));
+    }
+    let mut files: Vec<(String, Vec<u8>)> = exported
+        .files
+        .into_iter()
+        .map(|(rel, bytes)| {
+            let rel = rel.strip_prefix("sim/").unwrap_or(&rel).to_owned();
+            (rel, bytes)
+        })
+        .collect();
+    manifest.files = files.iter().map(|(rel, _)| rel.clone()).collect();
+    manifest.files.push("export.json".to_owned());
+    manifest.files.sort();
+    // The manifest last: its digest marks the files complete.
+    files.push((
+        "export.json".to_owned(),
+        mesa_schemas::json::to_sorted_pretty(&manifest)?,
+    ));
+    for (rel, bytes) in files {
+        let path = folder.join(&rel);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("{}: cannot create", parent.display()))?;
+        }
+        write_atomic(&path, &bytes).with_context(|| format!("{}: cannot write", path.display()))?;
+    }
+    Ok(true)
+}
+
+/// A layout object of an asset at its own size, bottom at z = 0, unturned.
+fn layout_object(uid: &str, size_m: [f64; 3]) -> anyhow::Result<mesa_schemas::LayoutObject> {
+    Ok(serde_json::from_value(serde_json::json!({
+        "instance": "object",
+        "category": "object",
+        "description": uid,
+        "retrieved_uid": uid,
+        "position": [0.0, 0.0, 50.0 * size_m[2]],
+        "rotation": [0.0, 0.0, 0.0, 1.0],
+        "size": size_m.map(|v| v * 100.0),
+        "scale_factor": [1.0, 1.0, 1.0]
+    }))?)
 }

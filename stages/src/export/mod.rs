@@ -212,6 +212,8 @@ pub struct ExportRequest<'a> {
     pub objects: Vec<ExportObject<'a>>,
     /// Objects left out, with the reason.
     pub skipped: Vec<UncheckedObject>,
+    /// Whether to write the table (a single asset's files have none).
+    pub with_table: bool,
 }
 
 /// A static box of the table, in the table frame: centre and half sizes, metres.
@@ -495,7 +497,11 @@ pub fn export_scene(
             body
         })
         .collect();
-    let table = table_boxes(request.layout, config);
+    let table = if request.with_table {
+        table_boxes(request.layout, config)
+    } else {
+        Vec::new()
+    };
     let mut files = BTreeMap::new();
     for (rel, bytes) in mjcf::write_mjcf(request.scene_id, &table, &bodies, config) {
         files.insert(format!("{MJCF_DIR}/{rel}"), bytes);
@@ -520,15 +526,20 @@ pub fn export_scene(
         formats: vec!["mjcf".to_owned(), "urdf".to_owned(), "usd".to_owned()],
         files: listed,
         density_kg_m3: config.density_kg_m3,
-        table_size_m: [
-            zone[1] - zone[0] + 2.0 * m,
-            zone[3] - zone[2] + 2.0 * m,
-            config.table_thickness_m,
-        ],
+        table_size_m: if request.with_table {
+            [
+                zone[1] - zone[0] + 2.0 * m,
+                zone[3] - zone[2] + 2.0 * m,
+                config.table_thickness_m,
+            ]
+        } else {
+            [0.0; 3]
+        },
         sink_depth_m: request
             .layout
             .restricted_zone_cm
             .as_ref()
+            .filter(|_| request.with_table)
             .map(|_| config.sink_depth_m),
         objects: bodies.into_iter().map(|b| b.record).collect(),
         skipped: request.skipped.clone(),

@@ -99,10 +99,13 @@ pub fn write_urdf(
     bodies: &[BodyModel],
     config: &ExportConfig,
 ) -> Result<Vec<(String, Vec<u8>)>, serde_json::Error> {
-    let mut files = vec![(
-        TABLE_URDF.to_owned(),
-        table_urdf(table, config).into_bytes(),
-    )];
+    let mut files = Vec::new();
+    if !table.is_empty() {
+        files.push((
+            TABLE_URDF.to_owned(),
+            table_urdf(table, config).into_bytes(),
+        ));
+    }
     let mut objects = Vec::new();
     for body in bodies {
         files.push((
@@ -120,13 +123,13 @@ pub fn write_urdf(
     let scene = UrdfSceneArtifact {
         schema: URDF_SCENE_SCHEMA.to_owned(),
         scene_id: scene_id.to_owned(),
-        table: UrdfPlacement {
+        table: (!table.is_empty()).then(|| UrdfPlacement {
             instance: "table".to_owned(),
             urdf: TABLE_URDF.to_owned(),
             position_m: [0.0; 3],
             orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
             fixed_base: true,
-        },
+        }),
         objects,
     };
     files.push((
