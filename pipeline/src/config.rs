@@ -45,6 +45,8 @@ pub struct Config {
     pub records: mesa_stages::records::RecordsConfig,
     /// `mesa render`: pictures of each scene's layout (and of single assets with --assets).
     pub render: mesa_stages::render::RenderConfig,
+    /// `mesa export`: the simulator export (masses, friction, contacts, the table box).
+    pub export: mesa_stages::export::ExportConfig,
     /// `mesa release`: the MesaTask-10K tree (layouts, pictures, annotations, assets).
     pub release: mesa_stages::release::ReleaseConfig,
 }
@@ -166,6 +168,7 @@ impl Config {
             .chain(config.check.problems())
             .chain(config.render.problems())
             .chain(config.assets.budget.problems())
+            .chain(config.export.problems())
             .collect();
         if !problems.is_empty() {
             return Err(format!("{} ", problems.join("; ")));

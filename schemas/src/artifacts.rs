@@ -31,6 +31,10 @@ pub const TASKS_SCHEMA: &str = "mesa.tasks/1";
 pub const TASK_REJECT_SCHEMA: &str = "mesa.task-reject/1";
 /// Schema id of `records/split.json`.
 pub const SPLIT_SCHEMA: &str = "mesa.split/1";
+/// Schema id of `sim/export.json`.
+pub const EXPORT_SCHEMA: &str = "mesa.export/1";
+/// Schema id of `sim/urdf/scene.json`.
+pub const URDF_SCENE_SCHEMA: &str = "mesa.urdf-scene/1";
 /// Schema id of the runner's done / failed markers.
 pub const MARKER_SCHEMA: &str = "mesa.marker/1";
 
@@ -1331,4 +1335,110 @@ pub struct CachedChatReply {
 /// bytes.
 pub(crate) fn is_false(value: &bool) -> bool {
     !*value
+}
+
+// ---------------------------------------------------------------------------------------------
+// The simulator export.
+
+/// Where an exported object's mass comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum MassSource {
+    /// The asset annotation's `mass` (kg), as annotated (not scaled with the object).
+    Annotation,
+    /// `[export] density_kg_m3` × the volume of the convex parts at the layout's scale.
+    Density,
+}
+
+/// One object of `sim/export.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ExportedObject {
+    /// The layout's instance: the MJCF body, the URDF robot and the USD prim are named so.
+    pub instance: String,
+    /// The asset placed.
+    pub uid: String,
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Where the mass comes from.
+    pub mass_source: MassSource,
+    /// Volume of the convex parts at the layout's scale, m³ (parts do not overlap: they are
+    /// cut from disjoint boxes).
+    pub volume_m3: f64,
+    /// Centre of mass in the body frame (the object's bounding-box centre, turned by its
+    /// rotation), metres.
+    pub center_of_mass_m: [f64; 3],
+    /// Inertia tensor about the centre of mass in the body frame, [ixx, iyy, izz, ixy, ixz,
+    /// iyz], kg·m².
+    pub inertia_kg_m2: [f64; 6],
+    /// Collision geoms: one per convex part.
+    pub collision_parts: u64,
+    /// Triangles of the visual mesh.
+    pub visual_triangles: u64,
+}
+
+/// `sim/export.json`: what `mesa export` wrote for a scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ExportArtifact {
+    /// `mesa.export/1`.
+    pub schema: String,
+    /// The scene.
+    pub scene_id: String,
+    /// The layout exported, relative to the scene folder.
+    pub layout: String,
+    /// SHA-256 of the layout's bytes (for a single asset, `mesa export --assets`: of the
+    /// asset's inputs: its GLB, its shapes, its annotated mass and the settings).
+    pub layout_sha256: String,
+    /// The formats written (`mjcf`, ...), each a folder under `sim/`.
+    pub formats: Vec<String>,
+    /// The files written, relative to the scene folder, sorted.
+    pub files: Vec<String>,
+    /// Density used for objects without an annotated mass, kg/m³.
+    pub density_kg_m3: f64,
+    /// The table: a static box whose top is z = 0; [width, depth, thickness], metres (zeros in
+    /// a single asset's files, which have no table).
+    pub table_size_m: [f64; 3],
+    /// The sink of a vanity: a hole in the table top over the restricted zone, with a static
+    /// basin floor this far below the top, metres (absent without a restricted zone).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sink_depth_m: Option<f64>,
+    /// The objects, in layout order.
+    pub objects: Vec<ExportedObject>,
+    /// Objects left out, each with the reason.
+    pub skipped: Vec<UncheckedObject>,
+    /// Things worth knowing (flat parts, a missing visual mesh, ...).
+    pub warnings: Vec<String>,
+}
+
+/// Where one URDF of a scene goes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct UrdfPlacement {
+    /// The instance (`table` for the table).
+    pub instance: String,
+    /// The URDF file, relative to `sim/urdf/`.
+    pub urdf: String,
+    /// Position of its root link's frame in the table frame, metres (z up, the table top at
+    /// z = 0).
+    pub position_m: [f64; 3],
+    /// Orientation of its root link, quaternion [x, y, z, w] (PyBullet's order).
+    pub orientation_xyzw: [f64; 4],
+    /// Whether to load it with a fixed base (the table).
+    pub fixed_base: bool,
+}
+
+/// `sim/urdf/scene.json`: the URDFs of a scene and their poses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct UrdfSceneArtifact {
+    /// `mesa.urdf-scene/1`.
+    pub schema: String,
+    /// The scene.
+    pub scene_id: String,
+    /// The table (static; absent in a single asset's files, `mesa export --assets`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table: Option<UrdfPlacement>,
+    /// The objects, in layout order.
+    pub objects: Vec<UrdfPlacement>,
 }

@@ -215,6 +215,22 @@ pub fn kinds() -> &'static [Kind] {
                 semantic: no_semantics,
             },
             Kind {
+                name: "export",
+                schema_id: Some(EXPORT_SCHEMA),
+                form: FileForm::Json,
+                summary: "sim/export.json (the simulator export: formats, masses, parts)",
+                generate: schema_of::<ExportArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "urdf-scene",
+                schema_id: Some(URDF_SCENE_SCHEMA),
+                form: FileForm::Json,
+                summary: "sim/urdf/scene.json (each URDF of a scene and its pose)",
+                generate: schema_of::<UrdfSceneArtifact>,
+                semantic: no_semantics,
+            },
+            Kind {
                 name: "graph",
                 schema_id: Some(GRAPH_SCHEMA),
                 form: FileForm::Json,

@@ -35,6 +35,7 @@ pub mod assets;
 pub mod check;
 pub mod demo;
 pub mod eval;
+pub mod export;
 pub mod glb_read;
 pub mod glb_write;
 pub mod gltf_frames;

@@ -34,6 +34,8 @@ pub mod dataset {
     pub const TEXT_UIDS: &str = "assets/text_uids.json";
     /// The views around every asset: `assets/renders/<uid>/`.
     pub const ASSET_RENDERS: &str = "assets/renders";
+    /// The simulator files of every asset (`mesa export --assets`): `assets/sim/<uid>/`.
+    pub const ASSET_SIM: &str = "assets/sim";
     /// The dataset's check summary.
     pub const CHECK_SUMMARY: &str = "qa/summary.json";
     /// The training records.
@@ -107,6 +109,16 @@ pub mod scene {
     pub const IMPORT_NOTES: &str = "imported/import.json";
     /// The released scene's `front.png`, kept as its reference picture (`mesa import`).
     pub const IMPORT_FRONT: &str = "imported/front.png";
+    /// The simulator export's folder (`mesa export`).
+    pub const SIM_DIR: &str = "sim";
+    /// The simulator export's manifest.
+    pub const EXPORT_MANIFEST: &str = "sim/export.json";
+    /// The MJCF export: `scene.xml` and `meshes/`.
+    pub const MJCF_DIR: &str = "sim/mjcf";
+    /// The URDF export: a URDF per object, `table.urdf` and `scene.json`.
+    pub const URDF_DIR: &str = "sim/urdf";
+    /// The USD export, one text file.
+    pub const USD_SCENE: &str = "sim/usd/scene.usda";
     /// The demo's true layout.
     pub const TRUTH_LAYOUT: &str = "truth/layout.json";
     /// The demo's true instances.

@@ -101,6 +101,21 @@ impl ShapeLibrary {
         })
     }
 
+    /// The dataset's asset annotations, if it has an annotations file.
+    pub fn annotations(&self) -> Option<&Annotations> {
+        self.annotations.as_ref()
+    }
+
+    /// The uids of the index, sorted.
+    pub fn uids(&self) -> impl Iterator<Item = &String> {
+        self.index.assets.keys()
+    }
+
+    /// The index's record of an asset.
+    pub fn record(&self, uid: &str) -> Option<&mesa_schemas::artifacts::AssetRecord> {
+        self.index.assets.get(uid)
+    }
+
     /// The collision shape of an object's asset, or why there is none.
     pub fn shape_of(
         &self,

@@ -11,6 +11,7 @@ pub mod assets;
 pub mod check;
 pub mod demo;
 pub mod eval;
+pub mod export;
 pub mod files;
 pub mod graph;
 pub mod import;
@@ -125,6 +126,10 @@ commands! {
     /// perspective views (render/<view>.png) with a camera file each; or, with --assets, eight
     /// views around every library asset (assets/renders/<uid>/).
     Render(render::Args) => render::run,
+    /// Export each scene for physics simulators (sim/): MJCF with one body per object, its
+    /// convex parts as colliders, its visual mesh and an explicit inertia, and the manifest
+    /// sim/export.json (docs/export.md). Not part of `mesa run`.
+    Export(export::Args) => export::run,
     /// Write the dataset's statistics and plots (report/stats.json, report/*.svg) and one page
     /// with a thumbnail, the QA flags and the files of every scene (report/index.html). Run it
     /// once, after all scenes (and all shards).

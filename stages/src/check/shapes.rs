@@ -22,7 +22,7 @@ use super::geometry::{convex_hull, Bounds, Hull};
 use crate::mesh::quat_to_matrix;
 
 /// A convex hull as vertices and triangles.
-type HullMesh = (Vec<[f64; 3]>, Vec<[u32; 3]>);
+pub type HullMesh = (Vec<[f64; 3]>, Vec<[u32; 3]>);
 
 /// An asset's convex parts, relative to the centre of its bounding box.
 #[derive(Debug, Clone, PartialEq)]
@@ -138,6 +138,13 @@ impl AssetShape {
     /// reach times the largest scale (a distance outside the mesh grows at most by it).
     pub fn reach_at(&self, pose: &Pose) -> f64 {
         self.reach_m * pose.scale.iter().fold(0.0_f64, |m, s| m.max(s.abs()))
+    }
+
+    /// The convex parts: hull vertices (metres, relative to the centre of the asset's bounding
+    /// box, in its table-aligned frame) and outward triangles (none for a part that spans no
+    /// volume).
+    pub fn parts(&self) -> &[HullMesh] {
+        &self.parts
     }
 
     /// The number of convex parts.
