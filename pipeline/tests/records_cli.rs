@@ -36,7 +36,8 @@ fn ok(args: &[&str], dir: &Path) -> String {
 
 /// A dataset of the published layouts with tasks and records built, and split ratios that give
 /// every split scenes (7 scenes: 4 train, 2 dpo, 1 test).
-fn built() -> tempfile::TempDir {
+/// The seven published layouts, with a split that gives every split a scene.
+fn gallery_with_split() -> tempfile::TempDir {
     let dir = tempfile::tempdir().expect("tempdir");
     common::gallery_dataset(dir.path());
     std::fs::write(
@@ -44,6 +45,11 @@ fn built() -> tempfile::TempDir {
         "[records.split]\ntrain = 0.6\ndpo = 0.25\ntest = 0.15\n",
     )
     .expect("config");
+    dir
+}
+
+fn built() -> tempfile::TempDir {
+    let dir = gallery_with_split();
     ok(&["graph", "--progress", "off"], dir.path());
     ok(&["tasks", "--progress", "off"], dir.path());
     ok(&["records", "--progress", "off"], dir.path());
@@ -704,13 +710,7 @@ fn band_flipping_y(zone: [f64; 4]) -> Option<f64> {
 /// layout agree (`mesa eval`'s self-consistency of the dataset's own references is 1).
 #[test]
 fn the_records_graph_is_that_of_the_layout_they_write() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    common::gallery_dataset(dir.path());
-    std::fs::write(
-        dir.path().join("mesa.toml"),
-        "[records.split]\ntrain = 0.6\ndpo = 0.25\ntest = 0.15\n",
-    )
-    .expect("config");
+    let dir = gallery_with_split();
     // Every scene's first object onto its zone's back edge, where rounding flips the band.
     let mut moved = 0;
     for (rel, _) in common::all_files(dir.path()) {
