@@ -219,15 +219,7 @@ impl SceneStage for ExportStage {
     }
 
     fn preflight(&self, ctx: &StageContext<'_>) -> Result<(), UsageError> {
-        let problems = ctx.config.export.problems();
-        if problems.is_empty() {
-            Ok(())
-        } else {
-            Err(UsageError::new(format!(
-                "mesa.toml: {} (fix the [export] section)",
-                problems.join("; ")
-            )))
-        }
+        check_export_config(ctx)
     }
 
     fn prepare(&self, ctx: &StageContext<'_>) {
@@ -359,15 +351,7 @@ impl DatasetStage for ExportAssetsStage {
     }
 
     fn preflight(&self, ctx: &StageContext<'_>) -> Result<(), UsageError> {
-        let problems = ctx.config.export.problems();
-        if problems.is_empty() {
-            Ok(())
-        } else {
-            Err(UsageError::new(format!(
-                "mesa.toml: {} (fix the [export] section)",
-                problems.join("; ")
-            )))
-        }
+        check_export_config(ctx)
     }
 
     fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
@@ -530,4 +514,17 @@ fn layout_object(uid: &str, size_m: [f64; 3]) -> anyhow::Result<mesa_schemas::La
         "size": size_m.map(|v| v * 100.0),
         "scale_factor": [1.0, 1.0, 1.0]
     }))?)
+}
+
+/// The `[export]` settings' problems as one usage error (both export stages check them first).
+fn check_export_config(ctx: &StageContext<'_>) -> Result<(), UsageError> {
+    let problems = ctx.config.export.problems();
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        Err(UsageError::new(format!(
+            "mesa.toml: {} (fix the [export] section)",
+            problems.join("; ")
+        )))
+    }
 }
