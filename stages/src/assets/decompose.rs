@@ -443,6 +443,13 @@ fn candidate(mesh: &Mesh, piece: &Piece) -> Option<Candidate> {
         None => {
             points.sort_by(lexical);
             points.dedup();
+            if collinear(&points) {
+                // A point or a segment: the piece holds only faces cut down to an edge (a face
+                // lying on a cut), no area and no volume. As a part it would touch nothing
+                // and take a place of the part budget (the demo pen had 107 such copies of
+                // its clip's edge among its 128 parts).
+                return None;
+            }
             (points, Vec::new())
         }
     };
@@ -458,6 +465,34 @@ const INSIDE_MARGIN_M: f64 = 1e-6;
 
 /// Coordinates closer than this are the same plane, metres.
 const PLANAR_EPS_M: f64 = 1e-7;
+
+/// Whether `points` lie on one line (within [`PLANAR_EPS_M`]): they span no area.
+pub(crate) fn collinear(points: &[[f64; 3]]) -> bool {
+    let Some(&a) = points.first() else {
+        return true;
+    };
+    let dist = |p: &[f64; 3], q: &[f64; 3]| (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f64>();
+    let Some(b) = points
+        .iter()
+        .max_by(|p, q| dist(p, &a).total_cmp(&dist(q, &a)))
+    else {
+        return true;
+    };
+    let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let length = dist(b, &a).sqrt();
+    if length <= PLANAR_EPS_M {
+        return true;
+    }
+    points.iter().all(|p| {
+        let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
+        let cross = [
+            ab[1] * ap[2] - ab[2] * ap[1],
+            ab[2] * ap[0] - ab[0] * ap[2],
+            ab[0] * ap[1] - ab[1] * ap[0],
+        ];
+        (cross.iter().map(|c| c * c).sum::<f64>()).sqrt() / length <= PLANAR_EPS_M
+    })
+}
 
 /// The (unnormalised) normal of a polygon, by its winding (Newell's method).
 fn polygon_normal(polygon: &[[f64; 3]]) -> [f64; 3] {

@@ -306,7 +306,7 @@ fn adaptive_shapes(
             ),
         };
     };
-    let parts: Vec<ConvexPart> = decomposed
+    let mut parts: Vec<ConvexPart> = decomposed
         .parts
         .iter()
         .map(|p| ConvexPart {
@@ -317,7 +317,13 @@ fn adaptive_shapes(
                 .collect(),
             volume_m3: p.volume_m3,
         })
+        // A sliver thinner than the precision in two directions rounds to a segment: it spans
+        // no area, so it can touch nothing.
+        .filter(|p| !super::decompose::collinear(&p.points_m))
         .collect();
+    if parts.is_empty() {
+        parts.push(hull.clone());
+    }
     decomposition.max_deviation_m = Some(round(
         decomposed.max_deviation_m as f32,
         config.shape_precision_m / 10.0,

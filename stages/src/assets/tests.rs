@@ -609,3 +609,48 @@ fn an_asset_beyond_the_tolerance_records_why_and_warns() {
     assert!(d.part_budget.expect("budget") > 4);
     assert!(indexed.warnings.is_empty(), "{:?}", indexed.warnings);
 }
+
+/// Every part of every demo asset spans an area: a piece cut down to an edge (a face lying on
+/// a cut) is no part. The demo pen had 107 identical two-point parts of 128 (its clip's
+/// edge), which used up its part budget: it now needs fewer parts and reaches less far.
+#[test]
+fn no_demo_asset_has_a_part_that_is_a_point_or_a_segment() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    crate::demo::write_demo(
+        dir.path(),
+        &crate::demo::DemoOptions::default().with_scenes(1),
+    )
+    .expect("demo");
+    let library = dir.path().join("assets/library");
+    let mut glbs: Vec<_> = std::fs::read_dir(&library)
+        .expect("library")
+        .map(|e| e.expect("entry").path())
+        .collect();
+    glbs.sort();
+    let config = AssetsConfig::default();
+    let mut worst_pen = None;
+    for glb in &glbs {
+        let bytes = std::fs::read(glb).expect("read");
+        let uid = glb
+            .file_stem()
+            .expect("stem")
+            .to_string_lossy()
+            .into_owned();
+        let indexed = index_asset(&uid, "digest", &bytes, None, &config);
+        let shapes = indexed.shapes.expect("shapes");
+        for (i, part) in shapes.parts.iter().enumerate() {
+            assert!(
+                !super::decompose::collinear(&part.points_m),
+                "{uid}: part {i} is {:?}",
+                part.points_m
+            );
+        }
+        // The pen: the slimmest asset (1 cm thick, 14 cm long).
+        if uid == "49151422f1ad6513609fa49aec5cabbb" {
+            worst_pen = Some((shapes.parts.len(), shapes.decomposition.max_deviation_m));
+        }
+    }
+    let (parts, reach) = worst_pen.expect("the demo pen");
+    println!("the demo pen: {parts} parts, reach {reach:?}");
+    assert!(parts < 128, "{parts} parts");
+}
