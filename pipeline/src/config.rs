@@ -282,6 +282,20 @@ mod tests {
         );
         let err = Config::from_toml("[check.settling]\nmax_rounds = 0\n").expect_err("bad");
         assert!(err.contains("[check.settling] max_rounds is 0"), "{err}");
+        let err = Config::from_toml(
+            "[check.settling]\nsimulate = true\nsimulated_s = 1.0\nrest_window_s = 2.0\n\
+             steps_per_second = 5\nfriction = -1\n",
+        )
+        .expect_err("bad");
+        for key in [
+            "rest_window_s is 2",
+            "steps_per_second is 5",
+            "friction is -1",
+        ] {
+            assert!(err.contains(&format!("[check.settling] {key}")), "{err}");
+        }
+        Config::from_toml("[check.settling]\nsimulate = true\nsimulated_s = 3.0\n")
+            .expect("a good simulation section");
         let err = Config::from_toml("[check]\nlayout = \"truth\"\n").expect_err("bad");
         assert!(err.contains("layout"), "{err}");
     }

@@ -721,7 +721,8 @@ pub struct SettleReport {
     /// was written (`reason` says why; later stages read the unsettled layout).
     pub status: SettleStatus,
     /// `least_motion`: objects pushed apart in the plane and dropped onto what is under them,
-    /// stacks and contents moving with what holds them.
+    /// stacks and contents moving with what holds them; `least_motion+simulation`: then
+    /// simulated under gravity until at rest (`simulation`).
     pub method: String,
     /// Why the scene could not be settled.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -745,6 +746,9 @@ pub struct SettleReport {
     /// The findings of a check of the layout settle arrived at (of `qa/layout.json` when
     /// settled).
     pub after: CheckFindings,
+    /// The simulation after the least-motion moves, when one ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulation: Option<SimulationReport>,
 }
 
 /// Whether a scene was settled.
@@ -763,10 +767,49 @@ pub enum SettleStatus {
 pub struct Displacement {
     /// The instance.
     pub instance: String,
-    /// The move [dx, dy, dz], cm.
+    /// The move of its position [dx, dy, dz], cm.
     pub offset_cm: [f64; 3],
     /// Its length, cm.
     pub distance_cm: f64,
+    /// Whether the simulation moved it (further than `rest_motion_mm`): its position and
+    /// rotation are then the simulation's.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub simulated: bool,
+    /// How far the simulation moved it (the largest motion of a corner of its box), cm; absent
+    /// without a simulation.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulation_cm: Option<f64>,
+    /// The angle the simulation turned it by, degrees (0 when it kept its pose).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turned_deg: Option<f64>,
+}
+
+/// The rigid-body simulation that ends settling (`[check.settling] simulate`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationReport {
+    /// The engine: `rapier3d 0.26`.
+    pub engine: String,
+    /// Simulated time, seconds: at least `[check.settling] simulated_s`, longer while
+    /// something still moved.
+    pub simulated_s: f64,
+    /// Steps run.
+    pub steps: u32,
+    /// The rest window (the last seconds of the simulation), seconds.
+    pub rest_window_s: f64,
+    /// Motion below this is no motion, mm.
+    pub rest_motion_mm: f64,
+    /// Objects the simulation moved (they take its pose).
+    pub objects_moved: u64,
+    /// The largest motion of an object in the simulation, cm.
+    pub max_motion_cm: f64,
+    /// Objects still moving over the rest window (more than `rest_motion_mm`): the scene is
+    /// not at rest.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub still_moving: Vec<String>,
+    /// Objects that ended under the table top (off the table, or into the sink).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub fell: Vec<String>,
 }
 
 /// `qa/summary.json` (dataset level): the collision rate over every checked scene, before and

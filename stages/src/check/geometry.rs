@@ -166,7 +166,7 @@ impl Hull {
     pub fn points(&self) -> Vec<[f64; 3]> {
         self.points
             .iter()
-            .map(|p| std::array::from_fn(|k| self.center[k] + f64::from(p[k])))
+            .map(|p| std::array::from_fn(|k| self.center[k] + f64::from(p[k]) / MM))
             .collect()
     }
 
@@ -382,6 +382,19 @@ mod tests {
             }
         }
         Hull::new(&points).expect("points")
+    }
+
+    #[test]
+    fn a_hull_gives_back_its_points_in_metres() {
+        let mut hull = cube([1.0, 2.0, 0.5], 0.05);
+        hull.translate([0.25, 0.0, -0.5]);
+        let points = hull.points();
+        assert_eq!(points.len(), 8);
+        for p in &points {
+            for (k, c) in [1.25, 2.0, 0.0].iter().enumerate() {
+                assert_abs_diff_eq!((p[k] - c).abs(), 0.05, epsilon = 1e-6);
+            }
+        }
     }
 
     #[test]

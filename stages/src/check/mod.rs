@@ -24,6 +24,7 @@ pub mod geometry;
 pub mod scene;
 pub mod settle;
 pub mod shapes;
+pub mod simulate;
 
 use std::sync::Arc;
 

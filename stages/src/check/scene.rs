@@ -5,14 +5,20 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use mesa_schemas::artifacts::{
-    CheckArtifact, Displacement, SettleReport, SettleStatus, UncheckedObject, CHECK_SCHEMA,
+    CheckArtifact, Displacement, SettleReport, SettleStatus, SimulationReport, UncheckedObject,
+    CHECK_SCHEMA,
 };
 use mesa_schemas::units::PositionCm;
 use mesa_schemas::{DatasetLayout, LayoutObject, Provenance};
 
 use super::settle::settle;
-use super::{check_scene, pair_contact, round_to, AssetShape, CheckConfig, Findings, PhysicsScene};
+use super::simulate::{simulate, table_boxes, SimObject, Simulation};
+use super::simulate::{SINK_DEPTH_M, TABLE_MARGIN_M, TABLE_THICKNESS_M};
+use super::{
+    check_scene, pair_contact, round_to, AssetShape, CheckConfig, Findings, PhysicsScene, Pose,
+};
 use crate::graph::{extract_graph, GraphOptions, GraphScene, Relation};
+use crate::mesh::{quat_mul, quat_normalize};
 
 /// The settled layout's file, relative to the scene folder.
 pub use crate::paths::scene::SETTLED_LAYOUT;
@@ -72,7 +78,7 @@ pub fn check_layout(
 ) -> SceneCheck {
     let layout = source.layout;
     let tolerances = config.tolerances();
-    let scene = PhysicsScene::from_layout(layout, shape_of);
+    let scene = PhysicsScene::from_layout(layout, &shape_of);
     let findings = check_scene(&scene, &tolerances);
     let unchecked: Vec<UncheckedObject> = scene
         .objects
@@ -115,6 +121,7 @@ pub fn check_layout(
     let settle_report = settle_scene.then(|| {
         settle_layout(
             layout,
+            &shape_of,
             &scene,
             &findings,
             containers,
@@ -201,8 +208,70 @@ fn median(values: &mut [f64]) -> f64 {
     }
 }
 
+/// The objects of a layout as the simulation takes them: each one's parts turned and scaled
+/// by the layout, relative to its position.
+fn sim_objects(
+    layout: &DatasetLayout,
+    shape_of: &dyn Fn(&LayoutObject) -> Result<Arc<AssetShape>, String>,
+) -> Vec<SimObject> {
+    layout
+        .objects
+        .iter()
+        .map(|object| {
+            let pose = Pose::of_object(object);
+            let parts = shape_of(object)
+                .map(|shape| {
+                    let at_origin = Pose {
+                        position_m: [0.0; 3],
+                        ..pose
+                    };
+                    shape.place(&at_origin).iter().map(|h| h.points()).collect()
+                })
+                .unwrap_or_default();
+            SimObject {
+                position_m: pose.position_m,
+                parts,
+            }
+        })
+        .collect()
+}
+
+/// Applies a simulation to the objects it moved further than `rest_motion_m`: their position
+/// and rotation become the simulation's (rounded as layouts are), with a provenance note.
+fn apply_simulation(layout: &mut DatasetLayout, simulation: &Simulation, rest_motion_m: f64) {
+    for (object, motion) in layout.objects.iter_mut().zip(&simulation.motions) {
+        let Some(m) = motion.filter(|m| m.moved_m > rest_motion_m) else {
+            continue;
+        };
+        object.position_cm = PositionCm(m.position_m.map(|v| round_to(v * 100.0, 4)));
+        let q = quat_normalize(quat_mul(m.turn_xyzw, quat_normalize(object.rotation.0)));
+        // One sign for the same rotation, then rounded.
+        let q = if q[3] < 0.0 { q.map(|c| -c) } else { q };
+        object.rotation.0 = quat_normalize(q.map(|c| round_to(c, 9))).map(|c| round_to(c, 12));
+        if object.z_rotation_deg.is_some() {
+            object.z_rotation_deg = Some(round_to(
+                mesa_schemas::rotation::yaw_deg_from_quat_xyzw(object.rotation.0),
+                4,
+            ));
+        }
+        let provenance = object.provenance.get_or_insert_with(|| Provenance {
+            stage: String::new(),
+            source_instance: None,
+            notes: Vec::new(),
+        });
+        provenance.stage = "check".to_owned();
+        provenance.notes.push(format!(
+            "settled: the simulation moved it {:.2} cm and turned it {:.1}°",
+            m.moved_m * 100.0,
+            m.turn_deg
+        ));
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
 fn settle_layout(
     layout: &DatasetLayout,
+    shape_of: &dyn Fn(&LayoutObject) -> Result<Arc<AssetShape>, String>,
     scene: &PhysicsScene,
     findings: &Findings,
     containers: &[bool],
@@ -236,33 +305,18 @@ fn settle_layout(
     } else {
         None
     };
-    let offsets = settled
-        .as_ref()
-        .map(|s| s.offsets_m.clone())
-        .unwrap_or_else(|| vec![[0.0; 3]; layout.objects.len()]);
-    let displacements: Vec<Displacement> = layout
-        .objects
-        .iter()
-        .zip(&offsets)
-        .map(|(o, t)| {
-            let offset_cm = t.map(|v| round_to(v * 100.0, 4));
-            Displacement {
-                instance: o.instance.clone(),
-                offset_cm,
-                distance_cm: round_to((t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt() * 100.0, 4),
-            }
-        })
-        .collect();
-    let mut distances: Vec<f64> = displacements.iter().map(|d| d.distance_cm).collect();
-    let max_displacement_cm = distances.iter().copied().fold(0.0, f64::max);
-    let median_displacement_cm = median(&mut distances);
+    // The least-motion moves, rounded as layouts are.
     let mut moved = layout.clone();
-    for (object, d) in moved.objects.iter_mut().zip(&displacements) {
-        if d.distance_cm > 0.0 {
+    if let Some(s) = &settled {
+        for (object, t) in moved.objects.iter_mut().zip(&s.offsets_m) {
+            if t.iter().all(|v| *v == 0.0) {
+                continue;
+            }
+            let offset_cm = t.map(|v| round_to(v * 100.0, 4));
             let p = object.position_cm.0;
             object.position_cm =
-                PositionCm(std::array::from_fn(|k| round_to(p[k] + d.offset_cm[k], 4)));
-            let mut provenance = object.provenance.clone().unwrap_or(Provenance {
+                PositionCm(std::array::from_fn(|k| round_to(p[k] + offset_cm[k], 4)));
+            let provenance = object.provenance.get_or_insert_with(|| Provenance {
                 stage: String::new(),
                 source_instance: None,
                 notes: Vec::new(),
@@ -270,11 +324,104 @@ fn settle_layout(
             provenance.stage = "check".to_owned();
             provenance.notes.push(format!(
                 "settled: moved by ({:.2}, {:.2}, {:.2}) cm",
-                d.offset_cm[0], d.offset_cm[1], d.offset_cm[2]
+                offset_cm[0], offset_cm[1], offset_cm[2]
             ));
-            object.provenance = Some(provenance);
         }
     }
+    // Then the simulation, on a scene the moves brought to rest.
+    let simulation: Option<Simulation> = match &settled {
+        Some(s) if config.settling.simulate && s.findings.physical() => {
+            let table = table_boxes(layout, TABLE_MARGIN_M, TABLE_THICKNESS_M, SINK_DEPTH_M);
+            let simulation = simulate(
+                &sim_objects(&moved, shape_of),
+                &table,
+                &config.settling.simulation(),
+            );
+            apply_simulation(
+                &mut moved,
+                &simulation,
+                config.settling.rest_motion_mm / 1000.0,
+            );
+            Some(simulation)
+        }
+        _ => None,
+    };
+    // The scene as settled: after a simulation, placed anew (rotations changed).
+    let (final_scene, final_findings) = match (&settled, &simulation) {
+        (Some(_), Some(_)) => {
+            let placed = PhysicsScene::from_layout(&moved, shape_of);
+            let found = check_scene(&placed, &tolerances);
+            (Some(placed), Some(found))
+        }
+        (Some(s), None) => (Some(s.scene.clone()), Some(s.findings.clone())),
+        _ => (None, None),
+    };
+    let displacements: Vec<Displacement> = layout
+        .objects
+        .iter()
+        .zip(&moved.objects)
+        .enumerate()
+        .map(|(i, (before, after))| {
+            let offset_cm: [f64; 3] = std::array::from_fn(|k| {
+                round_to(after.position_cm.0[k] - before.position_cm.0[k], 4)
+            });
+            let motion = simulation.as_ref().and_then(|s| s.motions[i]);
+            let simulated =
+                motion.is_some_and(|m| m.moved_m * 1000.0 > config.settling.rest_motion_mm);
+            Displacement {
+                instance: before.instance.clone(),
+                offset_cm,
+                distance_cm: round_to(offset_cm.iter().map(|v| v * v).sum::<f64>().sqrt(), 4),
+                simulated,
+                simulation_cm: motion.map(|m| round_to(m.moved_m * 100.0, 4)),
+                turned_deg: motion.map(|m| {
+                    if simulated {
+                        round_to(m.turn_deg, 3)
+                    } else {
+                        0.0
+                    }
+                }),
+            }
+        })
+        .collect();
+    let mut distances: Vec<f64> = displacements.iter().map(|d| d.distance_cm).collect();
+    let max_displacement_cm = distances.iter().copied().fold(0.0, f64::max);
+    let median_displacement_cm = median(&mut distances);
+    let simulation_report = simulation.as_ref().map(|s| {
+        let name = |i: usize| layout.objects[i].instance.clone();
+        let rest_m = config.settling.rest_motion_mm / 1000.0;
+        let motions: Vec<(usize, &super::simulate::SimMotion)> = s
+            .motions
+            .iter()
+            .enumerate()
+            .filter_map(|(i, m)| m.as_ref().map(|m| (i, m)))
+            .collect();
+        SimulationReport {
+            engine: "rapier3d 0.26".to_owned(),
+            simulated_s: round_to(
+                f64::from(s.steps) / f64::from(config.settling.steps_per_second),
+                4,
+            ),
+            steps: s.steps,
+            rest_window_s: config.settling.rest_window_s,
+            rest_motion_mm: config.settling.rest_motion_mm,
+            objects_moved: motions.iter().filter(|(_, m)| m.moved_m > rest_m).count() as u64,
+            max_motion_cm: round_to(
+                motions.iter().map(|(_, m)| m.moved_m).fold(0.0, f64::max) * 100.0,
+                4,
+            ),
+            still_moving: motions
+                .iter()
+                .filter(|(_, m)| m.window_motion_m > rest_m && !m.fell)
+                .map(|(i, _)| name(*i))
+                .collect(),
+            fell: motions
+                .iter()
+                .filter(|(_, m)| m.fell)
+                .map(|(i, _)| name(*i))
+                .collect(),
+        }
+    });
     // The relations the settled layout would lose: an object held by another (in it, or
     // above it) must still rest on it, or on something it holds (a fruit dropped onto the
     // fruits in a bowl is still in the bowl). The box rules of the scene graph cannot tell an
@@ -292,8 +439,8 @@ fn settle_layout(
         }
         out
     };
-    let relations_lost: Vec<String> = match (&edges, &settled) {
-        (Some(edges), Some(s)) => edges
+    let relations_lost: Vec<String> = match (&edges, &final_scene) {
+        (Some(edges), Some(placed)) => edges
             .iter()
             .filter(|(subject, _, object)| {
                 let (Some(&i), Some(&j)) =
@@ -301,10 +448,10 @@ fn settle_layout(
                 else {
                     return false;
                 };
-                let Ok(a) = &s.scene.objects[i].body else {
+                let Ok(a) = &placed.objects[i].body else {
                     return false;
                 };
-                let touches = |k: usize| match &s.scene.objects[k].body {
+                let touches = |k: usize| match &placed.objects[k].body {
                     Ok(b) if k != i => pair_contact(a, b, tolerances.floating_m)
                         .is_some_and(|c| c.near || c.depth_m > 0.0),
                     _ => false,
@@ -315,22 +462,38 @@ fn settle_layout(
             .collect(),
         _ => Vec::new(),
     };
-    let (after, rounds, reason) = match &settled {
-        None => (
-            findings.to_schema(scene),
-            0,
-            Some(format!(
-                "{unchecked} objects have no collision shape: a scene cannot be settled around \
-                 objects it cannot see"
-            )),
-        ),
-        Some(s) => {
-            let after = s.findings.to_schema(&s.scene);
+    let (after, rounds, reason) = match (&settled, &final_scene, &final_findings) {
+        (Some(s), Some(placed), Some(found)) => {
+            let after = found.to_schema(placed);
             let reason = if !s.findings.physical() {
                 Some(format!(
                     "still not at rest after {} rounds: {}",
                     s.rounds,
                     remaining(&s.findings, &s.scene)
+                ))
+            } else if let Some(fell) = simulation_report
+                .as_ref()
+                .filter(|r| !r.fell.is_empty())
+                .map(|r| r.fell.join(", "))
+            {
+                Some(format!(
+                    "in the simulation, {fell} fell under the table top (off the table or into \
+                     the sink)"
+                ))
+            } else if let Some(moving) = simulation_report
+                .as_ref()
+                .filter(|r| !r.still_moving.is_empty())
+                .map(|r| r.still_moving.join(", "))
+            {
+                Some(format!(
+                    "not at rest: {moving} still moved more than rest_motion_mm = {} mm in the \
+                     last {} s of the simulation",
+                    config.settling.rest_motion_mm, config.settling.rest_window_s
+                ))
+            } else if !found.physical() {
+                Some(format!(
+                    "after the simulation, the check finds {}",
+                    remaining(found, placed)
                 ))
             } else if max_displacement_cm > config.settling.max_displacement_cm {
                 let worst = displacements
@@ -353,6 +516,14 @@ fn settle_layout(
             };
             (after, s.rounds, reason)
         }
+        _ => (
+            findings.to_schema(scene),
+            0,
+            Some(format!(
+                "{unchecked} objects have no collision shape: a scene cannot be settled around \
+                 objects it cannot see"
+            )),
+        ),
     };
     let status = if reason.is_none() {
         SettleStatus::Settled
@@ -361,7 +532,12 @@ fn settle_layout(
     };
     let report = SettleReport {
         status,
-        method: "least_motion".to_owned(),
+        method: if simulation.is_some() {
+            "least_motion+simulation"
+        } else {
+            "least_motion"
+        }
+        .to_owned(),
         layout: (status == SettleStatus::Settled).then(|| SETTLED_LAYOUT.to_owned()),
         reason,
         iterations: rounds,
@@ -370,6 +546,7 @@ fn settle_layout(
         median_displacement_cm,
         relations_lost,
         after,
+        simulation: simulation_report,
     };
     let settled = (status == SettleStatus::Settled).then_some(moved);
     (report, settled)

@@ -41,6 +41,28 @@ pub struct SettleConfig {
     pub clearance_mm: f64,
     /// A scene needing an object moved farther than this is left unsettled, cm.
     pub max_displacement_cm: f64,
+    /// After the least-motion moves, simulate the scene under gravity (rapier3d, on the
+    /// objects' convex parts) so that it comes to rest where it would stay, and verify that
+    /// it does (`docs/check.md`).
+    pub simulate: bool,
+    /// Simulated time, seconds (at least).
+    pub simulated_s: f64,
+    /// While something still moves after `simulated_s`, the simulation goes on, a rest
+    /// window at a time, up to this, seconds.
+    pub max_simulated_s: f64,
+    /// Fixed simulation steps per simulated second.
+    pub steps_per_second: u32,
+    /// The last part of the simulation over which no object may move farther than
+    /// `rest_motion_mm`, seconds.
+    pub rest_window_s: f64,
+    /// Motion below this is no motion, mm: an object the simulation moves less keeps its
+    /// pose; one that moves more over the rest window is not at rest.
+    pub rest_motion_mm: f64,
+    /// Density of the objects' parts in the simulation, kg/m³ (as `[export] density_kg_m3`).
+    pub density_kg_m3: f64,
+    /// Friction coefficient of every contact in the simulation (as `[export]
+    /// friction_sliding`).
+    pub friction: f64,
 }
 
 impl Default for SettleConfig {
@@ -49,6 +71,14 @@ impl Default for SettleConfig {
             max_rounds: 40,
             clearance_mm: 0.5,
             max_displacement_cm: 30.0,
+            simulate: false,
+            simulated_s: 2.0,
+            max_simulated_s: 6.0,
+            steps_per_second: 240,
+            rest_window_s: 0.5,
+            rest_motion_mm: 1.0,
+            density_kg_m3: 500.0,
+            friction: 0.8,
         }
     }
 }
@@ -70,7 +100,70 @@ impl SettleConfig {
                 ));
             }
         }
+        if !(self.simulated_s.is_finite() && self.simulated_s > 0.0 && self.simulated_s <= 60.0) {
+            problems.push(format!(
+                "[check.settling] simulated_s is {} (expected a number of seconds in (0, 60])",
+                self.simulated_s
+            ));
+        }
+        if !(self.max_simulated_s.is_finite()
+            && self.max_simulated_s >= self.simulated_s
+            && self.max_simulated_s <= 600.0)
+        {
+            problems.push(format!(
+                "[check.settling] max_simulated_s is {} (expected seconds from simulated_s = {} \
+                 to 600)",
+                self.max_simulated_s, self.simulated_s
+            ));
+        }
+        if !(30..=10_000).contains(&self.steps_per_second) {
+            problems.push(format!(
+                "[check.settling] steps_per_second is {} (expected 30 to 10000)",
+                self.steps_per_second
+            ));
+        }
+        if !(self.rest_window_s.is_finite()
+            && self.rest_window_s > 0.0
+            && self.rest_window_s <= self.simulated_s)
+        {
+            problems.push(format!(
+                "[check.settling] rest_window_s is {} (expected a number of seconds > 0 and at \
+                 most simulated_s = {})",
+                self.rest_window_s, self.simulated_s
+            ));
+        }
+        for (name, value, floor_open) in [
+            ("rest_motion_mm", self.rest_motion_mm, false),
+            ("density_kg_m3", self.density_kg_m3, true),
+            ("friction", self.friction, false),
+        ] {
+            let ok = value.is_finite()
+                && if floor_open {
+                    value > 0.0
+                } else {
+                    value >= 0.0
+                };
+            if !ok {
+                let bound = if floor_open { "> 0" } else { ">= 0" };
+                problems.push(format!(
+                    "[check.settling] {name} is {value} (expected a number {bound})"
+                ));
+            }
+        }
         problems
+    }
+
+    /// The simulation's settings.
+    pub fn simulation(&self) -> super::simulate::SimulationConfig {
+        super::simulate::SimulationConfig {
+            simulated_s: self.simulated_s,
+            max_simulated_s: self.max_simulated_s,
+            steps_per_second: self.steps_per_second,
+            rest_window_s: self.rest_window_s,
+            rest_motion_m: self.rest_motion_mm / 1000.0,
+            density_kg_m3: self.density_kg_m3,
+            friction: self.friction,
+        }
     }
 }
 

@@ -413,3 +413,90 @@ fn the_reach_of_parts_grows_with_the_scale_a_layout_applies() {
     assert!(named[0].contains("pencil_1 (10.5 mm)"), "{}", named[0]);
     assert!(!named[0].contains("pencil_0"), "{}", named[0]);
 }
+
+/// Settles a dataset layout of the given shapes (`containers[i]`: object i holds things).
+fn settle_text(
+    text: &str,
+    shapes: &[(&str, Arc<AssetShape>)],
+    containers: &[bool],
+    simulate: bool,
+) -> (SceneCheck, DatasetLayout) {
+    let layout: DatasetLayout = serde_json::from_str(text).expect("layout");
+    let mut config = CheckConfig::default();
+    config.settling.simulate = simulate;
+    let source = super::scene::LayoutSource {
+        layout: &layout,
+        file: "refined/layout.json",
+        sha256: "0",
+        scene_id: "office_table_0001",
+    };
+    let checked = super::check_layout(
+        source,
+        |o| {
+            shapes
+                .iter()
+                .find(|(uid, _)| *uid == o.retrieved_uid)
+                .map(|(_, s)| Arc::clone(s))
+                .ok_or_else(|| "no shape".to_owned())
+        },
+        containers,
+        &crate::graph::GraphOptions::default(),
+        &config,
+        true,
+    );
+    (checked, layout)
+}
+
+#[test]
+fn a_stick_leaning_on_its_end_lies_down_when_settled_and_stands_without_the_simulation() {
+    // A 30 cm stick, 1 cm thick, standing on its end tilted 4° about x, a little above the
+    // table: the least-motion moves drop it onto its edge, where nothing overlaps and nothing
+    // floats; only the simulation lets it fall.
+    let half = 2f64.to_radians();
+    let text = format!(
+        r#"{{"item_placement_zone": [0, 100, 0, 100], "objects": [
+        {{"instance": "stick_0", "retrieved_uid": "stick", "position": [50, 50, 16],
+         "rotation": [{}, 0, 0, {}], "size": [1, 1, 30], "scale_factor": [1, 1, 1]}}]}}"#,
+        half.sin(),
+        half.cos()
+    );
+    let stick = cuboid([0.01, 0.01, 0.30]);
+    let shapes = [("stick", stick)];
+    let (with, _) = settle_text(&text, &shapes, &[false], true);
+    let report = with.artifact.settle.as_ref().expect("settle report");
+    let settled = with
+        .settled
+        .as_ref()
+        .unwrap_or_else(|| panic!("not settled: {report:?}"));
+    assert_eq!(report.method, "least_motion+simulation");
+    let d = &report.displacements[0];
+    assert!(d.simulated, "{d:?}");
+    assert!(d.turned_deg.expect("turned") > 60.0, "{d:?}");
+    // Lying on the table: its centre half its thickness up.
+    let z = settled.objects[0].position_cm.0[2];
+    assert!((0.3..1.0).contains(&z), "z = {z} cm; {report:?}");
+    assert!(
+        crate::mesh::quat_to_matrix(settled.objects[0].rotation.0)[2][2].abs() < 0.5,
+        "not lying: {:?}",
+        settled.objects[0].rotation
+    );
+    assert!(report.after.clean, "{:?}", report.after);
+    let sim = report.simulation.as_ref().expect("simulation");
+    assert_eq!(sim.objects_moved, 1);
+    assert!(
+        sim.still_moving.is_empty() && sim.fell.is_empty(),
+        "{sim:?}"
+    );
+    // The control: without the simulation, the least-motion moves leave it standing.
+    let (without, layout) = settle_text(&text, &shapes, &[false], false);
+    let report = without.artifact.settle.as_ref().expect("settle report");
+    let kept = without.settled.as_ref().expect("settled");
+    assert_eq!(report.method, "least_motion");
+    assert!(report.simulation.is_none());
+    assert_eq!(kept.objects[0].rotation, layout.objects[0].rotation);
+    assert!(
+        kept.objects[0].position_cm.0[2] > 14.0,
+        "{:?}",
+        kept.objects[0]
+    );
+}

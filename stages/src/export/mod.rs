@@ -100,10 +100,10 @@ impl Default for ExportConfig {
             solref_timeconst_s: 0.005,
             solref_dampratio: 1.0,
             timestep_s: 0.002,
-            table_margin_m: 0.05,
-            table_thickness_m: 0.05,
-            sink_depth_m: 0.15,
-            flat_part_thickness_m: 0.0005,
+            table_margin_m: crate::check::simulate::TABLE_MARGIN_M,
+            table_thickness_m: crate::check::simulate::TABLE_THICKNESS_M,
+            sink_depth_m: crate::check::simulate::SINK_DEPTH_M,
+            flat_part_thickness_m: crate::check::simulate::FLAT_PART_THICKNESS_M,
         }
     }
 }
@@ -216,55 +216,17 @@ pub struct ExportRequest<'a> {
     pub with_table: bool,
 }
 
-/// A static box of the table, in the table frame: centre and half sizes, metres.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TableBox {
-    /// Name of the geom.
-    pub name: &'static str,
-    /// Centre, metres.
-    pub center_m: [f64; 3],
-    /// Half sizes, metres.
-    pub half_size_m: [f64; 3],
-}
+pub use crate::check::simulate::TableBox;
 
-/// The table as static boxes: the top (split around the sink's hole) and the sink's floor.
+/// The table as static boxes: the top (split around the sink's hole) and the sink's floor —
+/// the same table `mesa check --settle` simulates on, with this section's sizes.
 pub fn table_boxes(layout: &DatasetLayout, config: &ExportConfig) -> Vec<TableBox> {
-    let m = config.table_margin_m;
-    let z = layout.zone_cm.0.map(|v| v / 100.0);
-    let (x0, x1, y0, y1) = (z[0] - m, z[1] + m, z[2] - m, z[3] + m);
-    let t = config.table_thickness_m;
-    let slab = |name, a: f64, b: f64, c: f64, d: f64, top: f64, thick: f64| TableBox {
-        name,
-        center_m: [0.5 * (a + b), 0.5 * (c + d), top - 0.5 * thick],
-        half_size_m: [0.5 * (b - a), 0.5 * (d - c), 0.5 * thick],
-    };
-    let Some(sink) = layout.restricted_zone_cm.as_ref() else {
-        return vec![slab("table_top", x0, x1, y0, y1, 0.0, t)];
-    };
-    // The hole, clipped to the table.
-    let r = sink.0.map(|v| v / 100.0);
-    let (rx0, rx1) = (r[0].clamp(x0, x1), r[1].clamp(x0, x1));
-    let (ry0, ry1) = (r[2].clamp(y0, y1), r[3].clamp(y0, y1));
-    let mut out = Vec::new();
-    let mut push = |b: TableBox| {
-        if b.half_size_m.iter().all(|h| *h > 1e-6) {
-            out.push(b);
-        }
-    };
-    push(slab("table_top_left", x0, rx0, y0, y1, 0.0, t));
-    push(slab("table_top_right", rx1, x1, y0, y1, 0.0, t));
-    push(slab("table_top_front", rx0, rx1, y0, ry0, 0.0, t));
-    push(slab("table_top_back", rx0, rx1, ry1, y1, 0.0, t));
-    push(slab(
-        "sink_floor",
-        rx0,
-        rx1,
-        ry0,
-        ry1,
-        -config.sink_depth_m,
-        t,
-    ));
-    out
+    crate::check::simulate::table_boxes(
+        layout,
+        config.table_margin_m,
+        config.table_thickness_m,
+        config.sink_depth_m,
+    )
 }
 
 /// An object's geometry in its body frame (scaled), with its mass properties.

@@ -1,0 +1,501 @@
+//! Settling's last step: a rigid-body simulation that lets a scene come to rest, and verifies
+//! that it stays there.
+//!
+//! The least-motion moves ([`super::settle`]) leave a scene without overlaps or gaps, which is
+//! not the same as stable: a pen balanced on a mug's rim, a toothbrush standing upright in a
+//! cup, fruit piled in a bowl all pass those moves and then fall in a simulator. So the moved
+//! scene is simulated with gravity for `simulated_s` seconds (rapier3d, the Rust physics engine
+//! of the parry3d line the check already uses): every object is a dynamic body made of its
+//! asset's convex parts at the layout's scale (the same parts `mesa export` writes as
+//! colliders), the table is the same static boxes `mesa export` writes (the top over the zone
+//! with a margin, a vanity's sink a hole with a basin floor). An object that moves further than
+//! `rest_motion_mm` in the simulation takes its simulated pose (position and rotation); the
+//! others keep their pose. Over the last `rest_window_s` seconds nothing may move further than
+//! `rest_motion_mm`: an object that still does is not at rest, and one that ends under the
+//! table top has fallen (off the table, or into the sink).
+//!
+//! Determinism: rapier runs on one thread with a fixed step and its `enhanced-determinism`
+//! feature (IEEE-exact maths through libm), bodies and colliders are inserted in layout order,
+//! so the same scene gives the same bits on every machine and at every thread count of the run.
+
+use mesa_schemas::DatasetLayout;
+use rapier3d::prelude::*;
+
+/// How far the table reaches beyond the item placement zone on each side, metres (also the
+/// default of `[export] table_margin_m`).
+pub const TABLE_MARGIN_M: f64 = 0.05;
+/// Thickness of the table, metres (also the default of `[export] table_thickness_m`).
+pub const TABLE_THICKNESS_M: f64 = 0.05;
+/// Depth of a vanity's sink basin under the table top, metres (also the default of
+/// `[export] sink_depth_m`).
+pub const SINK_DEPTH_M: f64 = 0.15;
+/// Thickness given to a convex part that is a flat polygon (a simulator needs a volume),
+/// metres (also the default of `[export] flat_part_thickness_m`).
+pub const FLAT_PART_THICKNESS_M: f64 = 0.0005;
+
+/// Angular damping of every body, 1/s.
+const ANGULAR_DAMPING: Real = 2.0;
+/// Linear damping of every body, 1/s.
+const LINEAR_DAMPING: Real = 0.5;
+
+/// An object whose top ends further than this under the table top has fallen, metres.
+const FELL_BELOW_M: f64 = 0.005;
+
+/// A static box of the table, in the table frame: centre and half sizes, metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TableBox {
+    /// Name of the box.
+    pub name: &'static str,
+    /// Centre, metres.
+    pub center_m: [f64; 3],
+    /// Half sizes, metres.
+    pub half_size_m: [f64; 3],
+}
+
+/// The table of a layout as static boxes: the top over the item placement zone grown by
+/// `margin_m` (split around the sink's hole when the layout has a restricted zone) and the
+/// sink's floor `sink_depth_m` under the top.
+pub fn table_boxes(
+    layout: &DatasetLayout,
+    margin_m: f64,
+    thickness_m: f64,
+    sink_depth_m: f64,
+) -> Vec<TableBox> {
+    let m = margin_m;
+    let z = layout.zone_cm.0.map(|v| v / 100.0);
+    let (x0, x1, y0, y1) = (z[0] - m, z[1] + m, z[2] - m, z[3] + m);
+    let t = thickness_m;
+    let slab = |name, a: f64, b: f64, c: f64, d: f64, top: f64, thick: f64| TableBox {
+        name,
+        center_m: [0.5 * (a + b), 0.5 * (c + d), top - 0.5 * thick],
+        half_size_m: [0.5 * (b - a), 0.5 * (d - c), 0.5 * thick],
+    };
+    let Some(sink) = layout.restricted_zone_cm.as_ref() else {
+        return vec![slab("table_top", x0, x1, y0, y1, 0.0, t)];
+    };
+    // The hole, clipped to the table.
+    let r = sink.0.map(|v| v / 100.0);
+    let (rx0, rx1) = (r[0].clamp(x0, x1), r[1].clamp(x0, x1));
+    let (ry0, ry1) = (r[2].clamp(y0, y1), r[3].clamp(y0, y1));
+    let mut out = Vec::new();
+    let mut push = |b: TableBox| {
+        if b.half_size_m.iter().all(|h| *h > 1e-6) {
+            out.push(b);
+        }
+    };
+    push(slab("table_top_left", x0, rx0, y0, y1, 0.0, t));
+    push(slab("table_top_right", rx1, x1, y0, y1, 0.0, t));
+    push(slab("table_top_front", rx0, rx1, y0, ry0, 0.0, t));
+    push(slab("table_top_back", rx0, rx1, ry1, y1, 0.0, t));
+    push(slab("sink_floor", rx0, rx1, ry0, ry1, -sink_depth_m, t));
+    out
+}
+
+/// The simulation's settings (part of `[check.settling]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimulationConfig {
+    /// Simulated time, seconds.
+    pub simulated_s: f64,
+    /// Simulated time at most while something still moves, seconds.
+    pub max_simulated_s: f64,
+    /// Fixed steps per simulated second.
+    pub steps_per_second: u32,
+    /// The last part of the simulation over which nothing may move, seconds.
+    pub rest_window_s: f64,
+    /// Motion below this is no motion, metres.
+    pub rest_motion_m: f64,
+    /// Density of every object's parts, kg/m³.
+    pub density_kg_m3: f64,
+    /// Friction coefficient of every contact.
+    pub friction: f64,
+}
+
+/// An object to simulate: its convex parts placed by the layout's rotation and scale, relative
+/// to its position (so the body starts unrotated at `position_m`).
+#[derive(Debug, Clone)]
+pub struct SimObject {
+    /// The position, table frame, metres.
+    pub position_m: [f64; 3],
+    /// Each part's points, relative to `position_m`, table axes, metres.
+    pub parts: Vec<Vec<[f64; 3]>>,
+}
+
+/// What the simulation did to one object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimMotion {
+    /// Where the object's position ended, metres.
+    pub position_m: [f64; 3],
+    /// The rotation the simulation applied, quaternion `[x, y, z, w]` (to compose before the
+    /// layout's own rotation).
+    pub turn_xyzw: [f64; 4],
+    /// The angle of that rotation, degrees.
+    pub turn_deg: f64,
+    /// How far the object moved over the whole simulation: the largest displacement of a
+    /// corner of its box, metres.
+    pub moved_m: f64,
+    /// The same over the rest window.
+    pub window_motion_m: f64,
+    /// Whether it ended under the table top, its top more than 5 mm below it (off the table,
+    /// or into the sink).
+    pub fell: bool,
+}
+
+/// The outcome of a simulation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Simulation {
+    /// Per object, in the order given; `None` for an object that had no usable part.
+    pub motions: Vec<Option<SimMotion>>,
+    /// Steps run.
+    pub steps: u32,
+}
+
+/// Points of a flat polygon given a thickness along its normal, so that a convex hull of them
+/// has a volume; `None` for points on a line.
+fn thickened(points: &[Point<Real>], thickness: Real) -> Option<Vec<Point<Real>>> {
+    let p0 = *points.first()?;
+    let p1 = *points.iter().max_by(|a, b| {
+        (**a - p0)
+            .norm_squared()
+            .total_cmp(&(**b - p0).norm_squared())
+    })?;
+    let axis = p1 - p0;
+    let p2 = *points.iter().max_by(|a, b| {
+        axis.cross(&(**a - p0))
+            .norm_squared()
+            .total_cmp(&axis.cross(&(**b - p0)).norm_squared())
+    })?;
+    let normal = axis.cross(&(p2 - p0));
+    if normal.norm() <= Real::EPSILON * axis.norm_squared().max(Real::MIN_POSITIVE) {
+        return None;
+    }
+    let offset = normal.normalize() * (0.5 * thickness);
+    Some(
+        points
+            .iter()
+            .flat_map(|p| [*p + offset, *p - offset])
+            .collect(),
+    )
+}
+
+/// The largest displacement of a corner of the box `[lo, hi]` (relative to the body origin)
+/// between two poses of the body.
+fn corner_motion(lo: [f64; 3], hi: [f64; 3], from: &Isometry<Real>, to: &Isometry<Real>) -> f64 {
+    let mut worst: f64 = 0.0;
+    for k in 0..8 {
+        let c = point![
+            if k & 1 == 0 { lo[0] } else { hi[0] } as Real,
+            if k & 2 == 0 { lo[1] } else { hi[1] } as Real,
+            if k & 4 == 0 { lo[2] } else { hi[2] } as Real
+        ];
+        let d = (from * c - to * c).norm() as f64;
+        worst = worst.max(d);
+    }
+    worst
+}
+
+/// A simulated object: its body, and the box of its points relative to the body's origin.
+type SimBody = (RigidBodyHandle, [f64; 3], [f64; 3]);
+
+/// Simulates the objects on the table under gravity for `config.simulated_s` seconds, and
+/// longer while something still moves (up to `config.max_simulated_s`).
+pub fn simulate(
+    objects: &[SimObject],
+    table: &[TableBox],
+    config: &SimulationConfig,
+) -> Simulation {
+    let mut bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let ground = bodies.insert(RigidBodyBuilder::fixed().build());
+    for b in table {
+        let c = b.center_m;
+        let h = b.half_size_m;
+        colliders.insert_with_parent(
+            ColliderBuilder::cuboid(h[0] as Real, h[1] as Real, h[2] as Real)
+                .translation(vector![c[0] as Real, c[1] as Real, c[2] as Real])
+                .friction(config.friction as Real)
+                .build(),
+            ground,
+            &mut bodies,
+        );
+    }
+    // Each object: its body handle and the box of its points (relative to its origin).
+    let mut handles: Vec<Option<SimBody>> = Vec::new();
+    for object in objects {
+        let mut shapes = Vec::new();
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for part in &object.parts {
+            let points: Vec<Point<Real>> = part
+                .iter()
+                .map(|p| point![p[0] as Real, p[1] as Real, p[2] as Real])
+                .collect();
+            let builder = ColliderBuilder::convex_hull(&points)
+                .filter(|b| b.shape.mass_properties(1.0).mass() > 1e-12);
+            let builder = match builder {
+                Some(b) => Some(b),
+                None => thickened(&points, FLAT_PART_THICKNESS_M as Real)
+                    .and_then(|p| ColliderBuilder::convex_hull(&p)),
+            };
+            let Some(builder) = builder else {
+                continue;
+            };
+            for p in part {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(p[k]);
+                    hi[k] = hi[k].max(p[k]);
+                }
+            }
+            shapes.push(builder);
+        }
+        if shapes.is_empty() {
+            handles.push(None);
+            continue;
+        }
+        let t = object.position_m;
+        let body = bodies.insert(
+            RigidBodyBuilder::dynamic()
+                .translation(vector![t[0] as Real, t[1] as Real, t[2] as Real])
+                // Thin parts (a sheet, a pen) must not pass through the table in one step.
+                .ccd_enabled(true)
+                // Without rolling resistance a ball rocks in a bowl for ever; damping makes
+                // it come to rest sooner, and does not change where things can rest.
+                .angular_damping(ANGULAR_DAMPING)
+                .linear_damping(LINEAR_DAMPING)
+                .build(),
+        );
+        for shape in shapes {
+            colliders.insert_with_parent(
+                shape
+                    .density(config.density_kg_m3 as Real)
+                    .friction(config.friction as Real)
+                    .build(),
+                body,
+                &mut bodies,
+            );
+        }
+        handles.push(Some((body, lo, hi)));
+    }
+
+    let parameters = IntegrationParameters {
+        dt: 1.0 / config.steps_per_second.max(1) as Real,
+        // Small objects (a pen is 1 cm thick): rapier's default 1 mm of tolerated overlap
+        // would be a tenth of one; 0.2 mm keeps resting contacts well under the check's
+        // tolerance.
+        normalized_allowed_linear_error: 0.0002,
+        // Objects of many convex parts (a glass, a bottle: a lathe decomposed into rings) rock
+        // on the table for seconds at rapier's default contact damping ratio (5): on 12 demo
+        // scenes, 17 objects standing on the table still moved after 6 s. A stiffer ratio
+        // (200) leaves 4.
+        contact_damping_ratio: 200.0,
+        ..IntegrationParameters::default()
+    };
+    let gravity = vector![0.0, 0.0, -9.81];
+    let mut pipeline = PhysicsPipeline::new();
+    let mut islands = IslandManager::new();
+    let mut broad_phase = DefaultBroadPhase::new();
+    let mut narrow_phase = NarrowPhase::new();
+    let mut impulse_joints = ImpulseJointSet::new();
+    let mut multibody_joints = MultibodyJointSet::new();
+    let mut ccd = CCDSolver::new();
+
+    let start: Vec<Option<Isometry<Real>>> = handles
+        .iter()
+        .map(|h| h.map(|(body, _, _)| *bodies[body].position()))
+        .collect();
+    let poses = |bodies: &RigidBodySet| -> Vec<Option<Isometry<Real>>> {
+        handles
+            .iter()
+            .map(|h| h.map(|(body, _, _)| *bodies[body].position()))
+            .collect()
+    };
+    let hz = f64::from(config.steps_per_second);
+    let window = ((config.rest_window_s * hz).round() as u32).max(1);
+    let first = ((config.simulated_s * hz).round() as u32).max(window);
+    let most = ((config.max_simulated_s * hz).round() as u32).max(first);
+    // At least `simulated_s`; then one rest window more at a time while something still
+    // moves (fruit rolling to the bottom of a bowl), up to `max_simulated_s`.
+    let mut window_start = start.clone();
+    let mut steps = 0;
+    loop {
+        let target = if steps == 0 { first } else { steps + window };
+        while steps < target {
+            if steps == target - window {
+                window_start = poses(&bodies);
+            }
+            pipeline.step(
+                &gravity,
+                &parameters,
+                &mut islands,
+                &mut broad_phase,
+                &mut narrow_phase,
+                &mut bodies,
+                &mut colliders,
+                &mut impulse_joints,
+                &mut multibody_joints,
+                &mut ccd,
+                None,
+                &(),
+                &(),
+            );
+            steps += 1;
+        }
+        let end = poses(&bodies);
+        let moving = handles.iter().enumerate().any(|(i, h)| {
+            let (Some((_, lo, hi)), Some(from), Some(to)) = (h, &window_start[i], &end[i]) else {
+                return false;
+            };
+            // What falls off the table keeps falling: it is not waited for.
+            to.translation.z > -1.0 && corner_motion(*lo, *hi, from, to) > config.rest_motion_m
+        });
+        if !moving || steps + window > most {
+            break;
+        }
+    }
+    let motions = handles
+        .iter()
+        .zip(start.iter().zip(&window_start))
+        .map(|(h, (from, mid))| {
+            let ((body, lo, hi), from, mid) = (h.as_ref()?, from.as_ref()?, mid.as_ref()?);
+            let end = bodies[*body].position();
+            let q = end.rotation.quaternion().coords;
+            let t = end.translation.vector;
+            // The top of the body's box, at its lowest corner over the end pose.
+            let top = (0..8)
+                .map(|k| {
+                    let c = point![
+                        if k & 1 == 0 { lo[0] } else { hi[0] } as Real,
+                        if k & 2 == 0 { lo[1] } else { hi[1] } as Real,
+                        if k & 4 == 0 { lo[2] } else { hi[2] } as Real
+                    ];
+                    (end * c).z as f64
+                })
+                .fold(f64::NEG_INFINITY, f64::max);
+            Some(SimMotion {
+                position_m: [t.x as f64, t.y as f64, t.z as f64],
+                turn_xyzw: [q[0] as f64, q[1] as f64, q[2] as f64, q[3] as f64],
+                turn_deg: (end.rotation.angle() as f64).to_degrees(),
+                moved_m: corner_motion(*lo, *hi, from, end),
+                window_motion_m: corner_motion(*lo, *hi, mid, end),
+                fell: top < -FELL_BELOW_M,
+            })
+        })
+        .collect();
+    Simulation { motions, steps }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config() -> SimulationConfig {
+        SimulationConfig {
+            simulated_s: 1.5,
+            max_simulated_s: 4.0,
+            steps_per_second: 240,
+            rest_window_s: 0.5,
+            rest_motion_m: 0.001,
+            density_kg_m3: 500.0,
+            friction: 0.8,
+        }
+    }
+
+    fn cube(half: [f64; 3]) -> Vec<[f64; 3]> {
+        let mut out = Vec::new();
+        for k in 0..8 {
+            out.push([
+                if k & 1 == 0 { -half[0] } else { half[0] },
+                if k & 2 == 0 { -half[1] } else { half[1] },
+                if k & 4 == 0 { -half[2] } else { half[2] },
+            ]);
+        }
+        out
+    }
+
+    fn table() -> Vec<TableBox> {
+        vec![TableBox {
+            name: "table_top",
+            center_m: [0.5, 0.5, -0.025],
+            half_size_m: [0.5, 0.5, 0.025],
+        }]
+    }
+
+    #[test]
+    fn a_box_on_the_table_stays_and_one_in_the_air_falls_onto_it() {
+        let resting = SimObject {
+            position_m: [0.3, 0.3, 0.05],
+            parts: vec![cube([0.05, 0.05, 0.05])],
+        };
+        let high = SimObject {
+            position_m: [0.7, 0.7, 0.25],
+            parts: vec![cube([0.05, 0.05, 0.05])],
+        };
+        let sim = simulate(&[resting, high], &table(), &config());
+        let a = sim.motions[0].expect("body");
+        let b = sim.motions[1].expect("body");
+        assert!(a.moved_m < 0.001, "{a:?}");
+        assert!(b.moved_m > 0.19, "{b:?}");
+        assert!((b.position_m[2] - 0.05).abs() < 0.002, "{b:?}");
+        assert!(b.window_motion_m < 0.001, "{b:?}");
+        assert!(!a.fell && !b.fell);
+    }
+
+    #[test]
+    fn a_stick_balanced_on_its_end_topples_and_one_off_the_table_falls() {
+        // A 30 cm stick, 1 cm thick, standing on its end, tilted 3° by its points.
+        let tilt = 3f64.to_radians();
+        let stick: Vec<[f64; 3]> = cube([0.005, 0.005, 0.15])
+            .into_iter()
+            .map(|p| [p[0] + p[2] * tilt.sin(), p[1], p[2] * tilt.cos()])
+            .collect();
+        let standing = SimObject {
+            position_m: [0.5, 0.5, 0.15],
+            parts: vec![stick],
+        };
+        let off = SimObject {
+            position_m: [1.3, 0.5, 0.05],
+            parts: vec![cube([0.05, 0.05, 0.05])],
+        };
+        let sim = simulate(&[standing, off], &table(), &config());
+        let s = sim.motions[0].expect("body");
+        assert!(s.turn_deg > 45.0, "{s:?}");
+        assert!(!s.fell, "{s:?}");
+        let o = sim.motions[1].expect("body");
+        assert!(o.fell, "{o:?}");
+    }
+
+    #[test]
+    fn a_flat_part_gets_a_thickness_and_a_segment_is_no_body() {
+        let flat = SimObject {
+            position_m: [0.5, 0.5, 0.01],
+            parts: vec![vec![
+                [-0.05, -0.05, 0.0],
+                [0.05, -0.05, 0.0],
+                [0.05, 0.05, 0.0],
+                [-0.05, 0.05, 0.0],
+            ]],
+        };
+        let segment = SimObject {
+            position_m: [0.2, 0.2, 0.01],
+            parts: vec![vec![[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]]],
+        };
+        let sim = simulate(&[flat, segment], &table(), &config());
+        let f = sim.motions[0].expect("a flat part is a thin body");
+        // Resting on the table: its centre half the given thickness up, within rapier's 0.2 mm.
+        assert!((f.position_m[2] - 0.00025).abs() < 0.0003, "{f:?}");
+        assert!(!f.fell, "{f:?}");
+        assert!(sim.motions[1].is_none());
+    }
+
+    #[test]
+    fn the_same_scene_gives_the_same_bits() {
+        let objects: Vec<SimObject> = (0..6)
+            .map(|i| SimObject {
+                position_m: [0.3 + 0.02 * i as f64, 0.5, 0.06 + 0.11 * i as f64],
+                parts: vec![cube([0.05, 0.04, 0.05])],
+            })
+            .collect();
+        let a = simulate(&objects, &table(), &config());
+        let b = simulate(&objects, &table(), &config());
+        assert_eq!(a, b);
+    }
+}
