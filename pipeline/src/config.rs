@@ -49,6 +49,8 @@ pub struct Config {
     pub export: mesa_stages::export::ExportConfig,
     /// `mesa release`: the MesaTask-10K tree (layouts, pictures, annotations, assets).
     pub release: mesa_stages::release::ReleaseConfig,
+    /// `mesa eval`: the GPT score's judge (a chat endpoint) and prompt.
+    pub eval: mesa_stages::eval::gpt_score::EvalConfig,
 }
 
 /// The `[run]` section.
@@ -169,6 +171,7 @@ impl Config {
             .chain(config.render.problems())
             .chain(config.assets.budget.problems())
             .chain(config.export.problems())
+            .chain(config.eval.problems())
             .collect();
         if !problems.is_empty() {
             return Err(format!("{} ", problems.join("; ")));
