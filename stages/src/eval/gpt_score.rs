@@ -75,12 +75,9 @@ impl Default for EvalConfig {
             gpt_score: false,
             judge: Judge::None,
             gpt_score_prompt: String::new(),
-            // A judge should be as repeatable as the endpoint allows, and its reply is short.
-            llm: LlmConfig {
-                temperature: 0.0,
-                max_tokens: 512,
-                ..LlmConfig::default()
-            },
+            // [tasks.llm]'s defaults: a section that sets some keys takes the others from
+            // LlmConfig::default, so the judge's defaults must be the same to be predictable.
+            llm: LlmConfig::default(),
         }
     }
 }
