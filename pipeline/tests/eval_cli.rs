@@ -1079,36 +1079,75 @@ fn gpt_score_batches_hold_one_request_per_successful_sample() {
     let m: EvalMetrics = read(&dir.join("metrics.json"));
     assert_eq!(m.gpt_score.as_ref().map(|g| g.pending), Some(3));
 
-    // The provider's output, in another order, every reply good.
+    // The provider's output, in another order: two good replies and one error line.
+    let line_of = |l: &Value, good: bool| {
+        let line = if good {
+            json!({"custom_id": l["custom_id"], "response": {"status_code": 200,
+                "body": common::completion_body(GOOD_SCORES)}, "error": null})
+        } else {
+            json!({"custom_id": l["custom_id"], "response": null,
+                "error": {"code": "server_error", "message": "try again"}})
+        };
+        format!("{line}\n")
+    };
     let output: String = lines
         .iter()
         .rev()
-        .map(|l| {
-            format!(
-                "{}\n",
-                json!({"custom_id": l["custom_id"], "response": {"status_code": 200,
-                    "body": common::completion_body(GOOD_SCORES)}, "error": null})
-            )
-        })
+        .enumerate()
+        .map(|(i, l)| line_of(l, i != 0))
         .collect();
     let results = data.with_file_name("gpt_batch_results.jsonl");
     std::fs::write(&results, output).expect("results");
     std::fs::remove_file(&batch).expect("remove the batch file");
-    let (success, _, stderr) = eval_gpt(
-        data,
-        &file,
-        "gpt_batch",
-        &[
-            "--config",
-            c,
-            "--batch-in",
-            results.to_str().expect("utf-8"),
-            "--batch-out",
-            b,
-        ],
+    let batch_in = |results: &Path| {
+        mesa()
+            .arg("eval")
+            .arg(data)
+            .arg("--outputs")
+            .arg(&file)
+            .args(["--name", "gpt_batch", "--config", c, "--batch-in"])
+            .arg(results)
+            .args(["--batch-out", b])
+            .output()
+            .expect("runs")
+    };
+    let out = batch_in(&results);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    // The error line is reported and exits with 1; its request goes into the next batch.
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("2 replies stored"), "{stderr}");
+    assert!(stderr.contains("server_error: try again"), "{stderr}");
+    let again: Vec<Value> = std::fs::read_to_string(&batch)
+        .expect("the next batch")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("a batch line"))
+        .collect();
+    assert_eq!(again.len(), 1, "only the request whose line failed");
+    let last = lines.last().expect("a line");
+    assert_eq!(again[0]["custom_id"], last["custom_id"]);
+    let samples = samples_of();
+    let statuses: Vec<String> = ["0", "1", "2"]
+        .iter()
+        .map(|id| gpt_of(&samples, id).status)
+        .collect();
+    assert_eq!(
+        statuses.iter().filter(|s| s.as_str() == "scored").count(),
+        2,
+        "{statuses:?}"
     );
-    assert!(success, "{stderr}");
-    assert!(stderr.contains("3 replies stored"), "{stderr}");
+    assert_eq!(
+        statuses.iter().filter(|s| s.as_str() == "pending").count(),
+        1,
+        "{statuses:?}"
+    );
+
+    // The provider's answer to the retried request: every sample is scored, nothing pends.
+    std::fs::write(&results, line_of(last, true)).expect("results");
+    std::fs::remove_file(&batch).expect("remove the batch file");
+    let out = batch_in(&results);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("1 replies stored"), "{stderr}");
     assert!(!batch.exists(), "nothing pending, no batch file: {stderr}");
     let samples = samples_of();
     for id in ["0", "1", "2"] {
@@ -1161,6 +1200,34 @@ fn the_gpt_score_without_a_judge_or_key_is_refused_naming_the_key() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         stderr.contains(&format!("{GPT_KEY_VAR} (named by [eval.llm] api_key_env)")),
+        "{stderr}"
+    );
+    assert!(
+        !data.join("eval/gpt_refused").exists(),
+        "refused before any work"
+    );
+    // A template with an unknown placeholder, named with the key.
+    let prompt = data.with_file_name("gpt_prompt_typo.txt");
+    std::fs::write(&prompt, "[user]\nScore {{task}} with {{objekts}}\n").expect("prompt");
+    let typo = gpt_config(
+        data,
+        "gpt_typo",
+        "http://127.0.0.1:9/v1",
+        "judge-typo",
+        &format!("gpt_score_prompt = \"{}\"\n", prompt.display()),
+    );
+    let out = mesa()
+        .args(["eval", data.to_str().expect("utf-8"), "--outputs"])
+        .arg(&file)
+        .args(["--name", "gpt_refused", "--gpt-score", "--config"])
+        .arg(&typo)
+        .env(GPT_KEY_VAR, GPT_KEY)
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("[eval] gpt_score_prompt") && stderr.contains("{{objekts}}"),
         "{stderr}"
     );
     assert!(
