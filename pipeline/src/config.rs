@@ -309,6 +309,29 @@ mod tests {
     }
 
     #[test]
+    fn eval_judge_keys_are_documented_and_checked_under_their_own_section() {
+        let text = annotated_toml(&Config::default()).expect("toml");
+        assert!(
+            text.contains("[eval]\n") && text.contains("[eval.llm]\n"),
+            "{text}"
+        );
+        assert!(text.contains("\njudge = \"none\"\n"), "{text}");
+        let config =
+            Config::from_toml("[eval]\njudge = \"llm\"\ngpt_score = true\n").expect("valid");
+        assert!(config.eval.gpt_score);
+        let err =
+            Config::from_toml("[eval]\njudge = \"llm\"\n[eval.llm]\nbase_url = \"ftp://x\"\n")
+                .expect_err("bad");
+        assert!(err.contains("[eval.llm] base_url \"ftp://x\""), "{err}");
+        let err = Config::from_toml("[eval.llm]\nmax_concurrency = 0\n").expect_err("bad");
+        assert!(err.contains("[eval.llm] max_concurrency is 0"), "{err}");
+        // Control: the URL is only checked when the judge uses it.
+        assert!(Config::from_toml("[eval.llm]\nbase_url = \"ftp://x\"\n").is_ok());
+        let err = Config::from_toml("[eval]\njudge = \"gpt\"\n").expect_err("bad");
+        assert!(err.contains("judge"), "{err}");
+    }
+
+    #[test]
     fn unknown_keys_are_errors_naming_the_key() {
         let err = Config::from_toml("[run]\njobz = 3\n").expect_err("typo");
         assert!(err.contains("jobz"), "{err}");
