@@ -49,6 +49,8 @@ pub struct Config {
     pub export: mesa_stages::export::ExportConfig,
     /// `mesa release`: the MesaTask-10K tree (layouts, pictures, annotations, assets).
     pub release: mesa_stages::release::ReleaseConfig,
+    /// `mesa eval`: the GPT score's judge (a chat endpoint) and prompt.
+    pub eval: mesa_stages::eval::gpt_score::EvalConfig,
 }
 
 /// The `[run]` section.
@@ -169,6 +171,7 @@ impl Config {
             .chain(config.render.problems())
             .chain(config.assets.budget.problems())
             .chain(config.export.problems())
+            .chain(config.eval.problems())
             .collect();
         if !problems.is_empty() {
             return Err(format!("{} ", problems.join("; ")));
@@ -317,6 +320,29 @@ mod tests {
         assert_eq!(config.assets.budget.triangles, 5);
         let err = Config::from_toml("[assets.budget]\nseconds = -1\n").expect_err("bad");
         assert!(err.contains("[assets.budget] seconds = -1"), "{err}");
+    }
+
+    #[test]
+    fn eval_judge_keys_are_documented_and_checked_under_their_own_section() {
+        let text = annotated_toml(&Config::default()).expect("toml");
+        assert!(
+            text.contains("[eval]\n") && text.contains("[eval.llm]\n"),
+            "{text}"
+        );
+        assert!(text.contains("\njudge = \"none\"\n"), "{text}");
+        let config =
+            Config::from_toml("[eval]\njudge = \"llm\"\ngpt_score = true\n").expect("valid");
+        assert!(config.eval.gpt_score);
+        let err =
+            Config::from_toml("[eval]\njudge = \"llm\"\n[eval.llm]\nbase_url = \"ftp://x\"\n")
+                .expect_err("bad");
+        assert!(err.contains("[eval.llm] base_url \"ftp://x\""), "{err}");
+        let err = Config::from_toml("[eval.llm]\nmax_concurrency = 0\n").expect_err("bad");
+        assert!(err.contains("[eval.llm] max_concurrency is 0"), "{err}");
+        // Control: the URL is only checked when the judge uses it.
+        assert!(Config::from_toml("[eval.llm]\nbase_url = \"ftp://x\"\n").is_ok());
+        let err = Config::from_toml("[eval]\njudge = \"gpt\"\n").expect_err("bad");
+        assert!(err.contains("judge"), "{err}");
     }
 
     #[test]

@@ -8,7 +8,11 @@
 //!   same prompts: the collision corruption raises the collision rate, the missing-object one
 //!   lowers task coverage, the relation one lowers graph self-consistency;
 //! - MesaTask-style inference folders with broken outputs: failures with reasons, no crash;
-//! - FID, KID and CKL against numpy / scipy (`MESA_PYTHON`, else `.venv-tools`), to 1e-6.
+//! - FID, KID and CKL against numpy / scipy (`MESA_PYTHON`, else `.venv-tools`), to 1e-6;
+//! - the GPT score against a local OpenAI-compatible server (tests/common): two views and the
+//!   template's text per request, a good reply's mean, rejects with their reasons, a rerun
+//!   without requests and the same bytes at 1 and 3 jobs, the API key in no file or log,
+//!   offline batches with one request per successful sample, a missing judge refused.
 
 mod common;
 
@@ -16,9 +20,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use common::mesa;
+use common::{mesa, user_text, MockServer, Reply};
 use mesa_schemas::artifacts::{CheckArtifact, DpoRecord, SftRecord};
-use mesa_schemas::eval::{EvalMetrics, EvalSample};
+use mesa_schemas::eval::{EvalMetrics, EvalSample, SampleGptScore};
 use mesa_schemas::output::{parse_model_output, FINAL_ANSWER_MARKER};
 use mesa_stages::eval::ckl;
 use mesa_stages::eval::features::{fid, kid, Features};
@@ -728,4 +732,522 @@ fn oversized_objects_and_foreign_categories_move_size_and_ckl() {
     let (before, after) = (base.ckl_mean.expect("ckl"), m.ckl_mean.expect("ckl"));
     eprintln!("CKL: references {before:.4}, renamed {after:.4}");
     assert!(after > before + 1.0, "CKL {before} → {after}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// The GPT score.
+
+const GPT_KEY_VAR: &str = "MESA_EVAL_GPT_TEST_KEY";
+const GPT_KEY: &str = "sk-mesa-eval-gpt-test-7e2a91";
+
+/// A good reply: the mean of its five scores is 8.
+const GOOD_SCORES: &str = r#"{"consistency_with_task": 8, "object_size_reasonableness": 7, "placement_plausibility": 9, "layout_coherence": 6, "object_visibility": 10, "reason": "A plausible counter."}"#;
+
+/// A configuration file beside the dataset's: its mesa.toml with a judge at `base_url`
+/// (each test its own model name, so that the tests share no cached reply) and `extra` lines
+/// in [eval].
+fn gpt_config(data: &Path, name: &str, base_url: &str, model: &str, extra: &str) -> PathBuf {
+    let mut text = std::fs::read_to_string(data.join("mesa.toml")).expect("mesa.toml");
+    text.push_str(&format!(
+        "\n[eval]\njudge = \"llm\"\n{extra}\n[eval.llm]\nbase_url = \"{base_url}\"\n\
+         model = \"{model}\"\napi_key_env = \"{GPT_KEY_VAR}\"\nmax_retries = 0\ntimeout_s = 20.0\n\
+         max_concurrency = 3\n"
+    ));
+    let path = data.with_file_name(format!("{name}.toml"));
+    std::fs::write(&path, text).expect("config");
+    path
+}
+
+/// The first `n` test prompts' reference outputs, and each one's task instruction.
+fn first_references(data: &Path, n: usize) -> (Outputs, Vec<String>) {
+    let tests: Vec<SftRecord> = read(&data.join("records/test.json"));
+    assert!(tests.len() >= n);
+    let outputs = (0..n)
+        .map(|i| (i.to_string(), tests[i].output.clone()))
+        .collect();
+    let tasks = tests[..n]
+        .iter()
+        .map(|r| {
+            let info: Value = serde_json::from_str(&r.input).expect("task info");
+            info["Task"].as_str().expect("Task").to_owned()
+        })
+        .collect();
+    (outputs, tasks)
+}
+
+/// `mesa eval` with the key in the environment and every log level on: (success, stdout,
+/// stderr).
+fn eval_gpt(data: &Path, outputs: &Path, name: &str, extra: &[&str]) -> (bool, String, String) {
+    let out = mesa()
+        .args(["-vv", "eval"])
+        .arg(data)
+        .arg("--outputs")
+        .arg(outputs)
+        .args(["--name", name, "--progress", "off"])
+        .args(extra)
+        .env(GPT_KEY_VAR, GPT_KEY)
+        .env("MESA_LOG", "trace")
+        .output()
+        .expect("runs");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn gpt_of(samples: &[EvalSample], id: &str) -> SampleGptScore {
+    samples
+        .iter()
+        .find(|s| s.id == id)
+        .and_then(|s| s.gpt_score.clone())
+        .unwrap_or_else(|| panic!("sample {id} has a GPT score"))
+}
+
+#[test]
+fn the_gpt_score_sends_two_views_validates_replies_caches_and_keeps_the_key_secret() {
+    let data = dataset();
+    let (outputs, tasks) = first_references(data, 5);
+    let distinct: std::collections::BTreeSet<&String> = tasks.iter().collect();
+    assert_eq!(
+        distinct.len(),
+        5,
+        "the replies are chosen by task: {tasks:?}"
+    );
+    // Sample i gets reply i: good, not JSON, a criterion missing, a score of 11, a string.
+    let replies = [
+        GOOD_SCORES.to_owned(),
+        "{not json".to_owned(),
+        GOOD_SCORES.replace("\"object_visibility\": 10, ", ""),
+        GOOD_SCORES.replace("\"layout_coherence\": 6", "\"layout_coherence\": 11"),
+        GOOD_SCORES.replace("\"layout_coherence\": 6", "\"layout_coherence\": \"6\""),
+    ];
+    let by_task: Vec<(String, String)> = tasks.iter().cloned().zip(replies).collect();
+    let server = MockServer::start(move |request, _| {
+        let text = user_text(&request.json());
+        match by_task
+            .iter()
+            .find(|(task, _)| text.contains(&format!("Task instruction: {task}\n")))
+        {
+            Some((_, reply)) => Reply::completion(reply),
+            None => Reply::error(400, "unknown sample"),
+        }
+    });
+    let file = data.join("gpt_live.jsonl");
+    write_outputs(&file, &outputs);
+    let config = gpt_config(data, "gpt_live", &server.base_url, "judge-live", "");
+    let c = config.to_str().expect("utf-8");
+
+    let (success, stdout, stderr) = eval_gpt(
+        data,
+        &file,
+        "gpt_live",
+        &["--gpt-score", "--config", c, "--jobs", "1"],
+    );
+    assert!(success, "{stderr}");
+    // One request per successful sample (the other five prompts have no output).
+    assert_eq!(server.requests(), 5, "{stderr}");
+    let dir = data.join("eval/gpt_live");
+    let template = mesa_stages::eval::gpt_score::parse_prompt(
+        "built-in",
+        mesa_stages::eval::gpt_score::GPT_SCORE_PROMPT,
+    )
+    .expect("template");
+    for request in server.received() {
+        assert_eq!(
+            request.header("authorization"),
+            Some(format!("Bearer {GPT_KEY}"))
+        );
+        let body = request.json();
+        assert_eq!(body["model"], "judge-live");
+        assert_eq!(body["messages"][0]["content"], template.system.as_str());
+        let parts = body["messages"][1]["content"].as_array().expect("parts");
+        assert_eq!(parts.len(), 3, "the text and two images");
+        let text = parts[0]["text"].as_str().expect("text");
+        for line in [
+            "Placement Plausibility & Intersections",
+            "Object Visibility",
+        ] {
+            assert!(text.contains(line), "the template's text: {text}");
+        }
+        // The images are the sample's front and perspective views, in that order.
+        let i = tasks
+            .iter()
+            .position(|t| text.contains(&format!("Task instruction: {t}\n")))
+            .expect("a sample's task");
+        for (part, view) in parts[1..].iter().zip(["front", "perspective"]) {
+            let png = std::fs::read(dir.join(format!("render/{i}_{view}.png"))).expect("view");
+            assert!(png.starts_with(b"\x89PNG"));
+            assert_eq!(
+                part["image_url"]["url"].as_str().expect("url"),
+                mesa_stages::tasks::chat::png_data_url(&png),
+                "sample {i} {view}"
+            );
+        }
+    }
+
+    let (m, samples) = (
+        read::<EvalMetrics>(&dir.join("metrics.json")),
+        std::fs::read_to_string(dir.join("samples.jsonl"))
+            .expect("samples")
+            .lines()
+            .map(|l| serde_json::from_str::<EvalSample>(l).expect("sample"))
+            .collect::<Vec<_>>(),
+    );
+    let good = gpt_of(&samples, "0");
+    assert_eq!(
+        (good.status.as_str(), good.mean),
+        ("scored", Some(8.0)),
+        "{good:?}"
+    );
+    assert_eq!(good.scores.len(), 5);
+    assert_eq!(good.reason.as_deref(), Some("A plausible counter."));
+    let not_json = gpt_of(&samples, "1");
+    assert_eq!(not_json.status, "rejected");
+    assert!(
+        not_json.problems[0].contains("not valid JSON"),
+        "{not_json:?}"
+    );
+    assert_eq!(not_json.reply.as_deref(), Some("{not json"));
+    let missing = gpt_of(&samples, "2");
+    assert_eq!(missing.rejected_criteria, ["object_visibility"]);
+    assert!(
+        missing.problems[0].contains("object_visibility: missing"),
+        "{missing:?}"
+    );
+    let eleven = gpt_of(&samples, "3");
+    assert_eq!(eleven.rejected_criteria, ["layout_coherence"]);
+    assert!(
+        eleven.problems[0].contains("11 is not an integer from 1 to 10"),
+        "{eleven:?}"
+    );
+    let string = gpt_of(&samples, "4");
+    assert_eq!(string.rejected_criteria, ["layout_coherence"]);
+    assert!(string.problems[0].contains("is not a number"), "{string:?}");
+    assert!(samples.iter().skip(5).all(|s| s.gpt_score.is_none()));
+    let g = m.gpt_score.as_ref().expect("metrics.gpt_score");
+    assert_eq!(
+        (g.requested, g.scored, g.rejected, g.pending, g.failed),
+        (5, 1, 4, 0, 0)
+    );
+    assert_eq!(g.mean, Some(8.0));
+    assert_eq!(g.criteria["object_visibility"].rejects, 1);
+    assert_eq!(g.criteria["layout_coherence"].rejects, 2);
+    assert_eq!(g.criteria["layout_coherence"].mean, Some(6.0));
+    assert_eq!(g.criteria["consistency_with_task"].count, 1);
+    let page = std::fs::read_to_string(dir.join("index.html")).expect("page");
+    assert!(page.contains("<th>GPT score</th>"), "{page}");
+    assert!(page.contains("8.0 (8/6/7/10/9)"), "{page}");
+    ok(&[
+        "validate",
+        dir.join("metrics.json").to_str().expect("utf-8"),
+    ]);
+    ok(&[
+        "validate",
+        "--kind",
+        "eval-sample",
+        dir.join("samples.jsonl").to_str().expect("utf-8"),
+    ]);
+
+    // A rerun at 3 jobs sends nothing and writes the same bytes.
+    let before: Vec<Vec<u8>> = ["metrics.json", "samples.jsonl", "index.html"]
+        .iter()
+        .map(|f| std::fs::read(dir.join(f)).expect("read"))
+        .collect();
+    let (success, stdout2, stderr2) = eval_gpt(
+        data,
+        &file,
+        "gpt_live",
+        &["--gpt-score", "--config", c, "--jobs", "3"],
+    );
+    assert!(success, "{stderr2}");
+    assert_eq!(server.requests(), 5, "zero requests the second time");
+    assert!(
+        stderr2.contains("judge-live: 0 requests, 5 cache hits"),
+        "{stderr2}"
+    );
+    for (f, bytes) in ["metrics.json", "samples.jsonl", "index.html"]
+        .iter()
+        .zip(&before)
+    {
+        assert!(&std::fs::read(dir.join(f)).expect("read") == bytes, "{f}");
+    }
+
+    // Control: another template (a config key) is another request, with its own text, so the
+    // counts above could have failed.
+    let prompt = data.with_file_name("gpt_prompt_edited.txt");
+    std::fs::write(
+        &prompt,
+        mesa_stages::eval::gpt_score::GPT_SCORE_PROMPT.replace(
+            "Score the scene on each criterion",
+            "EDITED: score the scene",
+        ),
+    )
+    .expect("prompt");
+    let edited_config = gpt_config(
+        data,
+        "gpt_live_edited",
+        &server.base_url,
+        "judge-live",
+        &format!("gpt_score_prompt = \"{}\"\n", prompt.display()),
+    );
+    let (success, _, stderr3) = eval_gpt(
+        data,
+        &file,
+        "gpt_live_edited",
+        &[
+            "--gpt-score",
+            "--config",
+            edited_config.to_str().expect("utf-8"),
+        ],
+    );
+    assert!(success, "{stderr3}");
+    assert_eq!(server.requests(), 10, "{stderr3}");
+    assert!(server.received()[5..]
+        .iter()
+        .all(|r| user_text(&r.json()).contains("EDITED: score the scene")));
+
+    // The key is in no output and no file.
+    for text in [&stdout, &stderr, &stdout2, &stderr2, &stderr3] {
+        assert!(!text.contains(GPT_KEY));
+    }
+    for (path, bytes) in common::all_files(data) {
+        assert!(
+            !bytes
+                .windows(GPT_KEY.len())
+                .any(|w| w == GPT_KEY.as_bytes()),
+            "{path} holds the key"
+        );
+    }
+    // Control: the search finds the key where it is.
+    std::fs::write(data.join("eval/key_probe.txt"), GPT_KEY).expect("probe");
+    assert!(common::all_files(data)
+        .values()
+        .any(|b| b.windows(GPT_KEY.len()).any(|w| w == GPT_KEY.as_bytes())));
+    std::fs::remove_file(data.join("eval/key_probe.txt")).expect("remove the probe");
+}
+
+#[test]
+fn gpt_score_batches_hold_one_request_per_successful_sample() {
+    let data = dataset();
+    let (mut outputs, _) = first_references(data, 4);
+    // Sample 3 fails (no marker): no request for it.
+    outputs[3].1 = outputs[3].1.replace(FINAL_ANSWER_MARKER, "\nThe layout:\n");
+    let file = data.join("gpt_batch.jsonl");
+    write_outputs(&file, &outputs);
+    // A server that must not be asked.
+    let server = MockServer::start(|_, _| Reply::error(500, "batch mode sends nothing"));
+    let config = gpt_config(data, "gpt_batch", &server.base_url, "judge-batch", "");
+    let c = config.to_str().expect("utf-8");
+    let batch = data.with_file_name("gpt_batch_requests.jsonl");
+    let b = batch.to_str().expect("utf-8");
+
+    let (success, _, stderr) =
+        eval_gpt(data, &file, "gpt_batch", &["--config", c, "--batch-out", b]);
+    assert!(success, "{stderr}");
+    let lines: Vec<Value> = std::fs::read_to_string(&batch)
+        .expect("the batch file")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("a batch line"))
+        .collect();
+    assert_eq!(lines.len(), 3, "one request per successful sample");
+    let ids: std::collections::BTreeSet<&str> = lines
+        .iter()
+        .map(|l| l["custom_id"].as_str().expect("custom_id"))
+        .collect();
+    assert_eq!(ids.len(), 3);
+    for line in &lines {
+        assert_eq!(line["url"], "/v1/chat/completions");
+        let parts = line["body"]["messages"][1]["content"]
+            .as_array()
+            .expect("parts");
+        assert_eq!(parts.len(), 3, "the text and two images");
+    }
+    let dir = data.join("eval/gpt_batch");
+    let samples_of = || -> Vec<EvalSample> {
+        std::fs::read_to_string(dir.join("samples.jsonl"))
+            .expect("samples")
+            .lines()
+            .map(|l| serde_json::from_str(l).expect("sample"))
+            .collect()
+    };
+    let samples = samples_of();
+    for id in ["0", "1", "2"] {
+        assert_eq!(gpt_of(&samples, id).status, "pending");
+    }
+    assert!(samples[3].gpt_score.is_none(), "the failed sample");
+    let m: EvalMetrics = read(&dir.join("metrics.json"));
+    assert_eq!(m.gpt_score.as_ref().map(|g| g.pending), Some(3));
+
+    // The provider's output, in another order: two good replies and one error line.
+    let line_of = |l: &Value, good: bool| {
+        let line = if good {
+            json!({"custom_id": l["custom_id"], "response": {"status_code": 200,
+                "body": common::completion_body(GOOD_SCORES)}, "error": null})
+        } else {
+            json!({"custom_id": l["custom_id"], "response": null,
+                "error": {"code": "server_error", "message": "try again"}})
+        };
+        format!("{line}\n")
+    };
+    let output: String = lines
+        .iter()
+        .rev()
+        .enumerate()
+        .map(|(i, l)| line_of(l, i != 0))
+        .collect();
+    let results = data.with_file_name("gpt_batch_results.jsonl");
+    std::fs::write(&results, output).expect("results");
+    std::fs::remove_file(&batch).expect("remove the batch file");
+    let batch_in = |results: &Path| {
+        mesa()
+            .arg("eval")
+            .arg(data)
+            .arg("--outputs")
+            .arg(&file)
+            .args(["--name", "gpt_batch", "--config", c, "--batch-in"])
+            .arg(results)
+            .args(["--batch-out", b])
+            .output()
+            .expect("runs")
+    };
+    let out = batch_in(&results);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    // The error line is reported and exits with 1; its request goes into the next batch.
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("2 replies stored"), "{stderr}");
+    assert!(stderr.contains("server_error: try again"), "{stderr}");
+    let again: Vec<Value> = std::fs::read_to_string(&batch)
+        .expect("the next batch")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("a batch line"))
+        .collect();
+    assert_eq!(again.len(), 1, "only the request whose line failed");
+    let last = lines.last().expect("a line");
+    assert_eq!(again[0]["custom_id"], last["custom_id"]);
+    let samples = samples_of();
+    let statuses: Vec<String> = ["0", "1", "2"]
+        .iter()
+        .map(|id| gpt_of(&samples, id).status)
+        .collect();
+    assert_eq!(
+        statuses.iter().filter(|s| s.as_str() == "scored").count(),
+        2,
+        "{statuses:?}"
+    );
+    assert_eq!(
+        statuses.iter().filter(|s| s.as_str() == "pending").count(),
+        1,
+        "{statuses:?}"
+    );
+
+    // The provider's answer to the retried request: every sample is scored, nothing pends.
+    std::fs::write(&results, line_of(last, true)).expect("results");
+    std::fs::remove_file(&batch).expect("remove the batch file");
+    let out = batch_in(&results);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("1 replies stored"), "{stderr}");
+    assert!(!batch.exists(), "nothing pending, no batch file: {stderr}");
+    let samples = samples_of();
+    for id in ["0", "1", "2"] {
+        let g = gpt_of(&samples, id);
+        assert_eq!((g.status.as_str(), g.mean), ("scored", Some(8.0)), "{g:?}");
+    }
+    let m: EvalMetrics = read(&dir.join("metrics.json"));
+    let g = m.gpt_score.expect("gpt_score");
+    assert_eq!((g.scored, g.pending, g.mean), (3, 0, Some(8.0)));
+    assert_eq!(server.requests(), 0, "batch mode sends nothing");
+}
+
+#[test]
+fn the_gpt_score_without_a_judge_or_key_is_refused_naming_the_key() {
+    let data = dataset();
+    let (outputs, _) = first_references(data, 1);
+    let file = data.join("gpt_refused.jsonl");
+    write_outputs(&file, &outputs);
+    // The dataset's own mesa.toml has no [eval] judge.
+    let out = mesa()
+        .args(["eval", data.to_str().expect("utf-8"), "--outputs"])
+        .arg(&file)
+        .args(["--name", "gpt_refused", "--gpt-score"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("[eval] judge"), "{stderr}");
+    assert!(
+        !data.join("eval/gpt_refused").exists(),
+        "refused before any work"
+    );
+    // With a judge but without its key (live mode).
+    let config = gpt_config(
+        data,
+        "gpt_nokey",
+        "http://127.0.0.1:9/v1",
+        "judge-nokey",
+        "",
+    );
+    let out = mesa()
+        .args(["eval", data.to_str().expect("utf-8"), "--outputs"])
+        .arg(&file)
+        .args(["--name", "gpt_refused", "--gpt-score", "--config"])
+        .arg(&config)
+        .env_remove(GPT_KEY_VAR)
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains(&format!("{GPT_KEY_VAR} (named by [eval.llm] api_key_env)")),
+        "{stderr}"
+    );
+    assert!(
+        !data.join("eval/gpt_refused").exists(),
+        "refused before any work"
+    );
+    // A template with an unknown placeholder, named with the key.
+    let prompt = data.with_file_name("gpt_prompt_typo.txt");
+    std::fs::write(&prompt, "[user]\nScore {{task}} with {{objekts}}\n").expect("prompt");
+    let typo = gpt_config(
+        data,
+        "gpt_typo",
+        "http://127.0.0.1:9/v1",
+        "judge-typo",
+        &format!("gpt_score_prompt = \"{}\"\n", prompt.display()),
+    );
+    let out = mesa()
+        .args(["eval", data.to_str().expect("utf-8"), "--outputs"])
+        .arg(&file)
+        .args(["--name", "gpt_refused", "--gpt-score", "--config"])
+        .arg(&typo)
+        .env(GPT_KEY_VAR, GPT_KEY)
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("[eval] gpt_score_prompt") && stderr.contains("{{objekts}}"),
+        "{stderr}"
+    );
+    assert!(
+        !data.join("eval/gpt_refused").exists(),
+        "refused before any work"
+    );
+    // Control: without --gpt-score the same command runs.
+    let out = mesa()
+        .args(["eval", data.to_str().expect("utf-8"), "--outputs"])
+        .arg(&file)
+        .args(["--name", "gpt_refused", "--config"])
+        .arg(&config)
+        .env_remove(GPT_KEY_VAR)
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let m: EvalMetrics = read(&data.join("eval/gpt_refused/metrics.json"));
+    assert!(m.gpt_score.is_none());
 }

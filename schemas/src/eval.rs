@@ -52,6 +52,85 @@ pub struct EvalMetrics {
     /// FID and KID from user-supplied feature files, when given.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub features: Option<FeatureMetrics>,
+    /// The GPT score (`--gpt-score`): a chat model's 1–10 scores of the rendered scenes on the
+    /// paper's five criteria.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gpt_score: Option<GptScoreMetrics>,
+}
+
+/// The GPT score over the samples (MesaTask paper §5: each criterion scored 1–10 by a chat
+/// model from the rendered views; a sample's GPT score is the mean of its five).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GptScoreMetrics {
+    /// The judge model (`[eval.llm] model`).
+    pub model: String,
+    /// The prompt template (`built-in data/prompts/gpt_score.txt`, or the file of
+    /// `[eval] gpt_score_prompt`).
+    pub prompt: String,
+    /// Samples a request was made for (successful and drawn).
+    pub requested: u64,
+    /// Samples whose reply passed validation.
+    pub scored: u64,
+    /// Samples whose reply was rejected (not JSON, a criterion missing or not an integer in
+    /// 1..=10); the reasons are in samples.jsonl.
+    pub rejected: u64,
+    /// Samples still waiting for their reply (offline batches).
+    pub pending: u64,
+    /// Samples whose request the endpoint failed for good.
+    pub failed: u64,
+    /// Successful samples that could not be drawn (no request).
+    pub not_drawn: u64,
+    /// The mean over scored samples of each sample's mean of the five criteria (the paper's
+    /// GPT score); absent when none was scored.
+    pub mean: Option<f64>,
+    /// Per criterion key (`consistency_with_task`, `object_size_reasonableness`,
+    /// `placement_plausibility`, `layout_coherence`, `object_visibility`).
+    pub criteria: BTreeMap<String, CriterionScore>,
+}
+
+/// One criterion of the GPT score over the samples.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CriterionScore {
+    /// The criterion's name in the paper (`Consistency with Task`).
+    pub name: String,
+    /// The mean of its scores over the scored samples; absent when none was scored.
+    pub mean: Option<f64>,
+    /// Scored samples (each gives every criterion a score).
+    pub count: u64,
+    /// Rejected replies in which this criterion was missing or not an integer in 1..=10.
+    pub rejects: u64,
+}
+
+/// The GPT score of one sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SampleGptScore {
+    /// `scored`, `rejected` (the reply failed validation), `pending` (offline batches: no
+    /// reply yet), `failed` (the endpoint gave no reply) or `not_drawn` (no views, no request).
+    pub status: String,
+    /// The criteria's scores (1–10) by key, when scored.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub scores: BTreeMap<String, u32>,
+    /// The mean of the five scores, when scored.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean: Option<f64>,
+    /// The model's short reason, when it gave one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// Why the reply was rejected or why there is none, one problem each.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub problems: Vec<String>,
+    /// The criteria keys a rejected reply got wrong (missing or not an integer in 1..=10).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rejected_criteria: Vec<String>,
+    /// The rejected reply as received (the API key redacted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reply: Option<String>,
+    /// SHA-256 of the request body (the reply cache's key, `.mesa/cache/chat/`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub request_sha256: Option<String>,
 }
 
 /// The physics figures of `mesa check`, over the successful samples.
@@ -254,6 +333,9 @@ pub struct EvalSample {
     /// Objects whose size is implausible for their category, with why.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub implausible_size: Vec<String>,
+    /// The GPT score of the sample (`--gpt-score`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gpt_score: Option<SampleGptScore>,
 }
 
 /// Why a sample failed.

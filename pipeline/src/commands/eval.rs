@@ -2,24 +2,31 @@
 //! [`mesa_stages::eval`]: model outputs for the dataset's test prompts (JSON Lines `{"id",
 //! "output"}`, or MesaTask's inference folders) → `eval/<name>/metrics.json`,
 //! `eval/<name>/samples.jsonl` and `eval/<name>/index.html`; `--compare a,b,c` puts several
-//! runs side by side.
+//! runs side by side; `--gpt-score` asks a chat model (`[eval.llm]`, live or through offline
+//! batches, the reply cache of `mesa tasks`) to score the rendered scenes on the paper's five
+//! criteria.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context as _};
 use clap::Args as ClapArgs;
 use mesa_schemas::artifacts::{AssetIndexArtifact, TextIndexArtifact};
 use mesa_schemas::convert::category_of_instance;
-use mesa_schemas::eval::{EvalMetrics, EvalSample, FeatureMetrics};
+use mesa_schemas::eval::{EvalMetrics, EvalSample, FeatureMetrics, SampleGptScore};
 use mesa_schemas::json::{to_sorted_line, to_sorted_pretty};
 use mesa_schemas::layout_file::AnyLayout;
 use mesa_schemas::output::parse_model_output;
 use mesa_schemas::DatasetLayout;
 use mesa_stages::eval::features::{fid, kid, Features};
+use mesa_stages::eval::gpt_score::{
+    aggregate_gpt_scores, parse_prompt, parse_score_reply, score_request, EvalConfig, ScoreInput,
+    BUILTIN_SOURCE, GPT_SCORE_PROMPT,
+};
 use mesa_stages::eval::{
     aggregate, evaluate_sample, EvalLibrary, ReferenceScenes, RunInfo, SampleInput, SizeStats,
 };
@@ -28,13 +35,16 @@ use mesa_stages::paths::dataset::{INDEX, TEXT_INDEX};
 use mesa_stages::retrieve::lexical::LexicalIndex;
 use mesa_stages::retrieve::npy::parse_matrix_f64;
 use mesa_stages::retrieve::{Catalog, TextScorer};
+use mesa_stages::tasks::chat::{Chat, ChatError, ChatRequest};
+use mesa_stages::tasks::prompts::PromptTemplate;
 use rayon::prelude::*;
 use serde_json::Value;
 
+use crate::chat::{custom_id, import_batch, request_digest, write_batch, ApiKey, ChatClient, Mode};
 use crate::cli::{DatasetArgs, Global};
 use crate::commands::check::ShapeLibrary;
 use crate::dataset_cache::read_annotations;
-use crate::exit::usage;
+use crate::exit::{usage, EXIT_FAILED};
 use crate::fsio::{
     read_bounded, read_json, read_text_bounded, write_atomic, SizeLimit, JSON_LIMIT, RECORDS_LIMIT,
 };
@@ -89,6 +99,20 @@ pub struct Args {
     /// DATASET/eval/compare.md.
     #[arg(long, value_name = "A,B,...")]
     pub compare: Option<String>,
+    /// Ask the GPT score of each successful sample: the chat endpoint of [eval.llm] (with
+    /// [eval] judge = "llm") scores its front and perspective views 1 to 10 on the paper's
+    /// five criteria (draws the views, as --render; default: [eval] gpt_score).
+    #[arg(long)]
+    pub gpt_score: bool,
+    /// GPT score through offline batches: write the requests whose reply is not cached to FILE
+    /// as OpenAI Batch JSONL (implies --gpt-score); samples whose reply is still missing are
+    /// `pending` in samples.jsonl.
+    #[arg(long, value_name = "FILE")]
+    pub batch_out: Option<PathBuf>,
+    /// GPT score through offline batches: read a provider's batch output JSONL (repeatable)
+    /// into the reply cache before scoring (joined by custom_id; implies --gpt-score).
+    #[arg(long, value_name = "FILE")]
+    pub batch_in: Vec<PathBuf>,
 }
 
 /// One prompt.
@@ -102,12 +126,22 @@ struct Prompt {
 
 /// Runs `mesa eval`.
 pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
-    let resolved = args.common.resolve(global)?;
+    let mut resolved = args.common.resolve(global)?;
     let dataset = resolved.dataset.clone();
     if let Some(names) = &args.compare {
         return compare(&dataset, names, global.quiet);
     }
     let started = Instant::now();
+    let batch = args.batch_out.is_some() || !args.batch_in.is_empty();
+    if args.gpt_score || batch {
+        resolved.config.eval.gpt_score = true;
+    }
+    // The judge, its prompt and its API key are checked before any work starts.
+    let judge = if resolved.config.eval.gpt_score {
+        Some(GptJudge::new(&dataset, &resolved.config.eval, batch)?)
+    } else {
+        None
+    };
     let (mut prompts, prompts_label, name) = match (&args.outputs, &args.mesatask) {
         (Some(outputs), None) => {
             let name = match &args.name {
@@ -204,17 +238,6 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
     }
 
     let out_dir = dataset.join("eval").join(&name);
-    let metrics_path = out_dir.join("metrics.json");
-    write_atomic(&metrics_path, &to_sorted_pretty(&metrics)?)
-        .with_context(|| format!("{}: cannot write", metrics_path.display()))?;
-    let mut lines = String::new();
-    for sample in &samples {
-        lines.push_str(&to_sorted_line(sample)?);
-        lines.push('\n');
-    }
-    let samples_path = out_dir.join("samples.jsonl");
-    write_atomic(&samples_path, lines.as_bytes())
-        .with_context(|| format!("{}: cannot write", samples_path.display()))?;
     // The scenes as checked, for `mesa check`, `mesa render` or Blender.
     let layouts_dir = out_dir.join("layouts");
     // Those of an earlier run of this name would be stale.
@@ -232,7 +255,7 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
         write_atomic(&path, &to_sorted_pretty(scene)?)
             .with_context(|| format!("{}: cannot write", path.display()))?;
     }
-    let pictures = if args.render {
+    let pictures = if args.render || judge.is_some() {
         render_samples(
             &dataset,
             &resolved.config.render,
@@ -244,6 +267,32 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
     } else {
         BTreeMap::new()
     };
+    let mut samples = samples;
+    let mut exit = ExitCode::SUCCESS;
+    if let Some(judge) = &judge {
+        let (scores, code) =
+            judge.score(&args, &prompts, &samples, &scenes, &pictures, global.quiet)?;
+        for (sample, score) in samples.iter_mut().zip(scores) {
+            sample.gpt_score = score;
+        }
+        metrics.gpt_score = Some(aggregate_gpt_scores(
+            &judge.config.model,
+            &judge.prompt_source,
+            samples.iter().filter_map(|s| s.gpt_score.as_ref()),
+        ));
+        exit = code;
+    }
+    let metrics_path = out_dir.join("metrics.json");
+    write_atomic(&metrics_path, &to_sorted_pretty(&metrics)?)
+        .with_context(|| format!("{}: cannot write", metrics_path.display()))?;
+    let mut lines = String::new();
+    for sample in &samples {
+        lines.push_str(&to_sorted_line(sample)?);
+        lines.push('\n');
+    }
+    let samples_path = out_dir.join("samples.jsonl");
+    write_atomic(&samples_path, lines.as_bytes())
+        .with_context(|| format!("{}: cannot write", samples_path.display()))?;
     let page_path = out_dir.join("index.html");
     write_atomic(&page_path, page(&metrics, &samples, &pictures).as_bytes())
         .with_context(|| format!("{}: cannot write", page_path.display()))?;
@@ -256,13 +305,13 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
             out_dir.display()
         );
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(exit)
 }
 
 /// Draws the front and perspective views of every successful sample's scene (objects without
 /// an asset left out) into `out_dir/render/<id>_<view>.png`. Returns per sample id the
-/// pictures' paths relative to `out_dir`, or why the scene could not be drawn (one failure
-/// never stops the others).
+/// pictures' paths relative to `out_dir` with their PNG bytes (front, then perspective), or why
+/// the scene could not be drawn (one failure never stops the others).
 fn render_samples(
     dataset: &Path,
     config: &mesa_stages::render::RenderConfig,
@@ -270,7 +319,7 @@ fn render_samples(
     samples: &[EvalSample],
     scenes: &[Option<DatasetLayout>],
     pool: &rayon::ThreadPool,
-) -> anyhow::Result<BTreeMap<String, Result<Vec<String>, String>>> {
+) -> anyhow::Result<BTreeMap<String, Drawn>> {
     let renderer = crate::commands::render::RenderStage::new();
     let render_dir = out_dir.join("render");
     match std::fs::remove_dir_all(&render_dir) {
@@ -281,7 +330,7 @@ fn render_samples(
             render_dir.display()
         ),
     }
-    let drawn: Vec<(String, Result<Vec<String>, String>)> = pool.install(|| {
+    let drawn: Vec<(String, Drawn)> = pool.install(|| {
         samples
             .par_iter()
             .zip(scenes.par_iter())
@@ -294,14 +343,15 @@ fn render_samples(
                     .map_err(|e| format!("{e:#}"))
                     .and_then(|(views, _)| {
                         let mut files = Vec::new();
-                        for view in views
-                            .iter()
-                            .filter(|v| v.name == "front" || v.name == "perspective")
-                        {
+                        // Front first, then perspective: the order the GPT score sends them.
+                        for name in ["front", "perspective"] {
+                            let Some(view) = views.iter().find(|v| v.name == name) else {
+                                continue;
+                            };
                             let rel = format!("render/{stem}_{}.png", view.name);
                             write_atomic(&out_dir.join(&rel), &view.png)
                                 .map_err(|e| format!("{rel}: cannot write: {e}"))?;
-                            files.push(rel);
+                            files.push((rel, view.png.clone()));
                         }
                         Ok(files)
                     });
@@ -311,6 +361,289 @@ fn render_samples(
     });
     Ok(drawn.into_iter().collect())
 }
+
+/// The GPT score's judge: the prompt and the chat client of `[eval.llm]`, made before any work
+/// starts.
+struct GptJudge {
+    config: mesa_stages::tasks::LlmConfig,
+    template: PromptTemplate,
+    prompt_source: String,
+    client: Arc<ChatClient>,
+}
+
+/// What a sample's GPT score request is, before it is sent.
+enum Planned {
+    /// A failed sample: no GPT score.
+    Nothing,
+    /// No request can be made (the score says why).
+    Settled(SampleGptScore),
+    /// The request.
+    Request(Box<ChatRequest>),
+}
+
+fn gpt_status(status: &str, problems: Vec<String>) -> SampleGptScore {
+    SampleGptScore {
+        status: status.to_owned(),
+        scores: BTreeMap::new(),
+        mean: None,
+        reason: None,
+        problems,
+        rejected_criteria: Vec::new(),
+        reply: None,
+        request_sha256: None,
+    }
+}
+
+impl GptJudge {
+    /// The judge of `[eval]`: refused (naming the key) without `judge = "llm"`, a prompt that
+    /// cannot be read or parsed, or (live) an API key that is not set.
+    fn new(dataset: &Path, config: &EvalConfig, batch: bool) -> anyhow::Result<Self> {
+        use mesa_stages::eval::gpt_score::Judge;
+        if config.judge != Judge::Llm {
+            return Err(usage(
+                "--gpt-score needs a chat backend, and [eval] judge is \"none\" (set [eval] \
+                 judge = \"llm\" in DATASET/mesa.toml and the endpoint in [eval.llm]: base_url, \
+                 model, api_key_env; see docs/eval.md)",
+            ));
+        }
+        let (prompt_source, text) = if config.gpt_score_prompt.is_empty() {
+            (BUILTIN_SOURCE.to_owned(), GPT_SCORE_PROMPT.to_owned())
+        } else {
+            let path = dataset.join(&config.gpt_score_prompt);
+            let text = read_text_bounded(&path, JSON_LIMIT).map_err(|e| {
+                usage(format!(
+                    "[eval] gpt_score_prompt: {}: cannot read: {e} (copy data/prompts/\
+                     gpt_score.txt there and edit it, or set gpt_score_prompt = \"\" for the \
+                     built-in prompt)",
+                    path.display()
+                ))
+            })?;
+            (config.gpt_score_prompt.clone(), text)
+        };
+        let template = parse_prompt(&prompt_source, &text)
+            .map_err(|e| usage(format!("[eval] gpt_score_prompt: {e}")))?;
+        // ApiKey names [tasks.llm] in its messages; the judge's key is [eval.llm]'s.
+        let rename = |e: String| e.replace("[tasks.llm]", "[eval.llm]");
+        let (mode, key) = if batch {
+            // Nothing is sent; the key, when set, only serves to redact batch replies.
+            (
+                Mode::CacheOnly,
+                ApiKey::from_env(&config.llm.api_key_env).ok().flatten(),
+            )
+        } else {
+            let key = ApiKey::from_env(&config.llm.api_key_env).map_err(|e| usage(rename(e)))?;
+            (Mode::Live, key)
+        };
+        Ok(Self {
+            config: config.llm.clone(),
+            template,
+            prompt_source,
+            client: Arc::new(ChatClient::with_key(dataset, &config.llm, mode, key)),
+        })
+    }
+
+    /// The request of each sample (in sample order).
+    fn plan(
+        &self,
+        prompts: &[Prompt],
+        samples: &[EvalSample],
+        scenes: &[Option<DatasetLayout>],
+        pictures: &BTreeMap<String, Drawn>,
+    ) -> Vec<Planned> {
+        samples
+            .iter()
+            .zip(scenes)
+            .zip(prompts)
+            .map(|((sample, scene), prompt)| {
+                let Some(scene) = scene.as_ref().filter(|_| sample.success) else {
+                    return Planned::Nothing;
+                };
+                let views = match pictures.get(&sample.id) {
+                    None => return Planned::Settled(gpt_status("not_drawn", Vec::new())),
+                    Some(Err(why)) => {
+                        return Planned::Settled(gpt_status("not_drawn", vec![why.clone()]))
+                    }
+                    Some(Ok(views)) => views,
+                };
+                let png = |suffix: &str| {
+                    views
+                        .iter()
+                        .find(|(rel, _)| rel.ends_with(suffix))
+                        .map(|(_, png)| png.as_slice())
+                };
+                let (Some(front_png), Some(perspective_png)) =
+                    (png("_front.png"), png("_perspective.png"))
+                else {
+                    return Planned::Settled(gpt_status(
+                        "not_drawn",
+                        vec!["the renderer gave no front or no perspective view".to_owned()],
+                    ));
+                };
+                let input = ScoreInput {
+                    table_type: prompt.table_type.as_deref(),
+                    task_info: prompt.task_info.as_ref(),
+                    layout: scene,
+                    front_png,
+                    perspective_png,
+                };
+                match score_request(&self.config, &self.template, &input) {
+                    Ok(request) => Planned::Request(Box::new(request)),
+                    Err(e) => Planned::Settled(gpt_status("failed", vec![e.to_string()])),
+                }
+            })
+            .collect()
+    }
+
+    /// Asks (or, with offline batches, reads from the cache) the GPT score of every successful
+    /// sample; writes `--batch-out`. Returns the scores in sample order and the exit code (1
+    /// when a `--batch-in` line could not be used).
+    fn score(
+        &self,
+        args: &Args,
+        prompts: &[Prompt],
+        samples: &[EvalSample],
+        scenes: &[Option<DatasetLayout>],
+        pictures: &BTreeMap<String, Drawn>,
+        quiet: bool,
+    ) -> anyhow::Result<(Vec<Option<SampleGptScore>>, ExitCode)> {
+        let planned = self.plan(prompts, samples, scenes, pictures);
+        let mut code = ExitCode::SUCCESS;
+        if !args.batch_in.is_empty() {
+            let cache = self.client.cache();
+            let pending: BTreeMap<String, String> = planned
+                .iter()
+                .filter_map(|p| match p {
+                    Planned::Request(request) => Some(request_digest(request)),
+                    _ => None,
+                })
+                .filter(|digest| !cache.contains(digest))
+                .map(|digest| (custom_id(&digest), digest))
+                .collect();
+            for file in &args.batch_in {
+                let text = read_text_bounded(file, RECORDS_LIMIT).map_err(|e| {
+                    usage(format!(
+                        "{}: cannot read the batch output: {e}",
+                        file.display()
+                    ))
+                })?;
+                let report = import_batch(file, &text, &pending, cache);
+                eprintln!(
+                    "eval: {}: {} replies stored, {} already cached, {} lines failed",
+                    file.display(),
+                    report.stored,
+                    report.already_cached,
+                    report.failed.len()
+                );
+                for failure in &report.failed {
+                    eprintln!("  failed {failure}");
+                }
+                if !report.failed.is_empty() {
+                    code = ExitCode::from(EXIT_FAILED);
+                }
+            }
+        }
+        // Requests wait on the network: as many threads as may be in flight.
+        let pool = thread_pool(self.config.max_concurrency).map_err(|e| anyhow!("{e}"))?;
+        let answered: Vec<(Option<SampleGptScore>, Option<ChatRequest>)> = pool.install(|| {
+            planned
+                .into_par_iter()
+                .map(|p| match p {
+                    Planned::Nothing => (None, None),
+                    Planned::Settled(score) => (Some(score), None),
+                    Planned::Request(request) => self.answer(*request),
+                })
+                .collect()
+        });
+        let mut scores = Vec::with_capacity(answered.len());
+        let mut waiting = Vec::new();
+        for (score, pending) in answered {
+            scores.push(score);
+            waiting.extend(pending);
+        }
+        match &args.batch_out {
+            Some(path) if !waiting.is_empty() => {
+                let lines = write_batch(path, &waiting)
+                    .with_context(|| format!("{}: cannot write", path.display()))?;
+                eprintln!(
+                    "eval: {lines} GPT score requests written to {} (OpenAI Batch JSONL; read \
+                     the provider's output with --batch-in)",
+                    path.display()
+                );
+            }
+            Some(path) => eprintln!(
+                "eval: no GPT score request is pending, so {} was not written",
+                path.display()
+            ),
+            None if !waiting.is_empty() => eprintln!(
+                "eval: {} samples wait for their GPT score (write the batch with --batch-out \
+                 FILE)",
+                waiting.len()
+            ),
+            None => {}
+        }
+        if !quiet {
+            eprintln!(
+                "eval: GPT score: {}: {}",
+                self.config.model,
+                self.client.stats.summary()
+            );
+        }
+        for warning in self.client.warnings() {
+            eprintln!(
+                "eval: warning: {}",
+                warning.replace("[tasks.llm]", "[eval.llm]")
+            );
+        }
+        Ok((scores, code))
+    }
+
+    /// One sample's reply, validated; the request when it is still pending.
+    fn answer(&self, request: ChatRequest) -> (Option<SampleGptScore>, Option<ChatRequest>) {
+        let digest = request_digest(&request);
+        let mut score = match self.client.complete(&request) {
+            Ok(reply) => match parse_score_reply(&reply.content) {
+                Ok(scored) => SampleGptScore {
+                    status: "scored".to_owned(),
+                    scores: scored.scores,
+                    mean: Some(scored.mean),
+                    reason: Some(scored.reason).filter(|r| !r.is_empty()),
+                    ..gpt_status("scored", Vec::new())
+                },
+                Err(reject) => {
+                    let mut problems = reject.problems;
+                    if reply.finish_reason.as_deref() == Some("length") {
+                        problems.push(
+                            "the reply was cut at [eval.llm] max_tokens (raise it)".to_owned(),
+                        );
+                    }
+                    SampleGptScore {
+                        rejected_criteria: reject.criteria,
+                        reply: Some(reply.content),
+                        ..gpt_status("rejected", problems)
+                    }
+                }
+            },
+            Err(ChatError::Pending(_)) => {
+                let mut score = gpt_status(
+                    "pending",
+                    vec![
+                        "no reply yet: write the batch with --batch-out FILE, read the \
+                          provider's output with --batch-in FILE"
+                            .to_owned(),
+                    ],
+                );
+                score.request_sha256 = Some(digest);
+                return (Some(score), Some(request));
+            }
+            Err(ChatError::Failed(why)) => gpt_status("failed", vec![why]),
+        };
+        score.request_sha256 = Some(digest);
+        (Some(score), None)
+    }
+}
+
+/// A sample's drawn views: (path relative to the run's folder, PNG bytes), or why not drawn.
+type Drawn = Result<Vec<(String, Vec<u8>)>, String>;
 
 /// A sample id as a file name: characters other than ASCII letters, digits, `-`, `_` and `.`
 /// become `_` (`task_000/scene_001` → `task_000_scene_001`), and a leading `.` too.
@@ -667,6 +1000,26 @@ fn summary(m: &EvalMetrics) -> String {
     if let Some(f) = &m.features {
         let _ = write!(s, "; FID {:.4}, KID {:.6}", f.fid, f.kid);
     }
+    if let Some(g) = &m.gpt_score {
+        let opt = |v: Option<f64>| v.map_or("–".to_owned(), |v| format!("{v:.2}"));
+        let criteria: Vec<String> = g
+            .criteria
+            .iter()
+            .map(|(key, c)| format!("{key} {}", opt(c.mean)))
+            .collect();
+        let _ = write!(
+            s,
+            "\n  GPT score ({}) {}: {} scored, {} rejected, {} pending, {} failed, {} not drawn; {}",
+            g.model,
+            opt(g.mean),
+            g.scored,
+            g.rejected,
+            g.pending,
+            g.failed,
+            g.not_drawn,
+            criteria.join(", ")
+        );
+    }
     if !m.failures.is_empty() {
         let reasons: Vec<String> = m.failures.iter().map(|(k, v)| format!("{k} {v}")).collect();
         let _ = write!(s, "\n  failures: {}", reasons.join(", "));
@@ -689,11 +1042,7 @@ fn escape(text: &str) -> String {
 }
 
 /// `eval/<name>/index.html`: the numbers, then one row per sample with its flags.
-fn page(
-    m: &EvalMetrics,
-    samples: &[EvalSample],
-    pictures: &BTreeMap<String, Result<Vec<String>, String>>,
-) -> String {
+fn page(m: &EvalMetrics, samples: &[EvalSample], pictures: &BTreeMap<String, Drawn>) -> String {
     let mut html = String::new();
     let _ = write!(
         html,
@@ -703,7 +1052,7 @@ fn page(
          <h1>mesa eval: {name}</h1>\n<pre>{summary}</pre>\n<table><tr><th>id</th><th>table \
          type</th><th>success</th><th>objects</th><th>collisions</th><th>floating</th>\
          <th>outside zone</th><th>graph (written/extracted/matched)</th><th>missing task \
-         types</th><th>implausible sizes</th><th>views</th></tr>\n",
+         types</th><th>implausible sizes</th><th>GPT score</th><th>views</th></tr>\n",
         name = escape(&m.name),
         summary = escape(&summary(m))
     );
@@ -717,7 +1066,7 @@ fn page(
         let _ = writeln!(
             html,
             "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-             <td>{}/{}/{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+             <td>{}/{}/{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             if flagged { " class=\"bad\"" } else { "" },
             escape(&s.id),
             escape(s.table_type.as_deref().unwrap_or("")),
@@ -734,11 +1083,12 @@ fn page(
             s.graph_counts[2],
             escape(&s.missing_task_types.join(", ")),
             escape(&s.implausible_size.join("; ")),
+            escape(&gpt_cell(s.gpt_score.as_ref())),
             match pictures.get(&s.id) {
                 None => String::new(),
                 Some(Ok(files)) => files
                     .iter()
-                    .map(|f| format!("<img src=\"{}\" width=\"192\">", escape(f)))
+                    .map(|(f, _)| format!("<img src=\"{}\" width=\"192\">", escape(f)))
                     .collect::<String>(),
                 Some(Err(why)) => escape(&format!("not drawn: {why}")),
             },
@@ -748,12 +1098,31 @@ fn page(
     html
 }
 
+/// A sample's GPT score on the page: the mean and the five scores, or the status and why.
+fn gpt_cell(score: Option<&SampleGptScore>) -> String {
+    let Some(score) = score else {
+        return String::new();
+    };
+    match score.mean {
+        Some(mean) => {
+            let each: Vec<String> = score.scores.values().map(u32::to_string).collect();
+            let mut cell = format!("{mean:.1} ({})", each.join("/"));
+            if let Some(reason) = &score.reason {
+                cell.push_str(": ");
+                cell.push_str(reason);
+            }
+            cell
+        }
+        None => format!("{}: {}", score.status, score.problems.join("; ")),
+    }
+}
+
 /// `--compare a,b,c`: the runs' main numbers side by side (printed and eval/compare.md).
 fn compare(dataset: &Path, names: &str, quiet: bool) -> anyhow::Result<ExitCode> {
     let mut table = String::from(
         "| model | samples | success | collision rate | scenes with collision | MesaTask 5 cm \
-         | CKL | graph P | graph R | task coverage | implausible size | FID | KID |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+         | CKL | graph P | graph R | task coverage | implausible size | FID | KID | GPT score |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for name in names.split(',').map(str::trim).filter(|n| !n.is_empty()) {
         check_name(name)?;
@@ -765,7 +1134,7 @@ fn compare(dataset: &Path, names: &str, quiet: bool) -> anyhow::Result<ExitCode>
         let opt = |v: Option<f64>, d: usize| v.map_or("–".to_owned(), |v| format!("{v:.d$}"));
         let _ = writeln!(
             table,
-            "| {} | {} | {:.1} % | {:.4} | {:.4} | {:.4} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {} | {} |",
+            "| {} | {} | {:.1} % | {:.4} | {:.4} | {:.4} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {} | {} | {} |",
             m.name,
             m.samples,
             100.0 * m.success_rate,
@@ -779,6 +1148,7 @@ fn compare(dataset: &Path, names: &str, quiet: bool) -> anyhow::Result<ExitCode>
             m.size.share,
             opt(m.features.as_ref().map(|f| f.fid), 3),
             opt(m.features.as_ref().map(|f| f.kid), 5),
+            opt(m.gpt_score.as_ref().and_then(|g| g.mean), 2),
         );
     }
     let path = dataset.join("eval").join("compare.md");

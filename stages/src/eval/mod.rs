@@ -8,12 +8,14 @@
 //! - the rule-based scene graph ([`crate::graph`]) against the graph the model wrote;
 //! - the task's "Objects cluster" matched to the layout's types ([`crate::tasks::types`]);
 //! - category statistics (CKL, object counts) and size plausibility;
-//! - FID and KID from feature files ([`features`]).
+//! - FID and KID from feature files ([`features`]);
+//! - the GPT score's prompt, request and reply validation ([`gpt_score`]).
 //!
 //! [`evaluate_sample`] turns one output into an [`EvalSample`]; [`aggregate`] the samples into
 //! [`EvalMetrics`]. Both are pure functions of their inputs.
 
 pub mod features;
+pub mod gpt_score;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
@@ -142,6 +144,7 @@ fn empty_sample(input: &SampleInput<'_>, fail: Option<SampleFailure>) -> EvalSam
         task_types: 0,
         size_checked: 0,
         implausible_size: Vec::new(),
+        gpt_score: None,
     }
 }
 
@@ -596,6 +599,7 @@ pub fn aggregate(
         task_coverage: coverage,
         size,
         features: None,
+        gpt_score: None,
     }
 }
 

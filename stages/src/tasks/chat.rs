@@ -19,7 +19,7 @@ pub struct View {
     pub png: Vec<u8>,
 }
 
-/// The three kinds of model call of a scene.
+/// The kinds of model call: the three of a scene's tasks, and the GPT score of `mesa eval`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum CallKind {
     /// The table description, from the rendered views and the scene graph.
@@ -28,15 +28,18 @@ pub enum CallKind {
     Tasks,
     /// The reasoning text of one task.
     Reasoning,
+    /// The GPT score of a generated scene (`mesa eval --gpt-score`).
+    GptScore,
 }
 
 impl CallKind {
-    /// `description`, `tasks` or `reasoning` (as rejects and batch files name it).
+    /// `description`, `tasks`, `reasoning` or `gpt_score` (as rejects and batch files name it).
     pub fn name(self) -> &'static str {
         match self {
             Self::Description => "description",
             Self::Tasks => "tasks",
             Self::Reasoning => "reasoning",
+            Self::GptScore => "gpt_score",
         }
     }
 }
