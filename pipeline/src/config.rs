@@ -49,6 +49,9 @@ pub struct Config {
     pub export: mesa_stages::export::ExportConfig,
     /// `mesa release`: the MesaTask-10K tree (layouts, pictures, annotations, assets).
     pub release: mesa_stages::release::ReleaseConfig,
+    /// `mesa annotate`: asset annotations from a vision-language model or the offline
+    /// placeholder.
+    pub annotations: mesa_stages::annotate::AnnotationsConfig,
 }
 
 /// The `[run]` section.
@@ -169,6 +172,7 @@ impl Config {
             .chain(config.render.problems())
             .chain(config.assets.budget.problems())
             .chain(config.export.problems())
+            .chain(config.annotations.problems())
             .collect();
         if !problems.is_empty() {
             return Err(format!("{} ", problems.join("; ")));

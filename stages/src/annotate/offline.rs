@@ -153,7 +153,7 @@ pub fn hollowness(mesh: &GlbMesh) -> f64 {
 
 /// The placeholder fields of an asset: category from its names (the taxonomy entry its words
 /// match best, else its first name), a description of its name words and size, `onTable`
-/// true, a mass of [`PLACEHOLDER_DENSITY_KG_M3`] times its box volume, `frontView` 0 (the
+/// when its longest side is at most 1 m, a mass of [`PLACEHOLDER_DENSITY_KG_M3`] times its box volume, `frontView` 0 (the
 /// glTF convention), `isContainer` when [`hollowness`] is at least one half, its material
 /// names.
 pub fn placeholder_fields(
@@ -207,7 +207,7 @@ pub fn placeholder_fields(
     let mut fields = AssetFields::new();
     fields.insert("category".into(), json!(normalize_category(&category)));
     fields.insert("description".into(), json!(description.trim_start()));
-    fields.insert("onTable".into(), json!(x.max(y).max(z) <= 2.0));
+    fields.insert("onTable".into(), json!(x.max(y).max(z) <= 1.0));
     fields.insert("mass".into(), json!(mass));
     fields.insert("frontView".into(), json!(0));
     fields.insert("isContainer".into(), json!(container));
