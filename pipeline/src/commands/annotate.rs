@@ -34,7 +34,9 @@ use serde_json::{json, Value};
 use crate::chat::{custom_id, import_batch, request_digest, write_batch, ChatClient, Mode};
 use crate::cli::{DatasetArgs, Global};
 use crate::exit::{usage, UsageError};
-use crate::fsio::{read_bounded, read_json, read_text_bounded, write_atomic, GLB_LIMIT, JSON_LIMIT};
+use crate::fsio::{
+    read_bounded, read_json, read_text_bounded, write_atomic, GLB_LIMIT, JSON_LIMIT,
+};
 use crate::progress::Tick;
 use crate::runner::{DatasetReport, DatasetStage, Executor, StageContext};
 
@@ -292,7 +294,9 @@ impl AnnotateAssetsStage {
             Err(e) => return Annotated::failed(format!("{}: {e}", path.display())),
         };
         let Some(geometry) = target.record.geometry.as_ref() else {
-            return Annotated::failed(format!("{uid}: the index has no geometry (run `mesa assets`)"));
+            return Annotated::failed(format!(
+                "{uid}: the index has no geometry (run `mesa assets`)"
+            ));
         };
         let extents = geometry.gltf_extents_m;
         let Some(chat) = &self.chat else {
@@ -442,8 +446,8 @@ impl DatasetStage for AnnotateAssetsStage {
             // The reader of `mesa assets` and `mesa retrieve` must accept the file first.
             Annotations::parse(&text)
                 .map_err(|e| anyhow!("{}: {e}", annotations_path.display()))?;
-            let value = parse_lenient(&text)
-                .map_err(|e| anyhow!("{}: {e}", annotations_path.display()))?;
+            let value =
+                parse_lenient(&text).map_err(|e| anyhow!("{}: {e}", annotations_path.display()))?;
             (Some(text), value)
         } else {
             (None, json!({}))
@@ -574,8 +578,13 @@ impl DatasetStage for AnnotateAssetsStage {
                         .geometry
                         .as_ref()
                         .map_or([0.0; 3], |g| g.gltf_extents_m);
-                    let merged =
-                        merge_entry(entries.get(target.uid), &fields, &target.fields, &source, extents);
+                    let merged = merge_entry(
+                        entries.get(target.uid),
+                        &fields,
+                        &target.fields,
+                        &source,
+                        extents,
+                    );
                     entries.insert(target.uid.to_owned(), merged);
                     summary.annotated.push(target.uid.to_owned());
                 }

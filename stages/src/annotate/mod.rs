@@ -296,17 +296,16 @@ pub fn validate_asset_reply(
     };
     let mut reasons = Vec::new();
     let mut fields = Map::new();
-    let mut field = |name: &str, check: &dyn Fn(&Value) -> Result<Value, String>| match object
-        .get(name)
-    {
-        None => reasons.push(format!("{name}: missing")),
-        Some(v) => match check(v) {
-            Ok(v) => {
-                fields.insert(name.to_owned(), v);
-            }
-            Err(why) => reasons.push(format!("{name}: {why}")),
-        },
-    };
+    let mut field =
+        |name: &str, check: &dyn Fn(&Value) -> Result<Value, String>| match object.get(name) {
+            None => reasons.push(format!("{name}: missing")),
+            Some(v) => match check(v) {
+                Ok(v) => {
+                    fields.insert(name.to_owned(), v);
+                }
+                Err(why) => reasons.push(format!("{name}: {why}")),
+            },
+        };
     field("category", &|v| {
         let text = v
             .as_str()

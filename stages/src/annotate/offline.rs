@@ -12,9 +12,28 @@ use super::{normalize_category, AssetFields};
 
 /// Words that name no object (exporters' defaults, parts, levels of detail).
 const GENERIC: [&str; 22] = [
-    "mesh", "node", "object", "scene", "root", "material", "mat", "default", "geometry",
-    "primitive", "group", "model", "part", "lod", "lod0", "defaultmaterial", "gltf", "sketchfab",
-    "untitled", "obj", "polysurface", "shape",
+    "mesh",
+    "node",
+    "object",
+    "scene",
+    "root",
+    "material",
+    "mat",
+    "default",
+    "geometry",
+    "primitive",
+    "group",
+    "model",
+    "part",
+    "lod",
+    "lod0",
+    "defaultmaterial",
+    "gltf",
+    "sketchfab",
+    "untitled",
+    "obj",
+    "polysurface",
+    "shape",
 ];
 
 /// Density assumed for the mass estimate, kg/m³ of the bounding box (a household object is
@@ -42,7 +61,12 @@ pub fn asset_names(glb: &[u8]) -> Result<Vec<String>, GlbError> {
 pub fn material_names(glb: &[u8]) -> Result<Vec<String>, GlbError> {
     let document = open_glb(glb)?;
     let mut names: Vec<String> = Vec::new();
-    for name in document.root().materials.iter().filter_map(|m| m.name.clone()) {
+    for name in document
+        .root()
+        .materials
+        .iter()
+        .filter_map(|m| m.name.clone())
+    {
         if !names.contains(&name) {
             names.push(name);
         }
@@ -224,7 +248,10 @@ fn best_taxonomy_match(words: &[String], taxonomy: &[String]) -> Option<String> 
     let mut best: Option<(usize, bool, usize, &String)> = None;
     for entry in taxonomy {
         let parts: Vec<&str> = entry.split('_').filter(|p| !p.is_empty()).collect();
-        let found = parts.iter().filter(|p| words.iter().any(|w| w == *p)).count();
+        let found = parts
+            .iter()
+            .filter(|p| words.iter().any(|w| w == *p))
+            .count();
         if found == 0 {
             continue;
         }

@@ -38,7 +38,10 @@ fn bad_replies_are_rejected_with_the_field_and_the_reason() {
         validate_asset_reply(&v.to_string(), &input(), &[], &config).expect_err("rejected")
     };
     let reasons = with("mass", json!("heavy"));
-    assert!(reasons[0].starts_with("mass: ") && reasons[0].contains("string"), "{reasons:?}");
+    assert!(
+        reasons[0].starts_with("mass: ") && reasons[0].contains("string"),
+        "{reasons:?}"
+    );
     let reasons = with("mass", json!(500.0));
     assert!(reasons[0].contains("implausible"), "{reasons:?}");
     let reasons = with("mass", json!(0));
@@ -66,7 +69,13 @@ fn the_merge_keeps_a_persons_fields_and_records_its_own() {
     let fields = fields_to_annotate(Some(&person), "offline", false);
     assert_eq!(
         fields,
-        ["description", "onTable", "frontView", "isContainer", "materials"]
+        [
+            "description",
+            "onTable",
+            "frontView",
+            "isContainer",
+            "materials"
+        ]
     );
     let offline = placeholder_fields(
         &["coffee_mug".into()],
@@ -75,7 +84,13 @@ fn the_merge_keeps_a_persons_fields_and_records_its_own() {
         0.8,
         &[],
     );
-    let merged = merge_entry(Some(&person), &offline, &fields, "offline", [0.09, 0.1, 0.12]);
+    let merged = merge_entry(
+        Some(&person),
+        &offline,
+        &fields,
+        "offline",
+        [0.09, 0.1, 0.12],
+    );
     assert_eq!(merged["category"], "mug", "a person's field stays");
     assert_eq!(merged["mass"], 0.3);
     assert_eq!(merged["isContainer"], true);
@@ -86,12 +101,15 @@ fn the_merge_keeps_a_persons_fields_and_records_its_own() {
     assert!(fields_to_annotate(Some(&merged), "offline", false).is_empty());
     let model_fields = fields_to_annotate(Some(&merged), "llm:m", false);
     assert_eq!(model_fields, fields);
-    let good = validate_asset_reply(GOOD, &input(), &[], &AnnotationsConfig::default())
-        .expect("valid");
+    let good =
+        validate_asset_reply(GOOD, &input(), &[], &AnnotationsConfig::default()).expect("valid");
     let by_model = merge_entry(Some(&merged), &good, &model_fields, "llm:m", [0.0; 3]);
     assert_eq!(by_model["category"], "mug");
     assert_eq!(by_model["frontView"], 1);
-    assert!(by_model.get(PLACEHOLDER_KEY).is_none(), "no placeholder left");
+    assert!(
+        by_model.get(PLACEHOLDER_KEY).is_none(),
+        "no placeholder left"
+    );
     let (counts, placeholders) = count_sources(&json!({"a": by_model, "b": merged}));
     assert_eq!(placeholders, 1);
     assert_eq!(counts["llm:m"], 5);
