@@ -409,3 +409,145 @@ fn the_offline_placeholder_is_marked_and_unchanged_assets_keep_their_index_bytes
         "{out}"
     );
 }
+
+/// A synthetic scene of four boxes whose instances.json lacks some labels and descriptions:
+/// 1 has a person's label only, 2 has neither, 3 and 4 are complete (a person's).
+fn instance_scene(base_url: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir
+        .path()
+        .join("scenes/office_table/office_table_0001/input");
+    mesa_stages::lift::synthetic::SyntheticScene {
+        size_px: 256,
+        boxes: 4,
+        ..Default::default()
+    }
+    .write(&input)
+    .expect("synthetic scene");
+    let path = input.join("instances.json");
+    let mut instances = read_json(&path);
+    let entries = instances["instances"].as_array_mut().expect("instances");
+    entries[0] = json!({"id": 1, "label": "mug", "description": ""});
+    entries[1] = json!({"id": 2});
+    std::fs::write(&path, serde_json::to_vec_pretty(&instances).expect("json")).expect("write");
+    std::fs::write(
+        dir.path().join("mesa.toml"),
+        format!(
+            "[annotations.llm]\nbase_url = \"{base_url}\"\nmodel = \"mock-vlm\"\n\
+             api_key_env = \"{KEY_VAR}\"\nmax_retries = 1\ntimeout_s = 5.0\n"
+        ),
+    )
+    .expect("config");
+    dir
+}
+
+fn instance_model(body: &Value) -> String {
+    let text = body["messages"][1]["content"][0]["text"]
+        .as_str()
+        .expect("text");
+    if text.contains("label so far: \"mug\"") {
+        return json!({"label": "cup", "description": "white ceramic mug"}).to_string();
+    }
+    match body["seed"].as_u64() {
+        Some(0) => "{\"label\": ".to_owned(),
+        _ => json!({"label": "Bowl", "description": "shallow blue bowl"}).to_string(),
+    }
+}
+
+fn annotate_instances(dir: &Path, extra: &[&str]) -> (bool, String) {
+    let out = mesa()
+        .args(["annotate", "instances", "--progress", "off"])
+        .args(extra)
+        .arg(dir)
+        .env(KEY_VAR, KEY)
+        .output()
+        .expect("runs");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
+}
+
+#[test]
+fn instances_get_labels_from_their_crop_and_the_photo_and_keep_a_persons_text() {
+    let server =
+        MockServer::start(|request, _| Reply::completion(&instance_model(&request.json())));
+    let data = instance_scene(&server.base_url);
+    let dir = data.path();
+    let input = dir.join("scenes/office_table/office_table_0001/input");
+    let before = read_json(&input.join("instances.json"));
+    let (success, out) = annotate_instances(dir, &["--backend", "llm"]);
+    assert!(success, "{out}");
+    // Instance 1 once, instance 2 twice (its first reply is malformed).
+    assert_eq!(server.requests(), 3, "{out}");
+    let photo = mesa_stages::tasks::chat::png_data_url(
+        &std::fs::read(input.join("image.png")).expect("photo"),
+    );
+    for request in server.received() {
+        let parts = request.json()["messages"][1]["content"].clone();
+        let crop = parts[1]["image_url"]["url"]
+            .as_str()
+            .expect("crop")
+            .to_owned();
+        assert!(crop.starts_with("data:image/png;base64,") && crop != photo);
+        assert_eq!(
+            parts[2]["image_url"]["url"],
+            photo.as_str(),
+            "the whole photo"
+        );
+    }
+    let after = read_json(&input.join("instances.json"));
+    let entries = after["instances"].as_array().expect("instances");
+    assert_eq!(entries[0]["label"], "mug", "a person's label stays");
+    assert_eq!(entries[0]["description"], "white ceramic mug");
+    assert_eq!(
+        entries[0]["mesa_sources"],
+        json!({"description": "llm:mock-vlm"})
+    );
+    assert_eq!(entries[1]["label"], "bowl");
+    assert_eq!(entries[1]["mesa_sources"]["label"], "llm:mock-vlm");
+    assert_eq!(
+        entries[2], before["instances"][2],
+        "complete entries untouched"
+    );
+    assert_eq!(entries[4], before["instances"][4], "the table untouched");
+    let rejects = std::fs::read_to_string(dir.join("assets/annotate/instance_rejects.jsonl"))
+        .expect("rejects");
+    assert_eq!(rejects.lines().count(), 1);
+    assert!(rejects.contains("not valid JSON"), "{rejects}");
+    // A rerun sends nothing.
+    let (success, out2) = annotate_instances(dir, &["--backend", "llm"]);
+    assert!(success, "{out2}");
+    assert_eq!(server.requests(), 3);
+    // The written file is still a valid input: lift reads it.
+    let lift = mesa()
+        .args(["lift", "--progress", "off"])
+        .arg(dir)
+        .output()
+        .expect("lift");
+    assert!(
+        lift.status.success(),
+        "{}",
+        String::from_utf8_lossy(&lift.stderr)
+    );
+    assert_no_key(dir, &[&out, &out2]);
+
+    // The offline backend on the same inputs: placeholders, marked.
+    let offline = instance_scene("http://127.0.0.1:9/v1");
+    let (success, out) = annotate_instances(offline.path(), &[]);
+    assert!(success, "{out}");
+    let entries = read_json(
+        &offline
+            .path()
+            .join("scenes/office_table/office_table_0001/input/instances.json"),
+    )["instances"]
+        .clone();
+    assert_eq!(entries[1]["label"], "object");
+    assert_eq!(entries[1]["mesa_sources"]["label"], "offline");
+    assert!(entries[0]["description"]
+        .as_str()
+        .expect("text")
+        .starts_with("mug at the "));
+}

@@ -15,8 +15,14 @@ use clap::{Args as ClapArgs, Subcommand, ValueEnum};
 use mesa_schemas::annotate::{
     AnnotateReject, AnnotateSummary, ANNOTATE_REJECT_SCHEMA, ANNOTATE_SUMMARY_SCHEMA,
 };
+use mesa_schemas::artifacts::InstanceEntry;
 use mesa_schemas::artifacts::{AssetIndexArtifact, AssetRecord};
 use mesa_schemas::json::{parse_lenient, to_sorted_line, to_sorted_pretty};
+use mesa_stages::annotate::instances::{
+    instance_fields_to_annotate, instance_placeholder, instance_prompt, instance_request,
+    merge_instance, validate_instance_reply, INSTANCE_FIELDS, INSTANCE_PROMPT,
+    INSTANCE_PROMPT_FILE,
+};
 use mesa_stages::annotate::offline::{asset_names, hollowness, material_names, placeholder_fields};
 use mesa_stages::annotate::{
     asset_prompt, asset_request, count_sources, fields_to_annotate, front_view_of_file,
@@ -24,21 +30,28 @@ use mesa_stages::annotate::{
     AssetFields, AssetInput, ASSET_PROMPT, ASSET_PROMPT_FILE, VIEW_AZIMUTHS_DEG,
 };
 use mesa_stages::annotations::Annotations;
+use mesa_stages::lift::inputs::{read_masks, read_png, PngLimit};
+use mesa_stages::pack::snapshot::{snapshot_png, Margin, Photo};
 use mesa_stages::paths::dataset::{
     asset_glb, ANNOTATE_REJECTS, ANNOTATE_SUMMARY, ANNOTATIONS, ASSET_RENDERS, INDEX,
+    INSTANCE_REJECTS,
 };
+use mesa_stages::paths::scene::INSTANCES;
 use mesa_stages::tasks::chat::{Chat, ChatError, ChatRequest, View};
 use mesa_stages::tasks::prompts::PromptTemplate;
 use serde_json::{json, Value};
 
 use crate::chat::{custom_id, import_batch, request_digest, write_batch, ChatClient, Mode};
-use crate::cli::{DatasetArgs, Global};
+use crate::cli::{DatasetArgs, Global, SceneArgs};
 use crate::exit::{usage, UsageError};
 use crate::fsio::{
     read_bounded, read_json, read_text_bounded, write_atomic, GLB_LIMIT, JSON_LIMIT,
 };
 use crate::progress::Tick;
-use crate::runner::{DatasetReport, DatasetStage, Executor, StageContext};
+use crate::runner::{
+    discover_scenes, select_scenes, DatasetReport, DatasetStage, Executor, RunError, Scene,
+    StageContext,
+};
 
 /// `mesa annotate`.
 #[derive(Debug, ClapArgs)]
@@ -56,6 +69,10 @@ pub enum What {
     /// frontView, isContainer, materials, merged into assets/annotations.json with the source
     /// of every field (a person's fields are never changed). Needs `mesa assets` first.
     Assets(AssetsArgs),
+    /// Each scene's photo instances lacking a label or a description (input/instances.json):
+    /// the model is shown the instance's crop (the pack's snapshot) and the whole photo; the
+    /// fields are written back with their source (a person's text is never changed).
+    Instances(InstancesArgs),
 }
 
 /// `--backend`.
@@ -98,6 +115,7 @@ pub struct AssetsArgs {
 pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
     match args.what {
         What::Assets(args) => run_assets(args, global),
+        What::Instances(args) => run_instances(args, global),
     }
 }
 
@@ -276,6 +294,79 @@ fn text_tokens(request: &ChatRequest) -> u64 {
     chars.div_ceil(4) as u64
 }
 
+/// Asks the model for `key` up to `[annotations] max_attempts` times (the seed plus the
+/// attempt), until a reply passes `validate`; rejected replies are kept with their reasons.
+fn ask(
+    chat: &(dyn Chat + Send + Sync),
+    config: &AnnotationsConfig,
+    key: &str,
+    request: impl Fn(u32) -> Result<ChatRequest, String>,
+    validate: impl Fn(&str) -> Result<AssetFields, Vec<String>>,
+    rejects_file: &str,
+) -> Annotated {
+    let source = config.source();
+    let mut done = Annotated {
+        outcome: Outcome::Failed(String::new()),
+        rejects: Vec::new(),
+        requests: 0,
+        text_tokens: 0,
+    };
+    for attempt in 0..config.max_attempts {
+        let request = match request(attempt) {
+            Ok(request) => request,
+            Err(e) => {
+                done.outcome = Outcome::Failed(e);
+                return done;
+            }
+        };
+        done.requests += 1;
+        done.text_tokens += text_tokens(&request);
+        let reply = match chat.complete(&request) {
+            Ok(reply) => reply,
+            Err(ChatError::Pending(request)) => {
+                done.outcome = Outcome::Pending(request);
+                return done;
+            }
+            Err(ChatError::Failed(why)) => {
+                done.outcome = Outcome::Failed(why);
+                return done;
+            }
+        };
+        let mut checked = validate(&reply.content);
+        if reply.finish_reason.as_deref() == Some("length") {
+            let cut = "the reply was cut at max_tokens ([annotations.llm] max_tokens)".to_owned();
+            checked = Err(match checked {
+                Ok(_) => vec![cut],
+                Err(mut reasons) => {
+                    reasons.push(cut);
+                    reasons
+                }
+            });
+        }
+        match checked {
+            Ok(fields) => {
+                done.outcome = Outcome::Done(fields);
+                return done;
+            }
+            Err(reasons) => done.rejects.push(AnnotateReject {
+                schema: ANNOTATE_REJECT_SCHEMA.to_owned(),
+                uid: key.to_owned(),
+                attempt,
+                source: source.clone(),
+                request_sha256: request_digest(&request),
+                reasons,
+                reply: reply.content,
+                redacted: reply.redacted,
+            }),
+        }
+    }
+    done.outcome = Outcome::Failed(format!(
+        "every one of the {} replies was rejected (their reasons are in {rejects_file})",
+        config.max_attempts
+    ));
+    done
+}
+
 impl AnnotateAssetsStage {
     fn config<'a>(&self, ctx: &'a StageContext<'_>) -> &'a AnnotationsConfig {
         &ctx.config.annotations
@@ -339,75 +430,25 @@ impl AnnotateAssetsStage {
             gltf_extents_m: extents,
             views,
         };
-        let source = config.source();
-        let mut done = Annotated {
-            outcome: Outcome::Failed(String::new()),
-            rejects: Vec::new(),
-            requests: 0,
-            text_tokens: 0,
-        };
-        for attempt in 0..config.max_attempts {
-            let request =
-                match asset_request(&self.template, config, &self.taxonomy, &input, attempt) {
-                    Ok(request) => request,
-                    Err(e) => {
-                        done.outcome = Outcome::Failed(e.to_string());
-                        return done;
-                    }
-                };
-            done.requests += 1;
-            done.text_tokens += text_tokens(&request);
-            let reply = match chat.complete(&request) {
-                Ok(reply) => reply,
-                Err(ChatError::Pending(request)) => {
-                    done.outcome = Outcome::Pending(request);
-                    return done;
+        let yaw = geometry.front_yaw_deg;
+        ask(
+            chat.as_ref(),
+            config,
+            uid,
+            |attempt| {
+                asset_request(&self.template, config, &self.taxonomy, &input, attempt)
+                    .map_err(|e| e.to_string())
+            },
+            |content| {
+                let mut fields = validate_asset_reply(content, &input, &self.taxonomy, config)?;
+                // The views show the asset turned by the index's front yaw.
+                if let Some(k) = fields.get("frontView").and_then(Value::as_u64) {
+                    fields.insert("frontView".into(), json!(front_view_of_file(k, yaw)));
                 }
-                Err(ChatError::Failed(why)) => {
-                    done.outcome = Outcome::Failed(why);
-                    return done;
-                }
-            };
-            let mut checked = validate_asset_reply(&reply.content, &input, &self.taxonomy, config);
-            if reply.finish_reason.as_deref() == Some("length") {
-                let cut = "the reply was cut at max_tokens ([annotations.llm] max_tokens)";
-                checked = Err(match checked {
-                    Ok(_) => vec![cut.to_owned()],
-                    Err(mut reasons) => {
-                        reasons.push(cut.to_owned());
-                        reasons
-                    }
-                });
-            }
-            match checked {
-                Ok(mut fields) => {
-                    // The views show the asset turned by the index's front yaw.
-                    if let Some(k) = fields.get("frontView").and_then(Value::as_u64) {
-                        fields.insert(
-                            "frontView".into(),
-                            json!(front_view_of_file(k, geometry.front_yaw_deg)),
-                        );
-                    }
-                    done.outcome = Outcome::Done(fields);
-                    return done;
-                }
-                Err(reasons) => done.rejects.push(AnnotateReject {
-                    schema: ANNOTATE_REJECT_SCHEMA.to_owned(),
-                    uid: uid.to_owned(),
-                    attempt,
-                    source: source.clone(),
-                    request_sha256: request_digest(&request),
-                    reasons,
-                    reply: reply.content,
-                    redacted: reply.redacted,
-                }),
-            }
-        }
-        done.outcome = Outcome::Failed(format!(
-            "every one of the {} replies was rejected (their reasons are in {ANNOTATE_REJECTS})",
-            config.max_attempts
-        ));
-        done
+                Ok(fields)
+            },
+            ANNOTATE_REJECTS,
+        )
     }
 
     fn annotate_all(
@@ -682,4 +723,325 @@ fn format_summary(
         let _ = writeln!(out, "  failed {uid}: {why}");
     }
     out
+}
+
+// ---------------------------------------------------------------------------------------------
+// Instances
+
+/// `mesa annotate instances`.
+#[derive(Debug, ClapArgs)]
+pub struct InstancesArgs {
+    /// The runner flags (--scenes, --shard, --force: annotate again the fields mesa wrote).
+    #[command(flatten)]
+    pub stage: SceneArgs,
+    /// The backend (default: [annotations] backend of mesa.toml).
+    #[arg(long, value_enum)]
+    pub backend: Option<BackendArg>,
+}
+
+fn run_instances(args: InstancesArgs, global: Global) -> anyhow::Result<ExitCode> {
+    let mut resolved = args.stage.resolve(global)?;
+    let config = &mut resolved.config.annotations;
+    if let Some(backend) = args.backend {
+        config.backend = match backend {
+            BackendArg::Offline => AnnotateBackend::Offline,
+            BackendArg::Llm => AnnotateBackend::Llm,
+        };
+    }
+    let problems = config.problems();
+    if !problems.is_empty() {
+        return Err(usage(problems.join("\n")));
+    }
+    let template = load_prompt(
+        &resolved.dataset,
+        config,
+        INSTANCE_PROMPT_FILE,
+        INSTANCE_PROMPT,
+        instance_prompt,
+    )
+    .map_err(UsageError)?;
+    let client = match config.backend {
+        AnnotateBackend::Offline => None,
+        AnnotateBackend::Llm => {
+            let client = ChatClient::new(&resolved.dataset, &config.llm, Mode::Live)
+                .map_err(|e| UsageError(e.replace("[tasks.llm]", "[annotations.llm]")))?;
+            if args.stage.common.jobs.is_none() {
+                resolved.options.jobs = config.llm.max_concurrency;
+            }
+            Some(Arc::new(client))
+        }
+    };
+    let stage = AnnotateInstancesStage {
+        chat: client.clone().map(|c| c as Arc<dyn Chat + Send + Sync>),
+        template,
+    };
+    let code = resolved.run_dataset(&stage)?;
+    if let Some(client) = client {
+        eprintln!(
+            "annotate instances: {}: {}",
+            resolved.config.annotations.llm.model,
+            client.stats.summary()
+        );
+    }
+    Ok(code)
+}
+
+/// A prompt of `[annotations] prompts_dir` (`file`), else the built-in `builtin`.
+fn load_prompt(
+    dataset: &Path,
+    config: &AnnotationsConfig,
+    file: &str,
+    builtin: &str,
+    parse: fn(&str, &str) -> Result<PromptTemplate, mesa_stages::tasks::prompts::PromptError>,
+) -> Result<PromptTemplate, String> {
+    if config.prompts_dir.is_empty() {
+        return parse(&format!("built-in {file}"), builtin)
+            .map_err(|e| format!("[annotations] prompts_dir: {e}"));
+    }
+    let path = dataset.join(&config.prompts_dir).join(file);
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        format!(
+            "[annotations] prompts_dir: {}: cannot read: {e} (expected the folder to hold \
+             {file}; copy data/prompts/{file} there to edit it)",
+            path.display()
+        )
+    })?;
+    parse(&path.display().to_string(), &text).map_err(|e| format!("[annotations] prompts_dir: {e}"))
+}
+
+/// The `mesa annotate instances` stage: scenes in parallel, each scene's instances in turn.
+pub struct AnnotateInstancesStage {
+    chat: Option<Arc<dyn Chat + Send + Sync>>,
+    template: PromptTemplate,
+}
+
+/// What annotating one scene's instances gave.
+#[derive(Default)]
+struct SceneAnnotated {
+    annotated: u64,
+    failed: Vec<(String, String)>,
+    rejects: Vec<AnnotateReject>,
+    requests: u64,
+    text_tokens: u64,
+    written: bool,
+}
+
+impl AnnotateInstancesStage {
+    fn scene(
+        &self,
+        ctx: &StageContext<'_>,
+        scene: &Scene,
+        force: bool,
+    ) -> anyhow::Result<SceneAnnotated> {
+        let config = &ctx.config.annotations;
+        let source = config.source();
+        let path = scene.path(INSTANCES);
+        let text = read_text_bounded(&path, JSON_LIMIT)
+            .with_context(|| format!("{}: cannot read (the user writes it)", path.display()))?;
+        let mut document = parse_lenient(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        let entries = document
+            .get_mut("instances")
+            .and_then(Value::as_array_mut)
+            .ok_or_else(|| {
+                anyhow!(
+                    "{}: $.instances: missing (expected {{\"instances\": [...]}})",
+                    path.display()
+                )
+            })?;
+        let targets: Vec<(usize, Vec<&'static str>)> = entries
+            .iter()
+            .enumerate()
+            .map(|(i, e)| (i, instance_fields_to_annotate(e, &source, force)))
+            .filter(|(_, fields)| !fields.is_empty())
+            .collect();
+        let mut out = SceneAnnotated::default();
+        if targets.is_empty() {
+            return Ok(out);
+        }
+        // The photo and the masks, read as `mesa lift` and `mesa pack` read them.
+        let input = scene.path("input");
+        let photo_path = input.join("image.png");
+        let photo_png = read_bounded(&photo_path, GLB_LIMIT).with_context(|| {
+            format!("{}: cannot read (the user writes it)", photo_path.display())
+        })?;
+        let image = read_png(
+            &photo_path,
+            PngLimit::MaxPixels(ctx.config.lift.max_image_pixels),
+        )?
+        .into_rgb8();
+        let photo = Photo {
+            width: image.width() as usize,
+            height: image.height() as usize,
+            rgb: image.pixels().map(|p| p.0).collect(),
+        };
+        let typed: Vec<InstanceEntry> = entries
+            .iter()
+            .map(|e| {
+                let mut e = e.clone();
+                if let Some(o) = e.as_object_mut() {
+                    for field in INSTANCE_FIELDS {
+                        o.entry(field).or_insert(json!(""));
+                    }
+                }
+                serde_json::from_value(e)
+            })
+            .collect::<Result<_, _>>()
+            .map_err(|e| anyhow!("{}: $.instances: {e}", path.display()))?;
+        let masks = read_masks(&input, &typed, photo.width, photo.height)?;
+        let margin = Margin {
+            fraction: ctx.config.pack.snapshot_margin,
+            min_px: ctx.config.pack.snapshot_min_margin_px,
+        };
+        for (i, fields) in targets {
+            let id = typed[i].id;
+            let key = format!("{}#{id}", scene.key());
+            let pixels = masks.pixels.get(&id).map(Vec::as_slice).unwrap_or_default();
+            let annotated = match &self.chat {
+                None => {
+                    let mask_box = pixels.iter().fold(None, |b: Option<[usize; 4]>, p| {
+                        let (u, v) = (*p as usize % photo.width, *p as usize / photo.width);
+                        Some(match b {
+                            None => [u, v, u, v],
+                            Some([u0, v0, u1, v1]) => [u0.min(u), v0.min(v), u1.max(u), v1.max(v)],
+                        })
+                    });
+                    Annotated {
+                        outcome: Outcome::Done(instance_placeholder(
+                            &entries[i],
+                            mask_box,
+                            [photo.width, photo.height],
+                        )),
+                        rejects: Vec::new(),
+                        requests: 0,
+                        text_tokens: 0,
+                    }
+                }
+                Some(chat) => {
+                    let Some(crop) = snapshot_png(&photo, pixels, margin)? else {
+                        out.failed.push((
+                            key,
+                            format!("mask {id} is empty: nothing to show the model"),
+                        ));
+                        continue;
+                    };
+                    let entry = entries[i].clone();
+                    ask(
+                        chat.as_ref(),
+                        config,
+                        &key,
+                        |attempt| {
+                            instance_request(
+                                &self.template,
+                                config,
+                                &scene.table_type,
+                                &entry,
+                                View {
+                                    name: format!("instance_{id}"),
+                                    file: format!("pack/snapshots/instance_{id}.png"),
+                                    png: crop.clone(),
+                                },
+                                View {
+                                    name: "photo".to_owned(),
+                                    file: "input/image.png".to_owned(),
+                                    png: photo_png.clone(),
+                                },
+                                attempt,
+                            )
+                            .map_err(|e| e.to_string())
+                        },
+                        validate_instance_reply,
+                        INSTANCE_REJECTS,
+                    )
+                }
+            };
+            out.requests += annotated.requests;
+            out.text_tokens += annotated.text_tokens;
+            out.rejects.extend(annotated.rejects);
+            match annotated.outcome {
+                Outcome::Done(values) => {
+                    merge_instance(&mut entries[i], &values, &fields, &source);
+                    out.annotated += 1;
+                }
+                Outcome::Pending(_) => out.failed.push((key, "no reply".to_owned())),
+                Outcome::Failed(why) => out.failed.push((key, why)),
+            }
+        }
+        if out.annotated > 0 {
+            write_atomic(&path, &to_sorted_pretty(&document)?)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+            out.written = true;
+        }
+        Ok(out)
+    }
+}
+
+impl DatasetStage for AnnotateInstancesStage {
+    fn name(&self) -> &'static str {
+        "annotate-instances"
+    }
+
+    fn run(&self, ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Result<DatasetReport> {
+        use std::fmt::Write as _;
+        let started = std::time::Instant::now();
+        let options = exec.options();
+        let scenes = select_scenes(
+            discover_scenes(ctx.dataset).map_err(RunError::into_anyhow)?,
+            options.scenes.as_deref(),
+            options.shard,
+        )
+        .map_err(RunError::into_anyhow)?;
+        let results = exec.map("scenes", &scenes, |scene| {
+            self.scene(ctx, scene, options.force)
+        });
+        let (mut annotated, mut requests, mut tokens, mut written) = (0, 0, 0, 0);
+        let mut failed = Vec::new();
+        let mut rejects = Vec::new();
+        for (scene, result) in scenes.iter().zip(results) {
+            match result {
+                Ok(r) => {
+                    annotated += r.annotated;
+                    requests += r.requests;
+                    tokens += r.text_tokens;
+                    written += u64::from(r.written);
+                    failed.extend(r.failed);
+                    rejects.extend(r.rejects);
+                }
+                Err(e) => failed.push((scene.key(), format!("{e:#}"))),
+            }
+        }
+        if !rejects.is_empty() {
+            let mut lines = String::new();
+            for reject in &rejects {
+                lines.push_str(&to_sorted_line(reject)?);
+                lines.push('\n');
+            }
+            let path = ctx.dataset.join(INSTANCE_REJECTS);
+            write_atomic(&path, lines.as_bytes())
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+        }
+        let elapsed_s = started.elapsed().as_secs_f64();
+        let mut text = format!(
+            "annotate instances: {} scenes ({}): {annotated} instances annotated in {written} \
+             scenes, {} failed, {} replies rejected, {requests} requests in {elapsed_s:.2} s\n",
+            scenes.len(),
+            ctx.config.annotations.source(),
+            failed.len(),
+            rejects.len()
+        );
+        if !rejects.is_empty() {
+            let _ = writeln!(text, "  rejected replies are in {INSTANCE_REJECTS}");
+        }
+        for (key, why) in &failed {
+            let _ = writeln!(text, "  failed {key}: {why}");
+        }
+        Ok(DatasetReport {
+            success: failed.is_empty(),
+            text,
+            record: json!({
+                "scenes": scenes.len(), "annotated": annotated, "requests": requests,
+                "prompt_text_tokens": tokens, "rejected_replies": rejects.len(),
+                "failed": failed, "elapsed_s": elapsed_s,
+            }),
+        })
+    }
 }

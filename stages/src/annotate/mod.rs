@@ -12,6 +12,7 @@
 //! offline field also says `"mesa_placeholder": true`, so a placeholder is never mistaken for
 //! a model's annotation. Readers of the MesaTask format ignore both keys.
 
+pub mod instances;
 pub mod offline;
 
 use std::collections::{BTreeMap, BTreeSet};
