@@ -408,6 +408,30 @@ fn the_offline_placeholder_is_marked_and_unchanged_assets_keep_their_index_bytes
         out.contains("0 to annotate") && out.contains("unchanged"),
         "{out}"
     );
+    // The report counts the fields by source.
+    std::fs::create_dir_all(dir.join("scenes")).expect("mkdir");
+    let report = mesa()
+        .args(["report", "--progress", "off"])
+        .arg(dir)
+        .output()
+        .expect("report");
+    assert!(
+        report.status.success(),
+        "{}",
+        String::from_utf8_lossy(&report.stderr)
+    );
+    let stats = read_json(&dir.join("report/stats.json"));
+    assert_eq!(
+        stats["annotation_sources"],
+        json!({"offline": 13, "person": 8}),
+        "bowl 7 and mug 6 placeholder fields; the book's 7 and the mug's category a person's"
+    );
+    assert_eq!(stats["annotation_placeholder_assets"], 2);
+    let page = std::fs::read_to_string(dir.join("report/index.html")).expect("page");
+    assert!(
+        page.contains("fields by source: 13 offline, 8 person"),
+        "report page"
+    );
 }
 
 /// A synthetic scene of four boxes whose instances.json lacks some labels and descriptions:
