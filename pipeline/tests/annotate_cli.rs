@@ -364,8 +364,19 @@ fn the_offline_placeholder_is_marked_and_unchanged_assets_keep_their_index_bytes
     let data = dataset("http://127.0.0.1:9/v1");
     let dir = data.path();
     let before = index_records(dir);
-    let (success, out) = annotate(dir, &[]);
+    // The same bytes with one thread and with two.
+    let original = std::fs::read(dir.join("assets/annotations.json")).expect("read");
+    let (success, out) = annotate(dir, &["--jobs", "1"]);
     assert!(success, "{out}");
+    let one_thread = std::fs::read(dir.join("assets/annotations.json")).expect("read");
+    assert_ne!(one_thread, original);
+    std::fs::write(dir.join("assets/annotations.json"), &original).expect("restore");
+    let (success, out) = annotate(dir, &["--jobs", "2"]);
+    assert!(success, "{out}");
+    assert_eq!(
+        std::fs::read(dir.join("assets/annotations.json")).expect("read"),
+        one_thread
+    );
     assert!(
         out.contains("2 to annotate (offline): 2 annotated"),
         "{out}"

@@ -697,11 +697,14 @@ fn format_summary(
     for note in notes {
         let _ = writeln!(out, "  {note}");
     }
-    let sources: Vec<String> = summary
+    let mut sources: Vec<String> = summary
         .fields_by_source
         .iter()
         .map(|(source, n)| format!("{n} {source}"))
         .collect();
+    if sources.is_empty() {
+        sources.push("none".to_owned());
+    }
     let _ = writeln!(
         out,
         "  {ANNOTATIONS}: {} (fields by source: {}; {} assets hold placeholder fields)",
