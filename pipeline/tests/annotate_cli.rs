@@ -586,3 +586,55 @@ fn instances_get_labels_from_their_crop_and_the_photo_and_keep_a_persons_text() 
         .expect("text")
         .starts_with("mug at the "));
 }
+
+#[test]
+fn instance_batches_give_the_live_labels() {
+    let server =
+        MockServer::start(|request, _| Reply::completion(&instance_model(&request.json())));
+    let live = instance_scene(&server.base_url);
+    let (success, out) = annotate_instances(live.path(), &["--backend", "llm"]);
+    assert!(success, "{out}");
+    let batched = instance_scene("http://127.0.0.1:9/v1");
+    let dir = batched.path();
+    let mut batch_in: Option<std::path::PathBuf> = None;
+    let mut rounds = 0;
+    for round in 0..5 {
+        let batch = dir.join(format!("batch_{round}.jsonl"));
+        let mut args = vec!["--batch-out".to_owned(), batch.display().to_string()];
+        if let Some(input) = &batch_in {
+            args.extend(["--batch-in".to_owned(), input.display().to_string()]);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (success, out) = annotate_instances(dir, &args);
+        assert!(success, "{out}");
+        if !batch.exists() {
+            break;
+        }
+        rounds += 1;
+        let text = std::fs::read_to_string(&batch).expect("batch");
+        if round == 0 {
+            assert_eq!(
+                text.lines().count(),
+                2,
+                "one request per instance to annotate"
+            );
+        }
+        let output = dir.join(format!("output_{round}.jsonl"));
+        let lines: Vec<String> = text
+            .lines()
+            .map(|line| {
+                let request: Value = serde_json::from_str(line).expect("json");
+                json!({"custom_id": request["custom_id"], "error": null,
+                       "response": {"status_code": 200,
+                                    "body": common::completion_body(&instance_model(&request["body"]))}})
+                .to_string()
+            })
+            .collect();
+        std::fs::write(&output, lines.join("\n") + "\n").expect("write");
+        batch_in = Some(output);
+    }
+    assert_eq!(rounds, 2, "the malformed reply costs a second round");
+    assert_eq!(server.requests(), 3, "the batch path sends nothing");
+    let rel = "scenes/office_table/office_table_0001/input/instances.json";
+    assert_eq!(read_json(&dir.join(rel)), read_json(&live.path().join(rel)));
+}

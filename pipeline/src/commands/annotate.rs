@@ -740,16 +740,33 @@ pub struct InstancesArgs {
     /// The backend (default: [annotations] backend of mesa.toml).
     #[arg(long, value_enum)]
     pub backend: Option<BackendArg>,
+    /// Offline batches: write the requests still unanswered to FILE as OpenAI Batch JSONL
+    /// (one request per instance, its crop and the photo as data URLs; implies --backend llm).
+    #[arg(long, value_name = "FILE")]
+    pub batch_out: Option<PathBuf>,
+    /// Offline batches: read a provider's batch output JSONL (repeatable; implies --backend
+    /// llm).
+    #[arg(long, value_name = "FILE")]
+    pub batch_in: Vec<PathBuf>,
 }
 
 fn run_instances(args: InstancesArgs, global: Global) -> anyhow::Result<ExitCode> {
     let mut resolved = args.stage.resolve(global)?;
+    let batch = args.batch_out.is_some() || !args.batch_in.is_empty();
+    if batch && args.backend == Some(BackendArg::Offline) {
+        return Err(usage(
+            "--batch-out and --batch-in are for the llm backend (not --backend offline)",
+        ));
+    }
     let config = &mut resolved.config.annotations;
     if let Some(backend) = args.backend {
         config.backend = match backend {
             BackendArg::Offline => AnnotateBackend::Offline,
             BackendArg::Llm => AnnotateBackend::Llm,
         };
+    }
+    if batch {
+        config.backend = AnnotateBackend::Llm;
     }
     let problems = config.problems();
     if !problems.is_empty() {
@@ -766,9 +783,10 @@ fn run_instances(args: InstancesArgs, global: Global) -> anyhow::Result<ExitCode
     let client = match config.backend {
         AnnotateBackend::Offline => None,
         AnnotateBackend::Llm => {
-            let client = ChatClient::new(&resolved.dataset, &config.llm, Mode::Live)
+            let mode = if batch { Mode::CacheOnly } else { Mode::Live };
+            let client = ChatClient::new(&resolved.dataset, &config.llm, mode)
                 .map_err(|e| UsageError(e.replace("[tasks.llm]", "[annotations.llm]")))?;
-            if args.stage.common.jobs.is_none() {
+            if !batch && args.stage.common.jobs.is_none() {
                 resolved.options.jobs = config.llm.max_concurrency;
             }
             Some(Arc::new(client))
@@ -776,6 +794,9 @@ fn run_instances(args: InstancesArgs, global: Global) -> anyhow::Result<ExitCode
     };
     let stage = AnnotateInstancesStage {
         chat: client.clone().map(|c| c as Arc<dyn Chat + Send + Sync>),
+        client: client.clone(),
+        batch_out: args.batch_out,
+        batch_in: args.batch_in,
         template,
     };
     let code = resolved.run_dataset(&stage)?;
@@ -815,6 +836,9 @@ fn load_prompt(
 /// The `mesa annotate instances` stage: scenes in parallel, each scene's instances in turn.
 pub struct AnnotateInstancesStage {
     chat: Option<Arc<dyn Chat + Send + Sync>>,
+    client: Option<Arc<ChatClient>>,
+    batch_out: Option<PathBuf>,
+    batch_in: Vec<PathBuf>,
     template: PromptTemplate,
 }
 
@@ -824,6 +848,7 @@ struct SceneAnnotated {
     annotated: u64,
     failed: Vec<(String, String)>,
     rejects: Vec<AnnotateReject>,
+    pending: Vec<ChatRequest>,
     requests: u64,
     text_tokens: u64,
     written: bool,
@@ -965,7 +990,7 @@ impl AnnotateInstancesStage {
                     merge_instance(&mut entries[i], &values, &fields, &source);
                     out.annotated += 1;
                 }
-                Outcome::Pending(_) => out.failed.push((key, "no reply".to_owned())),
+                Outcome::Pending(request) => out.pending.push(*request),
                 Outcome::Failed(why) => out.failed.push((key, why)),
             }
         }
@@ -993,25 +1018,89 @@ impl DatasetStage for AnnotateInstancesStage {
             options.shard,
         )
         .map_err(RunError::into_anyhow)?;
-        let results = exec.map("scenes", &scenes, |scene| {
-            self.scene(ctx, scene, options.force)
-        });
         let (mut annotated, mut requests, mut tokens, mut written) = (0, 0, 0, 0);
         let mut failed = Vec::new();
-        let mut rejects = Vec::new();
-        for (scene, result) in scenes.iter().zip(results) {
-            match result {
-                Ok(r) => {
-                    annotated += r.annotated;
-                    requests += r.requests;
-                    tokens += r.text_tokens;
-                    written += u64::from(r.written);
-                    failed.extend(r.failed);
-                    rejects.extend(r.rejects);
+        // By (instance, attempt): a second pass re-reads the replies of the first.
+        let mut rejects: BTreeMap<(String, u32), AnnotateReject> = BTreeMap::new();
+        let mut notes = Vec::new();
+        let mut failed_lines = 0usize;
+        let passes = if self.batch_in.is_empty() { 1 } else { 2 };
+        let mut pending: Vec<ChatRequest> = Vec::new();
+        for pass in 0..passes {
+            if pass == 1 {
+                let by_id: BTreeMap<String, String> = pending
+                    .iter()
+                    .map(|request| {
+                        let digest = request_digest(request);
+                        (custom_id(&digest), digest)
+                    })
+                    .collect();
+                let client = self
+                    .client
+                    .as_ref()
+                    .ok_or_else(|| anyhow!("internal error: batches without a chat client"))?;
+                for file in &self.batch_in {
+                    let text = std::fs::read_to_string(file).map_err(|e| {
+                        UsageError(format!(
+                            "{}: cannot read the batch output: {e}",
+                            file.display()
+                        ))
+                    })?;
+                    let report = import_batch(file, &text, &by_id, client.cache());
+                    notes.push(format!(
+                        "{}: {} replies stored, {} already cached, {} lines failed",
+                        file.display(),
+                        report.stored,
+                        report.already_cached,
+                        report.failed.len()
+                    ));
+                    notes.extend(report.failed.iter().map(|f| format!("  failed {f}")));
+                    failed_lines += report.failed.len();
                 }
-                Err(e) => failed.push((scene.key(), format!("{e:#}"))),
+            }
+            let results = exec.map("scenes", &scenes, |scene| {
+                self.scene(ctx, scene, options.force)
+            });
+            pending.clear();
+            for (scene, result) in scenes.iter().zip(results) {
+                match result {
+                    Ok(r) => {
+                        annotated += r.annotated;
+                        requests += r.requests;
+                        tokens += r.text_tokens;
+                        written += u64::from(r.written);
+                        pending.extend(r.pending);
+                        if pass + 1 == passes {
+                            failed.extend(r.failed);
+                        }
+                        for reject in r.rejects {
+                            rejects.insert((reject.uid.clone(), reject.attempt), reject);
+                        }
+                    }
+                    Err(e) if pass + 1 == passes => {
+                        failed.push((scene.key(), format!("{e:#}")));
+                    }
+                    Err(_) => {}
+                }
             }
         }
+        match &self.batch_out {
+            Some(path) if !pending.is_empty() => {
+                let lines = write_batch(path, &pending)
+                    .with_context(|| format!("{}: cannot write", path.display()))?;
+                notes.push(format!(
+                    "{lines} requests written to {} (OpenAI Batch JSONL; read the provider's \
+                     output with --batch-in)",
+                    path.display()
+                ));
+            }
+            Some(path) => notes.push(format!(
+                "no request is pending, so {} was not written",
+                path.display()
+            )),
+            None => {}
+        }
+        let rejects: Vec<AnnotateReject> = rejects.into_values().collect();
         if !rejects.is_empty() {
             let mut lines = String::new();
             for reject in &rejects {
@@ -1031,6 +1120,16 @@ impl DatasetStage for AnnotateInstancesStage {
             failed.len(),
             rejects.len()
         );
+        for note in &notes {
+            let _ = writeln!(text, "  {note}");
+        }
+        if !pending.is_empty() {
+            let _ = writeln!(
+                text,
+                "  {} instances wait for replies (write the next batch with --batch-out FILE)",
+                pending.len()
+            );
+        }
         if !rejects.is_empty() {
             let _ = writeln!(text, "  rejected replies are in {INSTANCE_REJECTS}");
         }
@@ -1038,7 +1137,7 @@ impl DatasetStage for AnnotateInstancesStage {
             let _ = writeln!(text, "  failed {key}: {why}");
         }
         Ok(DatasetReport {
-            success: failed.is_empty(),
+            success: failed.is_empty() && failed_lines == 0,
             text,
             record: json!({
                 "scenes": scenes.len(), "annotated": annotated, "requests": requests,
