@@ -433,6 +433,14 @@ pub fn fields_to_annotate(entry: Option<&Value>, source: &str, force: bool) -> V
         .iter()
         .copied()
         .filter(|field| {
+            // objathor's `receptacle` is a person's isContainer (readers take either).
+            let alias = (*field == "isContainer")
+                .then(|| object.get("receptacle"))
+                .flatten()
+                .filter(|v| !v.is_null());
+            if alias.is_some() && object.get(*field).is_none() {
+                return false;
+            }
             let Some(_) = object.get(*field).filter(|v| !v.is_null()) else {
                 return true;
             };
@@ -509,7 +517,13 @@ pub fn count_sources(document: &Value) -> (BTreeMap<String, u64>, u64) {
         };
         let sources = object.get(SOURCES_KEY).and_then(Value::as_object);
         for field in FIELDS {
-            if object.get(field).is_none_or(Value::is_null) {
+            // objathor's `receptacle` stands for isContainer.
+            let key = if field == "isContainer" && !object.contains_key(field) {
+                "receptacle"
+            } else {
+                field
+            };
+            if object.get(key).is_none_or(Value::is_null) {
                 continue;
             }
             let source = sources

@@ -183,3 +183,34 @@ fn the_placeholder_is_valid_and_follows_the_taxonomy() {
     let fields = placeholder_fields(&names, &[], [0.09, 0.1, 0.12], 0.0, &taxonomy);
     assert_eq!(fields["category"], "mug");
 }
+
+#[test]
+fn the_merge_keeps_what_retrieval_reads_in_every_bbox_form() {
+    use crate::annotations::AssetAnnotation;
+    let entries = [
+        json!({"category": "lamp", "mark_deletion": true, "receptacle": true,
+               "min_point": [-0.1, 0.0, -0.1], "max_point": [0.1, 0.4, 0.1]}),
+        json!({"onTable": false, "bbox": {"min": {"x": 0, "y": 0, "z": 0},
+                                          "max": {"x": 1, "y": 2, "z": 3}}}),
+        json!({"is_composite": "True", "bbox": {"size": {"x": 0.2, "y": 0.1, "z": 0.3}}}),
+    ];
+    let offline = placeholder_fields(&["thing".into()], &[], [0.5, 0.5, 0.5], 0.0, &[]);
+    for entry in entries {
+        let before = AssetAnnotation::from_value("uid", &entry).expect("reads");
+        let fields = fields_to_annotate(Some(&entry), OFFLINE_SOURCE, false);
+        let merged = merge_entry(Some(&entry), &offline, &fields, OFFLINE_SOURCE, [0.5; 3]);
+        let after = AssetAnnotation::from_value("uid", &merged).expect("reads");
+        assert_eq!(after.bbox, before.bbox, "{entry}");
+        assert_eq!(after.rejection(), before.rejection(), "{entry}");
+        // A person's objathor `receptacle` is their isContainer: not overridden.
+        assert_eq!(
+            after.is_container,
+            before.is_container.or(Some(false)),
+            "{entry}"
+        );
+        // Every field the entry had is there unchanged.
+        for (key, value) in entry.as_object().expect("object") {
+            assert_eq!(&merged[key], value, "{key}");
+        }
+    }
+}
