@@ -310,6 +310,28 @@ mod tests {
     }
 
     #[test]
+    fn annotations_keys_are_documented_and_checked() {
+        let text = annotated_toml(&Config::default()).expect("toml");
+        assert!(text.contains("[annotations]\n"), "{text}");
+        assert!(text.contains("[annotations.llm]\n"), "{text}");
+        assert!(text.contains("\nmodel = \"gpt-4o-mini\"\n"), "{text}");
+        let config = Config::from_toml("[annotations]\nbackend = \"llm\"\n").expect("valid");
+        assert_eq!(config.annotations.source(), "llm:gpt-4o-mini");
+        let err = Config::from_toml("[annotations]\nmax_density_kg_m3 = -1\n").expect_err("bad");
+        assert!(
+            err.contains("[annotations] max_density_kg_m3 is -1"),
+            "{err}"
+        );
+        let err = Config::from_toml("[annotations]\nmin_density_kg_m3 = 9000\n").expect_err("bad");
+        assert!(err.contains("above max_density_kg_m3"), "{err}");
+        let err = Config::from_toml(
+            "[annotations]\nbackend = \"llm\"\n\n[annotations.llm]\nbase_url = \"ftp://x\"\n",
+        )
+        .expect_err("bad");
+        assert!(err.contains("[annotations.llm] base_url"), "{err}");
+    }
+
+    #[test]
     fn unknown_keys_are_errors_naming_the_key() {
         let err = Config::from_toml("[run]\njobz = 3\n").expect_err("typo");
         assert!(err.contains("jobz"), "{err}");

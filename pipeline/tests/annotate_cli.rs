@@ -638,3 +638,69 @@ fn instance_batches_give_the_live_labels() {
     let rel = "scenes/office_table/office_table_0001/input/instances.json";
     assert_eq!(read_json(&dir.join(rel)), read_json(&live.path().join(rel)));
 }
+
+#[test]
+fn bad_usage_and_missing_inputs_say_what_to_do() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = mesa()
+        .args([
+            "annotate",
+            "assets",
+            "--backend",
+            "offline",
+            "--batch-out",
+            "b.jsonl",
+        ])
+        .arg(dir.path())
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("for the llm backend"));
+    // No index yet: the error names the file and the command that writes it.
+    let out = mesa()
+        .args(["annotate", "assets", "--progress", "off"])
+        .arg(dir.path())
+        .output()
+        .expect("runs");
+    assert_ne!(out.status.code(), Some(0));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("assets/index/assets.json") && stderr.contains("run `mesa assets`"),
+        "{stderr}"
+    );
+    // A taxonomy file that is not there is a usage error naming the key.
+    std::fs::write(
+        dir.path().join("mesa.toml"),
+        "[annotations]\ncategories = \"taxonomy.txt\"\n",
+    )
+    .expect("config");
+    let out = mesa()
+        .args(["annotate", "assets"])
+        .arg(dir.path())
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("[annotations] categories") && stderr.contains("taxonomy.txt"),
+        "{stderr}"
+    );
+    // The live backend without its key is a usage error naming the variable.
+    std::fs::write(
+        dir.path().join("mesa.toml"),
+        "[annotations.llm]\napi_key_env = \"MESA_ANNOTATE_UNSET_KEY\"\n",
+    )
+    .expect("config");
+    let out = mesa()
+        .args(["annotate", "assets", "--backend", "llm"])
+        .arg(dir.path())
+        .env_remove("MESA_ANNOTATE_UNSET_KEY")
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("MESA_ANNOTATE_UNSET_KEY") && stderr.contains("[annotations.llm]"),
+        "{stderr}"
+    );
+}
