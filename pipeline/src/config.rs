@@ -51,6 +51,9 @@ pub struct Config {
     pub release: mesa_stages::release::ReleaseConfig,
     /// `mesa eval`: the GPT score's judge (a chat endpoint) and prompt.
     pub eval: mesa_stages::eval::gpt_score::EvalConfig,
+    /// `mesa annotate`: asset annotations from a vision-language model or the offline
+    /// placeholder.
+    pub annotations: mesa_stages::annotate::AnnotationsConfig,
 }
 
 /// The `[run]` section.
@@ -172,6 +175,7 @@ impl Config {
             .chain(config.assets.budget.problems())
             .chain(config.export.problems())
             .chain(config.eval.problems())
+            .chain(config.annotations.problems())
             .collect();
         if !problems.is_empty() {
             return Err(format!("{} ", problems.join("; ")));
@@ -343,6 +347,28 @@ mod tests {
         assert!(Config::from_toml("[eval.llm]\nbase_url = \"ftp://x\"\n").is_ok());
         let err = Config::from_toml("[eval]\njudge = \"gpt\"\n").expect_err("bad");
         assert!(err.contains("judge"), "{err}");
+    }
+
+    #[test]
+    fn annotations_keys_are_documented_and_checked() {
+        let text = annotated_toml(&Config::default()).expect("toml");
+        assert!(text.contains("[annotations]\n"), "{text}");
+        assert!(text.contains("[annotations.llm]\n"), "{text}");
+        assert!(text.contains("\nmodel = \"gpt-4o-mini\"\n"), "{text}");
+        let config = Config::from_toml("[annotations]\nbackend = \"llm\"\n").expect("valid");
+        assert_eq!(config.annotations.source(), "llm:gpt-4o-mini");
+        let err = Config::from_toml("[annotations]\nmax_density_kg_m3 = -1\n").expect_err("bad");
+        assert!(
+            err.contains("[annotations] max_density_kg_m3 is -1"),
+            "{err}"
+        );
+        let err = Config::from_toml("[annotations]\nmin_density_kg_m3 = 9000\n").expect_err("bad");
+        assert!(err.contains("above max_density_kg_m3"), "{err}");
+        let err = Config::from_toml(
+            "[annotations]\nbackend = \"llm\"\n\n[annotations.llm]\nbase_url = \"ftp://x\"\n",
+        )
+        .expect_err("bad");
+        assert!(err.contains("[annotations.llm] base_url"), "{err}");
     }
 
     #[test]

@@ -51,11 +51,19 @@ fn init_logging(verbose: u8, quiet: bool) {
         (false, 1) => "debug",
         (false, _) => "trace",
     };
-    let mut filter = tracing_subscriber::EnvFilter::try_from_env("MESA_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    let from_env = tracing_subscriber::EnvFilter::try_from_env("MESA_LOG").ok();
+    // Only a filter that may reach trace needs the cap below (at the default level a
+    // directive would switch the client's debug lines on).
+    let may_trace = from_env.is_some() || verbose >= 2;
+    let mut filter = from_env.unwrap_or_else(|| tracing_subscriber::EnvFilter::new(default));
     // The HTTP client's trace level writes the wire unredacted, the API key included (its
     // debug level redacts it): never below debug, whatever MESA_LOG says.
-    for directive in ["ureq=debug", "ureq_proto=debug"] {
+    let caps: &[&str] = if may_trace {
+        &["ureq=debug", "ureq_proto=debug"]
+    } else {
+        &[]
+    };
+    for directive in caps {
         if let Ok(directive) = directive.parse() {
             filter = filter.add_directive(directive);
         }

@@ -6,6 +6,9 @@ use schemars::JsonSchema;
 use serde::de::DeserializeOwned;
 use serde_json::Value;
 
+use crate::annotate::{
+    AnnotateReject, AnnotateSummary, ANNOTATE_REJECT_SCHEMA, ANNOTATE_SUMMARY_SCHEMA,
+};
 use crate::annotation::*;
 use crate::artifacts::*;
 use crate::eval::{EvalMetrics, EvalSample, EVAL_METRICS_SCHEMA, EVAL_SAMPLE_SCHEMA};
@@ -345,6 +348,24 @@ pub fn kinds() -> &'static [Kind] {
                 summary: "assets/annotations.json, a release's Asset_annotation.json (per uid)",
                 generate: schema_of::<AssetAnnotationsFile>,
                 semantic: |v| typed(v, annotation_problems),
+            },
+            Kind {
+                name: "annotate-rejects",
+                schema_id: Some(ANNOTATE_REJECT_SCHEMA),
+                form: FileForm::JsonLines,
+                summary: "assets/annotate/rejects.jsonl (asset annotation replies that failed \
+                          validation, with why)",
+                generate: schema_of::<AnnotateReject>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "annotate-summary",
+                schema_id: Some(ANNOTATE_SUMMARY_SCHEMA),
+                form: FileForm::Json,
+                summary: "assets/annotate/summary.json (what `mesa annotate assets` did, \
+                          annotations by source)",
+                generate: schema_of::<AnnotateSummary>,
+                semantic: no_semantics,
             },
             Kind {
                 name: "asset-views",

@@ -16,6 +16,7 @@
 //! Units live in names: `_cm`, `_deg`, `_m`, `_mm`, `_px`. Layout files are in centimetres in
 //! the table frame (SPEC section 2).
 
+pub mod annotate;
 pub mod annotation;
 pub mod artifacts;
 pub mod convert;

@@ -113,6 +113,14 @@ pub struct ReportStats {
     /// Imported scenes with at least one such object.
     #[serde(default)]
     pub scenes_with_missing_glb: u64,
+    /// Annotated fields of `assets/annotations.json` (category, description, onTable, mass,
+    /// frontView, isContainer, materials) by source: `person` (no recorded source), `offline`
+    /// (the placeholder of `mesa annotate`), `llm:<model>`. Absent without annotations.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub annotation_sources: BTreeMap<String, u64>,
+    /// Assets whose annotation holds placeholder fields (`mesa_placeholder`).
+    #[serde(default, skip_serializing_if = "crate::render::is_zero")]
+    pub annotation_placeholder_assets: u64,
 }
 
 /// A distribution of counts.
@@ -188,6 +196,10 @@ pub struct RateStats {
     pub floating: u64,
     /// Zone violations in all.
     pub zone_violations: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 /// `Asset_annotation.json` of a release (and `assets/annotations.json`): per uid the asset's

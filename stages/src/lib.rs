@@ -30,6 +30,7 @@
 //! - [`pickle`]: MesaTask's `sbert_text_features.pkl` read (safely, no code run) and written.
 //! - [`paths`]: where every artifact of a dataset lives (the one owner of those paths).
 
+pub mod annotate;
 pub mod annotations;
 pub mod assets;
 pub mod check;

@@ -44,6 +44,12 @@ pub mod dataset {
     pub const REPORT_DIR: &str = "report";
     /// The chat reply cache.
     pub const CHAT_CACHE: &str = ".mesa/cache/chat";
+    /// The replies `mesa annotate assets` rejected, with their reasons.
+    pub const ANNOTATE_REJECTS: &str = "assets/annotate/rejects.jsonl";
+    /// The replies `mesa annotate instances` rejected, with their reasons.
+    pub const INSTANCE_REJECTS: &str = "assets/annotate/instance_rejects.jsonl";
+    /// What the last `mesa annotate assets` run did (counts by source, requests).
+    pub const ANNOTATE_SUMMARY: &str = "assets/annotate/summary.json";
 
     /// The collision shapes file of an asset.
     pub fn shapes(uid: &str) -> String {

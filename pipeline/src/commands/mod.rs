@@ -7,6 +7,7 @@
 //! below; a stage that `mesa run` should run also gets its line in [`pipeline::pipeline`].
 //! `docs/ARCHITECTURE.md` ("Adding a stage") lists every edit.
 
+pub mod annotate;
 pub mod assets;
 pub mod check;
 pub mod demo;
@@ -93,6 +94,10 @@ commands! {
     /// counts, materials and validity, its collision shapes, and the text index. Unchanged
     /// assets are not re-indexed.
     Assets(assets::Args) => assets::run,
+    /// Annotate the asset library (assets/annotations.json) with a vision-language model
+    /// shown four renders of each asset, or with the offline placeholder from the assets'
+    /// names and geometry; each field's source is recorded, a person's fields are kept.
+    Annotate(annotate::Args) => annotate::run,
     /// Choose an asset for every lifted instance by text and size, MesaTask's recipe
     /// (coarse/retrieval.json).
     Retrieve(retrieve::Args) => retrieve::run,

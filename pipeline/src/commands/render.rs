@@ -489,10 +489,6 @@ pub fn render_asset_views(
     uids: Option<&str>,
     exec: &Executor<'_>,
 ) -> anyhow::Result<AssetViewsSummary> {
-    let started = Instant::now();
-    let force = exec.options().force;
-    let stage = RenderStage::new();
-    let library = stage.library(dataset)?;
     let matcher = match uids {
         Some(glob) => Some(
             globset::Glob::new(glob)
@@ -506,11 +502,31 @@ pub fn render_asset_views(
         ),
         None => None,
     };
+    render_asset_views_of(
+        dataset,
+        config,
+        |uid| matcher.as_ref().is_none_or(|m| m.is_match(uid)),
+        exec,
+    )
+}
+
+/// Renders the eight views around z of the library's assets that `select` keeps (`mesa
+/// annotate assets` renders the assets it annotates).
+pub fn render_asset_views_of(
+    dataset: &Path,
+    config: &Config,
+    select: impl Fn(&str) -> bool,
+    exec: &Executor<'_>,
+) -> anyhow::Result<AssetViewsSummary> {
+    let started = Instant::now();
+    let force = exec.options().force;
+    let stage = RenderStage::new();
+    let library = stage.library(dataset)?;
     let selected: Vec<&String> = library
         .index
         .assets
         .keys()
-        .filter(|uid| matcher.as_ref().is_none_or(|m| m.is_match(uid.as_str())))
+        .filter(|uid| select(uid.as_str()))
         .collect();
     // Invalid assets cannot be drawn; the index says why.
     let (uids, invalid): (Vec<&String>, Vec<&String>) = selected

@@ -422,7 +422,16 @@ pub fn write_report(dataset: &Path, exec: &Executor<'_>) -> anyhow::Result<Repor
     }
     remove_stale_thumbnails(&dir.join("thumbs"), &kept);
     let facts: Vec<SceneFacts> = gathered.into_iter().map(|(f, _)| f).collect();
-    let stats = compute_stats(&facts);
+    let mut stats = compute_stats(&facts);
+    // Where the library's annotations came from (`mesa annotate`): fields by source.
+    let annotations = dataset.join(mesa_stages::paths::dataset::ANNOTATIONS);
+    if let Ok(text) = crate::fsio::read_text_bounded(&annotations, crate::fsio::JSON_LIMIT) {
+        if let Ok(document) = mesa_schemas::json::parse_lenient(&text) {
+            let (sources, placeholders) = mesa_stages::annotate::count_sources(&document);
+            stats.annotation_sources = sources;
+            stats.annotation_placeholder_assets = placeholders;
+        }
+    }
     let svgs = plots(&stats).map_err(|e| anyhow!("cannot draw the plots: {e}"))?;
     write(&dir.join("stats.json"), &to_sorted_pretty(&stats)?)?;
     for (name, svg) in &svgs {

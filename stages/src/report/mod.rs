@@ -226,6 +226,9 @@ pub fn compute_stats(scenes: &[SceneFacts]) -> ReportStats {
         objects_missing_glb: scenes.iter().map(|s| s.missing_glbs.len() as u64).sum(),
         scenes_with_missing_glb: scenes.iter().filter(|s| !s.missing_glbs.is_empty()).count()
             as u64,
+        // The asset library's, filled in by the caller that reads assets/annotations.json.
+        annotation_sources: BTreeMap::new(),
+        annotation_placeholder_assets: 0,
     }
 }
 

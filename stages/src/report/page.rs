@@ -114,6 +114,20 @@ pub fn html(stats: &ReportStats, scenes: &[SceneFacts], plots: &[(String, String
             stats.imported, stats.objects_missing_glb, stats.scenes_with_missing_glb
         );
     }
+    if !stats.annotation_sources.is_empty() {
+        let sources: Vec<String> = stats
+            .annotation_sources
+            .iter()
+            .map(|(source, n)| format!("{n} {source}"))
+            .collect();
+        let _ = writeln!(
+            out,
+            "<p class=\"summary\">Asset annotation fields by source: {}; {} assets hold \
+             placeholder fields (no model).</p>",
+            escape(&sources.join(", ")),
+            stats.annotation_placeholder_assets
+        );
+    }
     out.push_str("<div class=\"plots\">\n");
     for (name, svg) in plots {
         let _ = writeln!(
