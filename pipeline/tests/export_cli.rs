@@ -116,6 +116,44 @@ fn export_writes_valid_deterministic_files_and_skips_when_done() {
     );
     assert!(sim_files(&dir) == files, "a forced export changed bytes");
 
+    // `--format` writes only what it names, the same bytes as a full export.
+    for scene in scene_dirs(&dir) {
+        std::fs::remove_dir_all(scene.join("sim")).expect("removes sim/");
+    }
+    ok(
+        &[
+            "export",
+            "--layout",
+            "coarse",
+            "--format",
+            "usd,mjcf",
+            "--progress",
+            "off",
+        ],
+        &dir,
+    );
+    let some = sim_files(&dir);
+    assert!(!some.is_empty());
+    for (rel, bytes) in &some {
+        if rel.ends_with("sim/export.json") {
+            continue;
+        }
+        assert!(!rel.contains("/sim/urdf/"), "{rel} written without urdf");
+        assert!(
+            files.get(rel) == Some(bytes),
+            "{rel} differs from the full export"
+        );
+    }
+    for scene in scene_dirs(&dir) {
+        let artifact: ExportArtifact = read_json(&scene.join("sim/export.json"));
+        assert_eq!(artifact.formats, ["mjcf", "usd"]);
+        assert!(scene.join("sim/usd/scene.usda").is_file());
+        assert!(!scene.join("sim/urdf").exists());
+        for file in &artifact.files {
+            assert!(scene.join(file).is_file(), "{file} listed but missing");
+        }
+    }
+
     // A bad setting is a usage error that names its key.
     std::fs::write(dir.join("mesa.toml"), "[export]\ndensity_kg_m3 = -1.0\n").expect("toml");
     let out = mesa()

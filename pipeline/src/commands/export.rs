@@ -73,11 +73,42 @@ pub struct Args {
     /// who compose their own scenes. An asset whose files are current is skipped.
     #[arg(long)]
     pub assets: bool,
+    /// The formats to write, comma-separated (default: `[export] formats`, all three).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub format: Vec<FormatArg>,
+}
+
+/// `--format`.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum FormatArg {
+    /// MuJoCo (sim/mjcf/).
+    Mjcf,
+    /// PyBullet, SAPIEN, Drake (sim/urdf/).
+    Urdf,
+    /// Isaac Sim (sim/usd/).
+    Usd,
+}
+
+impl From<FormatArg> for mesa_stages::export::ExportFormat {
+    fn from(f: FormatArg) -> Self {
+        match f {
+            FormatArg::Mjcf => Self::Mjcf,
+            FormatArg::Urdf => Self::Urdf,
+            FormatArg::Usd => Self::Usd,
+        }
+    }
 }
 
 /// Runs `mesa export`.
 pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
-    let resolved = args.stage.resolve(global)?;
+    let mut resolved = args.stage.resolve(global)?;
+    if !args.format.is_empty() {
+        let mut formats: Vec<mesa_stages::export::ExportFormat> =
+            args.format.iter().map(|f| (*f).into()).collect();
+        formats.sort();
+        formats.dedup();
+        resolved.config.export.formats = formats;
+    }
     if args.assets {
         return resolved.run_dataset(&ExportAssetsStage);
     }

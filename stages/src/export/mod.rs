@@ -53,10 +53,40 @@ pub enum Colliders {
     Hull,
 }
 
+/// A simulator format `mesa export` writes.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum ExportFormat {
+    /// MuJoCo: `sim/mjcf/scene.xml` and its meshes.
+    Mjcf,
+    /// PyBullet, SAPIEN, Drake: `sim/urdf/` (one URDF per object, the table, the poses).
+    Urdf,
+    /// Isaac Sim and other USD readers: `sim/usd/scene.usda`.
+    Usd,
+}
+
+impl ExportFormat {
+    /// Every format, in the order they are written.
+    pub const ALL: [ExportFormat; 3] = [Self::Mjcf, Self::Urdf, Self::Usd];
+
+    /// The name in `export.json` and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Mjcf => "mjcf",
+            Self::Urdf => "urdf",
+            Self::Usd => "usd",
+        }
+    }
+}
+
 /// The `[export]` section of `mesa.toml`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct ExportConfig {
+    /// The formats written: any of "mjcf", "urdf", "usd" (`--format` overrides it).
+    pub formats: Vec<ExportFormat>,
     /// The colliders of each object: `parts` (one per convex part) or `hull` (one hull).
     pub colliders: Colliders,
     /// Density of objects whose asset annotation gives no `mass`, kg/m³ (500: between wood
@@ -91,6 +121,7 @@ pub struct ExportConfig {
 impl Default for ExportConfig {
     fn default() -> Self {
         Self {
+            formats: ExportFormat::ALL.to_vec(),
             colliders: Colliders::Parts,
             density_kg_m3: 500.0,
             friction_sliding: 0.8,
@@ -138,6 +169,20 @@ impl ExportConfig {
                     "[export] {key}: is {v} (expected a finite number >= 0)"
                 ));
             }
+        }
+        if self.formats.is_empty() {
+            out.push(
+                "[export] formats: is empty (expected one or more of \"mjcf\", \"urdf\", \"usd\")"
+                    .to_owned(),
+            );
+        }
+        let mut seen = self.formats.clone();
+        seen.sort();
+        seen.dedup();
+        if seen.len() != self.formats.len() {
+            out.push(
+                "[export] formats: names a format twice (expected each at most once)".to_owned(),
+            );
         }
         if ![3, 4, 6].contains(&self.condim) {
             out.push(format!(
@@ -443,8 +488,8 @@ pub struct SceneExport {
     pub manifest: ExportArtifact,
 }
 
-/// Exports a scene as MJCF (`sim/mjcf/scene.xml` and its meshes), URDF (`sim/urdf/`) and USD
-/// (`sim/usd/scene.usda`).
+/// Exports a scene in the configured formats: MJCF (`sim/mjcf/scene.xml` and its meshes), URDF
+/// (`sim/urdf/`) and USD (`sim/usd/scene.usda`).
 pub fn export_scene(
     request: &ExportRequest<'_>,
     config: &ExportConfig,
@@ -465,16 +510,29 @@ pub fn export_scene(
         Vec::new()
     };
     let mut files = BTreeMap::new();
-    for (rel, bytes) in mjcf::write_mjcf(request.scene_id, &table, &bodies, config) {
-        files.insert(format!("{MJCF_DIR}/{rel}"), bytes);
+    let mut formats = config.formats.clone();
+    formats.sort();
+    formats.dedup();
+    for format in &formats {
+        match format {
+            ExportFormat::Mjcf => {
+                for (rel, bytes) in mjcf::write_mjcf(request.scene_id, &table, &bodies, config) {
+                    files.insert(format!("{MJCF_DIR}/{rel}"), bytes);
+                }
+            }
+            ExportFormat::Urdf => {
+                for (rel, bytes) in urdf::write_urdf(request.scene_id, &table, &bodies, config)? {
+                    files.insert(format!("{URDF_DIR}/{rel}"), bytes);
+                }
+            }
+            ExportFormat::Usd => {
+                files.insert(
+                    USD_SCENE.to_owned(),
+                    usd::write_usda(request.scene_id, &table, &bodies).into_bytes(),
+                );
+            }
+        }
     }
-    for (rel, bytes) in urdf::write_urdf(request.scene_id, &table, &bodies, config)? {
-        files.insert(format!("{URDF_DIR}/{rel}"), bytes);
-    }
-    files.insert(
-        USD_SCENE.to_owned(),
-        usd::write_usda(request.scene_id, &table, &bodies).into_bytes(),
-    );
     let m = config.table_margin_m;
     let zone = request.layout.zone_cm.0.map(|v| v / 100.0);
     let mut listed: Vec<String> = files.keys().cloned().collect();
@@ -485,7 +543,7 @@ pub fn export_scene(
         scene_id: request.scene_id.to_owned(),
         layout: request.layout_file.to_owned(),
         layout_sha256: request.layout_sha256.to_owned(),
-        formats: vec!["mjcf".to_owned(), "urdf".to_owned(), "usd".to_owned()],
+        formats: formats.iter().map(|f| f.name().to_owned()).collect(),
         files: listed,
         density_kg_m3: config.density_kg_m3,
         table_size_m: if request.with_table {

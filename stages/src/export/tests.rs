@@ -183,3 +183,21 @@ fn principal_axes_diagonalise_the_inertia() {
     }
     assert_abs_diff_eq!(d.iter().sum::<f64>(), 9.0, epsilon = 1e-9);
 }
+
+#[test]
+fn the_formats_must_name_something_once() {
+    assert!(ExportConfig::default().problems().is_empty());
+    let none = ExportConfig {
+        formats: Vec::new(),
+        ..ExportConfig::default()
+    };
+    assert!(none
+        .problems()
+        .iter()
+        .any(|p| p.contains("formats: is empty")));
+    let twice = ExportConfig {
+        formats: vec![ExportFormat::Usd, ExportFormat::Usd],
+        ..ExportConfig::default()
+    };
+    assert!(twice.problems().iter().any(|p| p.contains("twice")));
+}
