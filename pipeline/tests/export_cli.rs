@@ -153,6 +153,42 @@ fn export_writes_valid_deterministic_files_and_skips_when_done() {
             assert!(scene.join(file).is_file(), "{file} listed but missing");
         }
     }
+    // URDF alone still writes the meshes its files name, not the MJCF scene.
+    for scene in scene_dirs(&dir) {
+        std::fs::remove_dir_all(scene.join("sim")).expect("removes sim/");
+    }
+    ok(
+        &[
+            "export",
+            "--layout",
+            "coarse",
+            "--format",
+            "urdf",
+            "--progress",
+            "off",
+        ],
+        &dir,
+    );
+    for scene in scene_dirs(&dir) {
+        let artifact: ExportArtifact = read_json(&scene.join("sim/export.json"));
+        assert_eq!(artifact.formats, ["urdf"]);
+        assert!(!scene.join("sim/mjcf/scene.xml").exists());
+        for file in &artifact.files {
+            assert!(scene.join(file).is_file(), "{file} listed but missing");
+        }
+        let urdf = std::fs::read_to_string(scene.join("sim/urdf/table.urdf")).expect("urdf");
+        assert!(urdf.contains("<robot"), "{urdf}");
+        for entry in std::fs::read_dir(scene.join("sim/urdf")).expect("urdf dir") {
+            let text = std::fs::read_to_string(entry.expect("entry").path()).expect("text");
+            for mesh in text.split("filename=\"").skip(1) {
+                let rel = mesh.split('"').next().expect("a file name");
+                assert!(
+                    scene.join("sim/urdf").join(rel).is_file(),
+                    "{rel} named by a URDF is missing"
+                );
+            }
+        }
+    }
 
     // A bad setting is a usage error that names its key.
     std::fs::write(dir.join("mesa.toml"), "[export]\ndensity_kg_m3 = -1.0\n").expect("toml");

@@ -524,6 +524,16 @@ pub fn export_scene(
                 for (rel, bytes) in urdf::write_urdf(request.scene_id, &table, &bodies, config)? {
                     files.insert(format!("{URDF_DIR}/{rel}"), bytes);
                 }
+                // The URDFs name the MJCF's mesh files (`../mjcf/meshes/`): without the MJCF,
+                // its meshes are still written.
+                if !formats.contains(&ExportFormat::Mjcf) {
+                    for (rel, bytes) in mjcf::write_mjcf(request.scene_id, &table, &bodies, config)
+                    {
+                        if rel.starts_with("meshes/") {
+                            files.insert(format!("{MJCF_DIR}/{rel}"), bytes);
+                        }
+                    }
+                }
             }
             ExportFormat::Usd => {
                 files.insert(
