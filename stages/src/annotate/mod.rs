@@ -138,38 +138,10 @@ impl AnnotationsConfig {
                 self.min_density_kg_m3, self.max_density_kg_m3
             ));
         }
-        let llm = &self.llm;
-        if self.backend == AnnotateBackend::Llm {
-            if !(llm.base_url.starts_with("http://") || llm.base_url.starts_with("https://")) {
-                problems.push(format!(
-                    "[annotations.llm] base_url \"{}\" is not an http(s) URL (expected like \
-                     https://api.openai.com/v1)",
-                    llm.base_url
-                ));
-            }
-            if llm.model.trim().is_empty() {
-                problems.push("[annotations.llm] model is empty".to_owned());
-            }
-        }
-        if llm.max_concurrency == 0 {
-            problems
-                .push("[annotations.llm] max_concurrency is 0 (expected at least 1)".to_owned());
-        }
-        for (name, value) in [
-            ("temperature", llm.temperature),
-            ("backoff_initial_s", llm.backoff_initial_s),
-            ("backoff_max_s", llm.backoff_max_s),
-            ("timeout_s", llm.timeout_s),
-        ] {
-            if !value.is_finite() || value < 0.0 {
-                problems.push(format!(
-                    "[annotations.llm] {name} is {value} (expected a finite number >= 0)"
-                ));
-            }
-        }
-        if llm.timeout_s == 0.0 {
-            problems.push("[annotations.llm] timeout_s is 0 (expected > 0)".to_owned());
-        }
+        problems.extend(
+            self.llm
+                .problems("annotations.llm", self.backend == AnnotateBackend::Llm),
+        );
         problems
     }
 

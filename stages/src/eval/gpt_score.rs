@@ -18,7 +18,7 @@ use serde_json::Value;
 
 use crate::tasks::chat::{build_request, CallKind, ChatRequest, View};
 use crate::tasks::prompts::{PromptError, PromptTemplate};
-use crate::tasks::{Backend, LlmConfig, TasksConfig};
+use crate::tasks::LlmConfig;
 
 /// The built-in prompt (`data/prompts/gpt_score.txt`).
 pub const GPT_SCORE_PROMPT: &str = include_str!("../../../data/prompts/gpt_score.txt");
@@ -85,21 +85,7 @@ impl Default for EvalConfig {
 impl EvalConfig {
     /// What is wrong with the values, one line each (checked when the file is read).
     pub fn problems(&self) -> Vec<String> {
-        // The endpoint's values obey [tasks.llm]'s rules; reuse them under this section's name.
-        let as_tasks = TasksConfig {
-            backend: if self.judge == Judge::Llm {
-                Backend::Llm
-            } else {
-                Backend::Template
-            },
-            llm: self.llm.clone(),
-            ..TasksConfig::default()
-        };
-        as_tasks
-            .problems()
-            .into_iter()
-            .map(|p| p.replace("[tasks.llm]", "[eval.llm]"))
-            .collect()
+        self.llm.problems("eval.llm", self.judge == Judge::Llm)
     }
 }
 

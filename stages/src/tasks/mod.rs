@@ -131,6 +131,47 @@ impl Default for LlmConfig {
     }
 }
 
+impl LlmConfig {
+    /// What is wrong with the values, one line each, named under `[section]`; the URL and the
+    /// model are only checked when the endpoint is `used`.
+    pub fn problems(&self, section: &str, used: bool) -> Vec<String> {
+        let mut problems = Vec::new();
+        if used {
+            if !(self.base_url.starts_with("http://") || self.base_url.starts_with("https://")) {
+                problems.push(format!(
+                    "[{section}] base_url \"{}\" is not an http(s) URL (expected like \
+                     https://api.openai.com/v1)",
+                    self.base_url
+                ));
+            }
+            if self.model.trim().is_empty() {
+                problems.push(format!("[{section}] model is empty"));
+            }
+        }
+        if self.max_concurrency == 0 {
+            problems.push(format!(
+                "[{section}] max_concurrency is 0 (expected at least 1)"
+            ));
+        }
+        for (name, value) in [
+            ("temperature", self.temperature),
+            ("backoff_initial_s", self.backoff_initial_s),
+            ("backoff_max_s", self.backoff_max_s),
+            ("timeout_s", self.timeout_s),
+        ] {
+            if !value.is_finite() || value < 0.0 {
+                problems.push(format!(
+                    "[{section}] {name} is {value} (expected a finite number >= 0)"
+                ));
+            }
+        }
+        if self.timeout_s == 0.0 {
+            problems.push(format!("[{section}] timeout_s is 0 (expected > 0)"));
+        }
+        problems
+    }
+}
+
 impl TasksConfig {
     /// What is wrong with the values, one line each (checked before any work starts).
     pub fn problems(&self) -> Vec<String> {
@@ -141,37 +182,7 @@ impl TasksConfig {
         if self.max_attempts == 0 {
             problems.push("[tasks] max_attempts is 0 (expected at least 1)".to_owned());
         }
-        let llm = &self.llm;
-        if self.backend == Backend::Llm {
-            if !(llm.base_url.starts_with("http://") || llm.base_url.starts_with("https://")) {
-                problems.push(format!(
-                    "[tasks.llm] base_url \"{}\" is not an http(s) URL (expected like \
-                     https://api.openai.com/v1)",
-                    llm.base_url
-                ));
-            }
-            if llm.model.trim().is_empty() {
-                problems.push("[tasks.llm] model is empty".to_owned());
-            }
-        }
-        if llm.max_concurrency == 0 {
-            problems.push("[tasks.llm] max_concurrency is 0 (expected at least 1)".to_owned());
-        }
-        for (name, value) in [
-            ("temperature", llm.temperature),
-            ("backoff_initial_s", llm.backoff_initial_s),
-            ("backoff_max_s", llm.backoff_max_s),
-            ("timeout_s", llm.timeout_s),
-        ] {
-            if !value.is_finite() || value < 0.0 {
-                problems.push(format!(
-                    "[tasks.llm] {name} is {value} (expected a finite number >= 0)"
-                ));
-            }
-        }
-        if llm.timeout_s == 0.0 {
-            problems.push("[tasks.llm] timeout_s is 0 (expected > 0)".to_owned());
-        }
+        problems.extend(self.llm.problems("tasks.llm", self.backend == Backend::Llm));
         problems
     }
 
