@@ -359,7 +359,7 @@ pub fn simulate(
             let end = bodies[*body].position();
             let q = end.rotation.quaternion().coords;
             let t = end.translation.vector;
-            // The top of the body's box, at its lowest corner over the end pose.
+            // The top of the body's box in the end pose (its highest corner).
             let top = (0..8)
                 .map(|k| {
                     let c = point![
