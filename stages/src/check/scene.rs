@@ -329,20 +329,25 @@ fn settle_layout(
         }
     }
     // Then the simulation, on a scene the moves brought to rest.
+    let mut too_many_parts: Option<usize> = None;
     let simulation: Option<Simulation> = match &settled {
         Some(s) if config.settling.simulate && s.findings.physical() => {
-            let table = table_boxes(layout, TABLE_MARGIN_M, TABLE_THICKNESS_M, SINK_DEPTH_M);
-            let simulation = simulate(
-                &sim_objects(&moved, shape_of),
-                &table,
-                &config.settling.simulation(),
-            );
-            apply_simulation(
-                &mut moved,
-                &simulation,
-                config.settling.rest_motion_mm / 1000.0,
-            );
-            Some(simulation)
+            let objects = sim_objects(&moved, shape_of);
+            let parts: usize = objects.iter().map(|o| o.parts.len()).sum();
+            if parts > config.settling.max_simulated_parts {
+                // Not simulated, and so not settled (below).
+                too_many_parts = Some(parts);
+                None
+            } else {
+                let table = table_boxes(layout, TABLE_MARGIN_M, TABLE_THICKNESS_M, SINK_DEPTH_M);
+                let simulation = simulate(&objects, &table, &config.settling.simulation());
+                apply_simulation(
+                    &mut moved,
+                    &simulation,
+                    config.settling.rest_motion_mm / 1000.0,
+                );
+                Some(simulation)
+            }
         }
         _ => None,
     };
@@ -470,6 +475,12 @@ fn settle_layout(
                     "still not at rest after {} rounds: {}",
                     s.rounds,
                     remaining(&s.findings, &s.scene)
+                ))
+            } else if let Some(parts) = too_many_parts {
+                Some(format!(
+                    "not simulated: the scene has {parts} convex parts, more than \
+                     [check.settling] max_simulated_parts = {}",
+                    config.settling.max_simulated_parts
                 ))
             } else if let Some(fell) = simulation_report
                 .as_ref()

@@ -63,6 +63,9 @@ pub struct SettleConfig {
     /// Friction coefficient of every contact in the simulation (as `[export]
     /// friction_sliding`).
     pub friction: f64,
+    /// A scene with more convex parts than this is not simulated (and left unsettled, with
+    /// the reason): the simulation's time grows with its parts.
+    pub max_simulated_parts: usize,
 }
 
 impl Default for SettleConfig {
@@ -79,6 +82,7 @@ impl Default for SettleConfig {
             rest_motion_mm: 1.0,
             density_kg_m3: 500.0,
             friction: 0.8,
+            max_simulated_parts: 20_000,
         }
     }
 }
@@ -115,6 +119,10 @@ impl SettleConfig {
                  to 600)",
                 self.max_simulated_s, self.simulated_s
             ));
+        }
+        if self.max_simulated_parts == 0 {
+            problems
+                .push("[check.settling] max_simulated_parts is 0 (expected at least 1)".to_owned());
         }
         if !(30..=10_000).contains(&self.steps_per_second) {
             problems.push(format!(

@@ -421,9 +421,18 @@ fn settle_text(
     containers: &[bool],
     simulate: bool,
 ) -> (SceneCheck, DatasetLayout) {
-    let layout: DatasetLayout = serde_json::from_str(text).expect("layout");
     let mut config = CheckConfig::default();
     config.settling.simulate = simulate;
+    settle_with(text, shapes, containers, &config)
+}
+
+fn settle_with(
+    text: &str,
+    shapes: &[(&str, Arc<AssetShape>)],
+    containers: &[bool],
+    config: &CheckConfig,
+) -> (SceneCheck, DatasetLayout) {
+    let layout: DatasetLayout = serde_json::from_str(text).expect("layout");
     let source = super::scene::LayoutSource {
         layout: &layout,
         file: "refined/layout.json",
@@ -441,7 +450,7 @@ fn settle_text(
         },
         containers,
         &crate::graph::GraphOptions::default(),
-        &config,
+        config,
         true,
     );
     (checked, layout)
@@ -499,4 +508,34 @@ fn a_stick_leaning_on_its_end_lies_down_when_settled_and_stands_without_the_simu
         "{:?}",
         kept.objects[0]
     );
+}
+
+#[test]
+fn a_scene_over_the_part_budget_is_not_simulated_and_says_so() {
+    let text = r#"{"item_placement_zone": [0, 100, 0, 100], "objects": [
+        {"instance": "box_0", "retrieved_uid": "box", "position": [30, 50, 5],
+         "rotation": [0, 0, 0, 1], "size": [10, 10, 10], "scale_factor": [1, 1, 1]},
+        {"instance": "box_1", "retrieved_uid": "box", "position": [70, 50, 5],
+         "rotation": [0, 0, 0, 1], "size": [10, 10, 10], "scale_factor": [1, 1, 1]}]}"#;
+    let shapes = [("box", cuboid([0.1, 0.1, 0.1]))];
+    let parts = 2 * shapes[0].1.part_count();
+    let mut config = CheckConfig::default();
+    config.settling.simulate = true;
+    config.settling.max_simulated_parts = parts - 1;
+    let (over, _) = settle_with(text, &shapes, &[false, false], &config);
+    let report = over.artifact.settle.as_ref().expect("settle report");
+    assert!(over.settled.is_none(), "{report:?}");
+    assert!(report.simulation.is_none());
+    let reason = report.reason.as_deref().unwrap_or_default();
+    assert!(
+        reason.contains(&format!("has {parts} convex parts"))
+            && reason.contains("max_simulated_parts"),
+        "{reason}"
+    );
+    // The control: at the budget, it is simulated and settles.
+    config.settling.max_simulated_parts = parts;
+    let (within, _) = settle_with(text, &shapes, &[false, false], &config);
+    let report = within.artifact.settle.as_ref().expect("settle report");
+    assert!(within.settled.is_some(), "{report:?}");
+    assert!(report.simulation.is_some());
 }
