@@ -647,6 +647,61 @@ pub struct BatchImport {
     pub failed: Vec<String>,
 }
 
+/// The custom ids of `requests`, each to its request's digest: what [`import_batch`] joins a
+/// provider's output lines to.
+pub fn pending_by_id<'a>(
+    requests: impl IntoIterator<Item = &'a ChatRequest>,
+) -> BTreeMap<String, String> {
+    requests
+        .into_iter()
+        .map(|request| {
+            let digest = request_digest(request);
+            (custom_id(&digest), digest)
+        })
+        .collect()
+}
+
+/// What [`import_batch_files`] did: a line per file (and one per failed line) for the caller
+/// to show, and the count of failed lines.
+#[derive(Debug, Default)]
+pub struct BatchFilesImport {
+    /// `FILE: N replies stored, N already cached, N lines failed`, then `  failed ...` lines.
+    pub lines: Vec<String>,
+    /// Lines of the files that could not be used.
+    pub failed: usize,
+}
+
+/// Reads each provider batch output file (`--batch-in`, bounded like a records file) and
+/// stores its replies in `cache` ([`import_batch`]); an unreadable file is a usage error.
+pub fn import_batch_files(
+    files: &[PathBuf],
+    pending: &BTreeMap<String, String>,
+    cache: &ReplyCache,
+) -> anyhow::Result<BatchFilesImport> {
+    let mut out = BatchFilesImport::default();
+    for file in files {
+        let text =
+            crate::fsio::read_text_bounded(file, crate::fsio::RECORDS_LIMIT).map_err(|e| {
+                crate::exit::usage(format!(
+                    "{}: cannot read the batch output: {e}",
+                    file.display()
+                ))
+            })?;
+        let report = import_batch(file, &text, pending, cache);
+        out.lines.push(format!(
+            "{}: {} replies stored, {} already cached, {} lines failed",
+            file.display(),
+            report.stored,
+            report.already_cached,
+            report.failed.len()
+        ));
+        out.lines
+            .extend(report.failed.iter().map(|f| format!("  failed {f}")));
+        out.failed += report.failed.len();
+    }
+    Ok(out)
+}
+
 /// Reads a provider's batch output JSONL (`{"custom_id", "response": {"status_code", "body"},
 /// "error"}` per line) and stores each successful reply in the cache under the request it
 /// answers. Lines are joined to requests by `custom_id`, never by position; `pending` maps the

@@ -41,7 +41,9 @@ use mesa_stages::tasks::chat::{Chat, ChatError, ChatRequest, View};
 use mesa_stages::tasks::prompts::PromptTemplate;
 use serde_json::{json, Value};
 
-use crate::chat::{custom_id, import_batch, request_digest, write_batch, ChatClient, Mode};
+use crate::chat::{
+    custom_id, import_batch_files, pending_by_id, request_digest, write_batch, ChatClient, Mode,
+};
 use crate::cli::{DatasetArgs, Global, SceneArgs};
 use crate::exit::{usage, UsageError};
 use crate::fsio::{
@@ -559,24 +561,9 @@ impl DatasetStage for AnnotateAssetsStage {
                 .client
                 .as_ref()
                 .ok_or_else(|| anyhow!("internal error: batches without a chat client"))?;
-            for file in &self.batch_in {
-                let text = std::fs::read_to_string(file).map_err(|e| {
-                    UsageError(format!(
-                        "{}: cannot read the batch output: {e}",
-                        file.display()
-                    ))
-                })?;
-                let report = import_batch(file, &text, &by_id, client.cache());
-                notes.push(format!(
-                    "{}: {} replies stored, {} already cached, {} lines failed",
-                    file.display(),
-                    report.stored,
-                    report.already_cached,
-                    report.failed.len()
-                ));
-                notes.extend(report.failed.iter().map(|f| format!("  failed {f}")));
-                failed_lines += report.failed.len();
-            }
+            let imported = import_batch_files(&self.batch_in, &by_id, client.cache())?;
+            notes.extend(imported.lines);
+            failed_lines += imported.failed;
             outcomes = self.annotate_all(ctx, exec, &targets);
         }
         let pending: Vec<ChatRequest> = outcomes
@@ -1028,35 +1015,14 @@ impl DatasetStage for AnnotateInstancesStage {
         let mut pending: Vec<ChatRequest> = Vec::new();
         for pass in 0..passes {
             if pass == 1 {
-                let by_id: BTreeMap<String, String> = pending
-                    .iter()
-                    .map(|request| {
-                        let digest = request_digest(request);
-                        (custom_id(&digest), digest)
-                    })
-                    .collect();
+                let by_id = pending_by_id(pending.iter());
                 let client = self
                     .client
                     .as_ref()
                     .ok_or_else(|| anyhow!("internal error: batches without a chat client"))?;
-                for file in &self.batch_in {
-                    let text = std::fs::read_to_string(file).map_err(|e| {
-                        UsageError(format!(
-                            "{}: cannot read the batch output: {e}",
-                            file.display()
-                        ))
-                    })?;
-                    let report = import_batch(file, &text, &by_id, client.cache());
-                    notes.push(format!(
-                        "{}: {} replies stored, {} already cached, {} lines failed",
-                        file.display(),
-                        report.stored,
-                        report.already_cached,
-                        report.failed.len()
-                    ));
-                    notes.extend(report.failed.iter().map(|f| format!("  failed {f}")));
-                    failed_lines += report.failed.len();
-                }
+                let imported = import_batch_files(&self.batch_in, &by_id, client.cache())?;
+                notes.extend(imported.lines);
+                failed_lines += imported.failed;
             }
             let results = exec.map("scenes", &scenes, |scene| {
                 self.scene(ctx, scene, options.force)

@@ -40,7 +40,9 @@ use mesa_stages::tasks::prompts::PromptTemplate;
 use rayon::prelude::*;
 use serde_json::Value;
 
-use crate::chat::{custom_id, import_batch, request_digest, write_batch, ApiKey, ChatClient, Mode};
+use crate::chat::{
+    custom_id, import_batch_files, request_digest, write_batch, ApiKey, ChatClient, Mode,
+};
 use crate::cli::{DatasetArgs, Global};
 use crate::commands::check::ShapeLibrary;
 use crate::dataset_cache::read_annotations;
@@ -519,27 +521,17 @@ impl GptJudge {
                 .filter(|digest| !cache.contains(digest))
                 .map(|digest| (custom_id(&digest), digest))
                 .collect();
-            for file in &args.batch_in {
-                let text = read_text_bounded(file, RECORDS_LIMIT).map_err(|e| {
-                    usage(format!(
-                        "{}: cannot read the batch output: {e}",
-                        file.display()
-                    ))
-                })?;
-                let report = import_batch(file, &text, &pending, cache);
-                eprintln!(
-                    "eval: {}: {} replies stored, {} already cached, {} lines failed",
-                    file.display(),
-                    report.stored,
-                    report.already_cached,
-                    report.failed.len()
-                );
-                for failure in &report.failed {
-                    eprintln!("  failed {failure}");
+            let imported = import_batch_files(&args.batch_in, &pending, cache)?;
+            for line in &imported.lines {
+                // A file's line gets the command's name; its failed lines are indented.
+                if line.starts_with(' ') {
+                    eprintln!("{line}");
+                } else {
+                    eprintln!("eval: {line}");
                 }
-                if !report.failed.is_empty() {
-                    code = ExitCode::from(EXIT_FAILED);
-                }
+            }
+            if imported.failed > 0 {
+                code = ExitCode::from(EXIT_FAILED);
             }
         }
         // Requests wait on the network: as many threads as may be in flight.

@@ -122,7 +122,7 @@ pub fn run(args: Args, global: Global) -> anyhow::Result<ExitCode> {
 }
 
 fn batch_tasks(args: &Args, mut resolved: Resolved) -> anyhow::Result<ExitCode> {
-    use crate::chat::{custom_id, import_batch, request_digest, write_batch, ChatClient, Mode};
+    use crate::chat::{import_batch_files, pending_by_id, write_batch, ChatClient, Mode};
 
     let client = Arc::new(
         ChatClient::new(
@@ -145,33 +145,20 @@ fn batch_tasks(args: &Args, mut resolved: Resolved) -> anyhow::Result<ExitCode> 
     let mut failed_lines = 0usize;
     if !args.batch_in.is_empty() {
         let BatchPlan { pending, .. } = ctx_plan(&resolved)?;
-        let by_id: std::collections::BTreeMap<String, String> = pending
-            .iter()
-            .map(|(_, request)| {
-                let digest = request_digest(request);
-                (custom_id(&digest), digest)
-            })
-            .collect();
-        for file in &args.batch_in {
-            let text = std::fs::read_to_string(file).map_err(|e| {
-                UsageError(format!(
-                    "{}: cannot read the batch output: {e}",
-                    file.display()
-                ))
-            })?;
-            let report = import_batch(file, &text, &by_id, client.cache());
-            eprintln!(
-                "tasks: {}: {} replies stored, {} already cached, {} lines failed",
-                file.display(),
-                report.stored,
-                report.already_cached,
-                report.failed.len()
-            );
-            for failure in &report.failed {
-                eprintln!("  failed {failure}");
+        let imported = import_batch_files(
+            &args.batch_in,
+            &pending_by_id(pending.iter().map(|(_, request)| request)),
+            client.cache(),
+        )?;
+        for line in &imported.lines {
+            // A file's line gets the command's name; its failed lines are indented.
+            if line.starts_with(' ') {
+                eprintln!("{line}");
+            } else {
+                eprintln!("tasks: {line}");
             }
-            failed_lines += report.failed.len();
         }
+        failed_lines += imported.failed;
     }
     let BatchPlan { complete, pending } = ctx_plan(&resolved)?;
     let waiting: std::collections::BTreeSet<&str> =
