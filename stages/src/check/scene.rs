@@ -236,6 +236,17 @@ fn sim_objects(
         .collect()
 }
 
+/// Records in an object's provenance that settling moved it.
+fn note_settled(object: &mut LayoutObject, note: String) {
+    let provenance = object.provenance.get_or_insert_with(|| Provenance {
+        stage: String::new(),
+        source_instance: None,
+        notes: Vec::new(),
+    });
+    provenance.stage = "check".to_owned();
+    provenance.notes.push(note);
+}
+
 /// Applies a simulation to the objects it moved further than `rest_motion_m`: their position
 /// and rotation become the simulation's (rounded as layouts are), with a provenance note.
 fn apply_simulation(layout: &mut DatasetLayout, simulation: &Simulation, rest_motion_m: f64) {
@@ -254,17 +265,14 @@ fn apply_simulation(layout: &mut DatasetLayout, simulation: &Simulation, rest_mo
                 4,
             ));
         }
-        let provenance = object.provenance.get_or_insert_with(|| Provenance {
-            stage: String::new(),
-            source_instance: None,
-            notes: Vec::new(),
-        });
-        provenance.stage = "check".to_owned();
-        provenance.notes.push(format!(
-            "settled: the simulation moved it {:.2} cm and turned it {:.1}°",
-            m.moved_m * 100.0,
-            m.turn_deg
-        ));
+        note_settled(
+            object,
+            format!(
+                "settled: the simulation moved it {:.2} cm and turned it {:.1}°",
+                m.moved_m * 100.0,
+                m.turn_deg
+            ),
+        );
     }
 }
 
@@ -316,16 +324,13 @@ fn settle_layout(
             let p = object.position_cm.0;
             object.position_cm =
                 PositionCm(std::array::from_fn(|k| round_to(p[k] + offset_cm[k], 4)));
-            let provenance = object.provenance.get_or_insert_with(|| Provenance {
-                stage: String::new(),
-                source_instance: None,
-                notes: Vec::new(),
-            });
-            provenance.stage = "check".to_owned();
-            provenance.notes.push(format!(
-                "settled: moved by ({:.2}, {:.2}, {:.2}) cm",
-                offset_cm[0], offset_cm[1], offset_cm[2]
-            ));
+            note_settled(
+                object,
+                format!(
+                    "settled: moved by ({:.2}, {:.2}, {:.2}) cm",
+                    offset_cm[0], offset_cm[1], offset_cm[2]
+                ),
+            );
         }
     }
     // Then the simulation, on a scene the moves brought to rest.
