@@ -23,6 +23,7 @@
 
 pub mod budget;
 pub mod decompose;
+mod near;
 pub mod reach;
 pub mod shapes;
 pub mod simplify;
