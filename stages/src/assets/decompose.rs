@@ -32,6 +32,7 @@
 //! between the trial cuts of a piece, never by stopping a thread) and the pieces left are
 //! kept as parts, their deviation measured as any part's.
 
+use std::cell::RefCell;
 use std::collections::{BinaryHeap, HashMap};
 use std::time::Instant;
 
@@ -318,6 +319,10 @@ struct Mesh {
     near: NearTest,
     /// Whether the mesh is one solid piece (its solid's triangles are the surface's).
     one_solid: bool,
+    /// [`Mesh::inside`] of the corners of the boxes seen so far: a cut's two halves share
+    /// four corners with the piece, and each trial cut of a piece makes the same halves'
+    /// corners again.
+    corners_inside: RefCell<HashMap<[u64; 3], bool>>,
 }
 
 /// Millimetres per metre: parry3d's queries see millimetres (its tolerances are absolute, about
@@ -374,6 +379,17 @@ impl Mesh {
         f64::from((proj.point - q).norm()) / MM
     }
 
+    /// [`Mesh::inside`] for a box corner, remembered.
+    fn corner_inside(&self, p: [f64; 3]) -> bool {
+        let key = p.map(f64::to_bits);
+        if let Some(&known) = self.corners_inside.borrow().get(&key) {
+            return known;
+        }
+        let inside = self.inside(p);
+        self.corners_inside.borrow_mut().insert(key, inside);
+        inside
+    }
+
     /// Whether `p` provably deviates no more than `r` (some triangle is within `r` of it, with
     /// the margin of [`NearTest::slack_m`]): [`Mesh::deviation`] would not find more, since a
     /// point's deviation is at most its distance to the surface.
@@ -427,7 +443,13 @@ fn candidate(mesh: &Mesh, piece: &Piece) -> Option<Candidate> {
             // No surface crosses the box and it is outside every solid.
             return None;
         }
-        points.extend(piece.cell.corners().into_iter().filter(|c| mesh.inside(*c)));
+        points.extend(
+            piece
+                .cell
+                .corners()
+                .into_iter()
+                .filter(|c| mesh.corner_inside(*c)),
+        );
     }
     if points.is_empty() {
         return None;
@@ -739,6 +761,7 @@ pub fn decompose(
     let mesh = Mesh {
         near,
         one_solid: all_solid && solids.len() == 1,
+        corners_inside: RefCell::new(HashMap::new()),
         welded,
         all_solid,
         surface,
