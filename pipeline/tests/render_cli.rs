@@ -460,6 +460,48 @@ fn the_report_counts_the_dataset_and_its_page_opens_in_chromium_without_errors()
     assert!(page.contains("settled"));
     assert!(page.contains("not rendered"));
     mesa().arg("validate").arg(&report).assert().success();
+    // A second report makes no thumbnail again (the file is not even rewritten) unless its front
+    // view changed; one whose front view changed is made again. Control: SCENES[1]'s view
+    // becomes SCENES[2]'s, and its thumbnail becomes SCENES[2]'s bytes.
+    let thumb_of = |scene: &str| report.join("thumbs").join(format!("{scene}.png"));
+    let stamp = |path: &Path| {
+        let bytes = std::fs::read(path).expect("thumbnail");
+        let modified = std::fs::metadata(path)
+            .and_then(|m| m.modified())
+            .expect("mtime");
+        (bytes, modified)
+    };
+    let first = stamp(&thumb_of(SCENES[0]));
+    let second = stamp(&thumb_of(SCENES[1]));
+    let front = |scene: &str| ws.join("scenes").join(scene).join("render/front.png");
+    std::fs::copy(front(SCENES[2]), front(SCENES[1])).expect("copy");
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    mesa().arg("report").arg(&ws).assert().success();
+    assert_eq!(
+        stamp(&thumb_of(SCENES[0])),
+        first,
+        "an unchanged view's thumbnail was remade"
+    );
+    let remade = stamp(&thumb_of(SCENES[1]));
+    assert_ne!(remade, second);
+    assert_eq!(
+        remade.0,
+        std::fs::read(thumb_of(SCENES[2])).expect("thumbnail")
+    );
+    // A record of another recipe makes them all again.
+    let sources = report.join("thumbs/sources.json");
+    let record = std::fs::read_to_string(&sources).expect("sources");
+    assert!(record.contains("mesa.thumbnail/"), "{record}");
+    std::fs::write(
+        &sources,
+        record.replace("mesa.thumbnail/", "mesa.thumbnail/0-"),
+    )
+    .expect("write");
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    mesa().arg("report").arg(&ws).assert().success();
+    let again = stamp(&thumb_of(SCENES[0]));
+    assert_eq!(again.0, first.0);
+    assert_ne!(again.1, first.1, "another recipe's record was trusted");
     // Every link of the page leads to a file.
     let mut links = 0;
     for piece in page.split("href=\"").skip(1) {

@@ -15,8 +15,8 @@ use crate::eval::{EvalMetrics, EvalSample, EVAL_METRICS_SCHEMA, EVAL_SAMPLE_SCHE
 use crate::layout::{DatasetLayout, LAYOUT_SCHEMA};
 use crate::llm::{GalleryRecord, LlmLayout, TaskInfo};
 use crate::render::{
-    annotation_problems, AssetAnnotationsFile, RenderCameraArtifact, ReportStats,
-    RENDER_CAMERA_SCHEMA, REPORT_STATS_SCHEMA,
+    annotation_problems, AssetAnnotationsFile, RenderCameraArtifact, ReportStats, ReportThumbs,
+    RENDER_CAMERA_SCHEMA, REPORT_STATS_SCHEMA, REPORT_THUMBS_SCHEMA,
 };
 use crate::validate::{nonfinite_problems, validate_against, Problem};
 
@@ -339,6 +339,14 @@ pub fn kinds() -> &'static [Kind] {
                 form: FileForm::Json,
                 summary: "report/stats.json (dataset statistics)",
                 generate: schema_of::<ReportStats>,
+                semantic: no_semantics,
+            },
+            Kind {
+                name: "report-thumbs",
+                schema_id: Some(REPORT_THUMBS_SCHEMA),
+                form: FileForm::Json,
+                summary: "report/thumbs/sources.json (the front view each thumbnail was made from)",
+                generate: schema_of::<ReportThumbs>,
                 semantic: no_semantics,
             },
             Kind {

@@ -13,6 +13,23 @@ use crate::validate::Problem;
 pub const RENDER_CAMERA_SCHEMA: &str = "mesa.render-camera/1";
 /// Schema id of `report/stats.json`.
 pub const REPORT_STATS_SCHEMA: &str = "mesa.report-stats/1";
+/// Schema id of `report/thumbs/sources.json`.
+pub const REPORT_THUMBS_SCHEMA: &str = "mesa.report-thumbs/1";
+
+/// `report/thumbs/sources.json`: what each thumbnail of the report was made from, so that a
+/// later report makes again only those whose front view changed.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ReportThumbs {
+    /// `mesa.report-thumbs/1`.
+    pub schema: String,
+    /// How the thumbnails were made (crop and filter); a report with another recipe makes
+    /// them all again.
+    pub recipe: String,
+    /// Per thumbnail (`thumbs/<table_type>/<scene_id>.png`), the SHA-256 (hex) of the
+    /// `render/front.png` it was made from.
+    pub sources: BTreeMap<String, String>,
+}
 
 /// The camera of one rendered view: intrinsics and pose in the table frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]

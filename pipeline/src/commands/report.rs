@@ -6,7 +6,9 @@
 //! - `report/stats.json` (`mesa.report-stats/1`);
 //! - `report/objects_per_scene.svg`, `categories.svg` (the 100 most frequent), `table_types.svg`,
 //!   `relations.svg`, `collisions.svg` (before / after settling, or "not checked");
-//! - `report/thumbs/<table_type>/<scene_id>.png`, a 232-pixel copy of each front view;
+//! - `report/thumbs/<table_type>/<scene_id>.png`, a 232-pixel copy of each front view, made
+//!   again only when the front view changed (`report/thumbs/sources.json` records each one's
+//!   source digest);
 //! - `report/index.html`: the summary, the plots inline, and a card per scene with its
 //!   thumbnail, QA flags and relative links to its files; no script and no network.
 
@@ -14,7 +16,7 @@ use mesa_stages::paths::dataset::REPORT_DIR;
 use mesa_stages::paths::scene::{
     CHECK, GRAPH_JSON, GRAPH_TXT, IMAGE, IMPORT_NOTES, RENDER_DIR, SETTLED_LAYOUT, TASKS,
 };
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -26,7 +28,7 @@ use mesa_schemas::artifacts::{GraphArtifact, MarkerStatus, CHECK_SCHEMA};
 use mesa_schemas::convert::category_of_instance;
 use mesa_schemas::json::to_sorted_pretty;
 use mesa_schemas::layout_file::{read_layout_text, AnyLayout};
-use mesa_schemas::render::RenderCameraArtifact;
+use mesa_schemas::render::{RenderCameraArtifact, ReportThumbs, REPORT_THUMBS_SCHEMA};
 use mesa_stages::render::SceneView;
 use mesa_stages::report::{compute_stats, html, plots, CheckFacts, SceneFacts, SceneLink};
 use serde::Serialize;
@@ -121,8 +123,30 @@ fn thumbnail(png: &[u8]) -> anyhow::Result<Vec<u8>> {
     )?)
 }
 
-/// What the report learns of one scene, and its thumbnail's bytes.
-fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts, Option<Vec<u8>>) {
+/// Where the thumbnails' front views are recorded ([`ReportThumbs`]). A thumbnail whose front
+/// view is unchanged, made by the same recipe, and whose file is there is not made again
+/// (decoding and resizing a 512² view is most of a report's time).
+const THUMB_SOURCES: &str = "thumbs/sources.json";
+
+/// How thumbnails are made; a report whose recipe differs from the record's makes them all
+/// again. Change it whenever [`thumbnail`] changes its output.
+const THUMB_RECIPE: &str = "mesa.thumbnail/1 crop-1.08 triangle-232";
+
+/// A scene's thumbnail: the digest of its front view, and its bytes when it was made anew
+/// (`None`: the file from the last report stays).
+struct Thumb {
+    source_sha256: String,
+    bytes: Option<Vec<u8>>,
+}
+
+/// What the report learns of one scene, and its thumbnail. `previous` is the last report's
+/// [`THUMB_SOURCES`].
+fn scene_facts(
+    dataset: &Path,
+    scene: &Scene,
+    stages: &[String],
+    previous: &BTreeMap<String, String>,
+) -> (SceneFacts, Option<Thumb>) {
     let mut facts = SceneFacts {
         table_type: scene.table_type.clone(),
         scene_id: scene.scene_id.clone(),
@@ -240,13 +264,22 @@ fn scene_facts(dataset: &Path, scene: &Scene, stages: &[String]) -> (SceneFacts,
         }
     }
     if let Ok(png) = read_bounded(&scene.path(&format!("{RENDER_DIR}/front.png")), IMAGE_LIMIT) {
-        match thumbnail(&png) {
+        let rel = format!("thumbs/{}/{}.png", scene.table_type, scene.scene_id);
+        let source_sha256 = sha256_hex(&png);
+        let unchanged = previous.get(&rel) == Some(&source_sha256)
+            && dataset.join(REPORT_DIR).join(&rel).is_file();
+        let made = if unchanged {
+            Ok(None)
+        } else {
+            thumbnail(&png).map(Some)
+        };
+        match made {
             Ok(bytes) => {
-                facts.thumbnail = Some(format!(
-                    "thumbs/{}/{}.png",
-                    scene.table_type, scene.scene_id
-                ));
-                thumb = Some(bytes);
+                facts.thumbnail = Some(rel);
+                thumb = Some(Thumb {
+                    source_sha256,
+                    bytes,
+                });
             }
             Err(e) => facts.failed.push((
                 "render".into(),
@@ -408,19 +441,37 @@ pub fn write_report(dataset: &Path, exec: &Executor<'_>) -> anyhow::Result<Repor
     let started = Instant::now();
     let scenes = discover_scenes(dataset).map_err(RunError::into_anyhow)?;
     let stages = marker_stages(dataset);
-    let gathered: Vec<(SceneFacts, Option<Vec<u8>>)> = exec.map("scenes", &scenes, |scene| {
-        scene_facts(dataset, scene, &stages)
-    });
     let dir = dataset.join(REPORT_DIR);
+    // A missing, unreadable or other-recipe record only means every thumbnail is made again.
+    let previous: BTreeMap<String, String> =
+        read_text_bounded(&dir.join(THUMB_SOURCES), JSON_LIMIT)
+            .ok()
+            .and_then(|text| serde_json::from_str::<ReportThumbs>(&text).ok())
+            .filter(|record| record.schema == REPORT_THUMBS_SCHEMA && record.recipe == THUMB_RECIPE)
+            .map(|record| record.sources)
+            .unwrap_or_default();
+    let gathered: Vec<(SceneFacts, Option<Thumb>)> = exec.map("scenes", &scenes, |scene| {
+        scene_facts(dataset, scene, &stages, &previous)
+    });
     let mut kept = BTreeSet::new();
+    let mut sources = BTreeMap::new();
     for (facts, thumb) in &gathered {
-        if let (Some(rel), Some(bytes)) = (&facts.thumbnail, thumb) {
+        if let (Some(rel), Some(thumb)) = (&facts.thumbnail, thumb) {
             let path = dir.join(rel);
-            write(&path, bytes)?;
+            if let Some(bytes) = &thumb.bytes {
+                write(&path, bytes)?;
+            }
             kept.insert(path);
+            sources.insert(rel.clone(), thumb.source_sha256.clone());
         }
     }
     remove_stale_thumbnails(&dir.join("thumbs"), &kept);
+    let record = ReportThumbs {
+        schema: REPORT_THUMBS_SCHEMA.into(),
+        recipe: THUMB_RECIPE.into(),
+        sources,
+    };
+    write(&dir.join(THUMB_SOURCES), &to_sorted_pretty(&record)?)?;
     let facts: Vec<SceneFacts> = gathered.into_iter().map(|(f, _)| f).collect();
     let mut stats = compute_stats(&facts);
     // Where the library's annotations came from (`mesa annotate`): fields by source.
