@@ -11,6 +11,7 @@
 //! correct barycentrics) and shades only what is visible. It is single-threaded and
 //! deterministic: ties in depth keep the item drawn first.
 
+use std::borrow::Cow;
 use std::sync::Arc;
 
 use crate::mesh::{add3, cross3, dot3, normalize3, scale3, sub3, Aabb, Affine3, TriMesh};
@@ -316,14 +317,153 @@ fn clip_near(tri: [ClipVertex; 3], near: f64, out: &mut Vec<ClipVertex>) {
     }
 }
 
-fn rasterize_into(
+/// Where the rasterizer stores the sample of pixel `(x, y)` of its grid: every pixel of a full
+/// buffer ([`Every`]), or only the pixels a [`SampleMask`] selects.
+trait Samples {
+    /// The grid's width and height in pixels (the rasterizer clips to it).
+    fn grid(&self) -> (i64, i64);
+    /// The buffer index of pixel `(x, y)`, `None` when it is not kept.
+    fn index(&self, x: i64, y: i64) -> Option<usize>;
+    /// Whether any pixel of the box `x0..=x1 × y0..=y1` is kept (a triangle over none is
+    /// skipped whole).
+    fn any_in(&self, x0: i64, y0: i64, x1: i64, y1: i64) -> bool;
+}
+
+/// Every pixel of a `width`-wide buffer, row-major.
+struct Every {
+    width: i64,
+    height: i64,
+}
+
+impl Samples for Every {
+    fn grid(&self) -> (i64, i64) {
+        (self.width, self.height)
+    }
+
+    #[inline(always)]
+    fn index(&self, x: i64, y: i64) -> Option<usize> {
+        Some((y * self.width + x) as usize)
+    }
+
+    fn any_in(&self, _: i64, _: i64, _: i64, _: i64) -> bool {
+        true
+    }
+}
+
+/// The pixels of a picture whose `factor × factor` samples are all needed (the silhouettes:
+/// [`visibility_of_selected`]); the samples of the `k`-th selected pixel (row-major order) are
+/// stored at `k · factor² + dy · factor + dx`.
+pub struct SampleMask {
+    factor: i64,
+    /// `log2(factor)` when the factor is a power of two (shifts instead of divisions in the
+    /// rasterizer's inner loop).
+    shift: Option<u32>,
+    width: i64,
+    height: i64,
+    /// Per picture pixel, its rank among the selected pixels (`u32::MAX`: not selected).
+    slot: Vec<u32>,
+    /// Per tile of `TILE × TILE` picture pixels, whether any is selected, as a summed-area
+    /// table of `(tiles_x + 1) × (tiles_y + 1)` counts (a triangle over no selected tile is
+    /// skipped whole).
+    tiles: Vec<u32>,
+    tiles_x: i64,
+    selected: usize,
+}
+
+/// The side of a [`SampleMask`] tile, picture pixels.
+const TILE: i64 = 8;
+
+impl SampleMask {
+    /// The mask of a `width × height` picture sampled `factor × factor` per pixel, selecting
+    /// the pixels where `selected` is true (row-major, `width · height` values).
+    pub fn new(width: u32, height: u32, factor: u32, selected: &[bool]) -> Self {
+        let (w, h) = (width as usize, height as usize);
+        assert_eq!(selected.len(), w * h, "one flag per pixel");
+        let (tx, ty) = (w.div_ceil(TILE as usize), h.div_ceil(TILE as usize));
+        let mut slot = vec![u32::MAX; w * h];
+        let mut marked = vec![false; tx * ty];
+        let mut count = 0u32;
+        for (p, _) in selected.iter().enumerate().filter(|(_, &s)| s) {
+            slot[p] = count;
+            count += 1;
+            marked[(p / w) / TILE as usize * tx + (p % w) / TILE as usize] = true;
+        }
+        let mut tiles = vec![0u32; (tx + 1) * (ty + 1)];
+        for y in 0..ty {
+            let mut row = 0u32;
+            for x in 0..tx {
+                row += u32::from(marked[y * tx + x]);
+                tiles[(y + 1) * (tx + 1) + x + 1] = tiles[y * (tx + 1) + x + 1] + row;
+            }
+        }
+        let factor = factor.max(1);
+        Self {
+            factor: factor as i64,
+            shift: factor.is_power_of_two().then(|| factor.trailing_zeros()),
+            width: w as i64,
+            height: h as i64,
+            slot,
+            tiles,
+            tiles_x: tx as i64,
+            selected: count as usize,
+        }
+    }
+
+    /// How many pixels are selected.
+    pub fn selected(&self) -> usize {
+        self.selected
+    }
+
+    /// Where sample `(dx, dy)` of picture pixel `(x, y)` is stored, `None` when the pixel is
+    /// not selected.
+    pub fn sample(&self, x: u32, y: u32, dx: u32, dy: u32) -> Option<usize> {
+        let k = self.slot[y as usize * self.width as usize + x as usize];
+        (k != u32::MAX).then(|| {
+            let f = self.factor as usize;
+            k as usize * f * f + dy as usize * f + dx as usize
+        })
+    }
+}
+
+impl Samples for SampleMask {
+    fn grid(&self) -> (i64, i64) {
+        (self.width * self.factor, self.height * self.factor)
+    }
+
+    #[inline(always)]
+    fn index(&self, x: i64, y: i64) -> Option<usize> {
+        let f = self.factor;
+        let (px, py, dx, dy) = match self.shift {
+            Some(s) => (x >> s, y >> s, x & (f - 1), y & (f - 1)),
+            None => (x / f, y / f, x % f, y % f),
+        };
+        let k = self.slot[(py * self.width + px) as usize];
+        (k != u32::MAX).then(|| (k as i64 * f * f + dy * f + dx) as usize)
+    }
+
+    fn any_in(&self, x0: i64, y0: i64, x1: i64, y1: i64) -> bool {
+        let t = self.factor * TILE;
+        let tiles_y = (self.height + TILE - 1) / TILE;
+        let (x0, y0) = ((x0 / t).max(0), (y0 / t).max(0));
+        let (x1, y1) = ((x1 / t).min(self.tiles_x - 1), (y1 / t).min(tiles_y - 1));
+        if x0 > x1 || y0 > y1 {
+            return false;
+        }
+        let w1 = self.tiles_x + 1;
+        let at = |x: i64, y: i64| self.tiles[(y * w1 + x) as usize] as i64;
+        at(x1 + 1, y1 + 1) - at(x0, y1 + 1) - at(x1 + 1, y0) + at(x0, y0) > 0
+    }
+}
+
+fn rasterize_into<S: Samples>(
     buffer: &mut VisibilityBuffer,
+    samples: &S,
     projection: Projection,
     frame_from_world: &Affine3,
     items: &[DrawItem<'_>],
     only_shadow_casters: bool,
 ) {
-    let (w, h) = (buffer.width as i64, buffer.height as i64);
+    let (w, h) = samples.grid();
     let mut polygon = Vec::with_capacity(4);
     for (item_index, item) in items.iter().enumerate() {
         if only_shadow_casters && !item.casts_shadow {
@@ -365,14 +505,25 @@ fn rasterize_into(
             }
             for k in 1..polygon.len().saturating_sub(1) {
                 let fan = [polygon[0], polygon[k], polygon[k + 1]];
-                raster_triangle(buffer, projection, &fan, item_index as u32, t as u32, w, h);
+                raster_triangle(
+                    buffer,
+                    samples,
+                    projection,
+                    &fan,
+                    item_index as u32,
+                    t as u32,
+                    w,
+                    h,
+                );
             }
         }
     }
 }
 
-fn raster_triangle(
+#[allow(clippy::too_many_arguments)]
+fn raster_triangle<S: Samples>(
     buffer: &mut VisibilityBuffer,
+    samples: &S,
     projection: Projection,
     v: &[ClipVertex; 3],
     item: u32,
@@ -408,7 +559,7 @@ fn raster_triangle(
     let x_end = (max_x.floor() as i64).min(w - 1);
     let y_start = (min_y.ceil() as i64).max(0);
     let y_end = (max_y.floor() as i64).min(h - 1);
-    if x_start > x_end || y_start > y_end {
+    if x_start > x_end || y_start > y_end || !samples.any_in(x_start, y_start, x_end, y_end) {
         return;
     }
     let inv_area = 1.0 / area;
@@ -451,6 +602,9 @@ fn raster_triangle(
         let x_lo = ((lo.ceil() as i64) - 1).max(x_start);
         let x_hi = ((hi.floor() as i64) + 1).min(x_end);
         for x in x_lo..=x_hi {
+            let Some(o) = samples.index(x, y) else {
+                continue;
+            };
             let px = x as f64;
             let l0 = row[0].0 * px + row[0].1;
             let l1 = row[1].0 * px + row[1].1;
@@ -471,7 +625,6 @@ fn raster_triangle(
                     [l0, l1, l2],
                 )
             };
-            let o = (y * w + x) as usize;
             let depth32 = depth as f32;
             if depth32 < buffer.depth_m[o] {
                 buffer.depth_m[o] = depth32;
@@ -497,6 +650,10 @@ pub fn visibility(
     let mut buffer = VisibilityBuffer::new(camera.width, camera.height);
     rasterize_into(
         &mut buffer,
+        &Every {
+            width: camera.width as i64,
+            height: camera.height as i64,
+        },
         Projection::Perspective(*camera),
         camera_from_world,
         items,
@@ -505,7 +662,40 @@ pub fn visibility(
     buffer
 }
 
-struct ShadowMap {
+/// The visibility of the samples of the pixels `mask` selects, seen by `camera` (the picture's
+/// camera [`PinholeCamera::supersampled`] by the mask's factor). Each sample is exactly the
+/// one [`visibility`] finds at that pixel of `camera`; the buffer holds `mask.selected() ·
+/// factor²` samples in [`SampleMask::sample`] order (its `width` is `factor²`, its `height`
+/// the number of selected pixels). Triangles over no selected pixel are skipped whole.
+pub fn visibility_of_selected(
+    camera: &PinholeCamera,
+    camera_from_world: &Affine3,
+    items: &[DrawItem<'_>],
+    mask: &SampleMask,
+) -> VisibilityBuffer {
+    let per_pixel = (mask.factor * mask.factor) as u32;
+    debug_assert_eq!(
+        (camera.width as i64, camera.height as i64),
+        mask.grid(),
+        "the mask's picture sampled by its factor"
+    );
+    let mut buffer = VisibilityBuffer::new(per_pixel, mask.selected as u32);
+    rasterize_into(
+        &mut buffer,
+        mask,
+        Projection::Perspective(*camera),
+        camera_from_world,
+        items,
+        false,
+    );
+    buffer
+}
+
+/// The depth of the shadow casters seen from the first shadowed light over the lighting's
+/// shadow region: it depends on the items and the lights, not on the camera, so every view of
+/// one scene can share it ([`Shader::with_shadow_map`]).
+#[derive(Debug, Clone)]
+pub struct ShadowMap {
     light_from_world: Affine3,
     x0: f64,
     y0: f64,
@@ -514,6 +704,17 @@ struct ShadowMap {
 }
 
 impl ShadowMap {
+    /// The shadow map `lighting` asks for over `items` (its first shadowed light, over its
+    /// shadow region); `None` when it has no shadowed light or no region.
+    pub fn of_lighting(lighting: &Lighting, items: &[DrawItem<'_>]) -> Option<Self> {
+        lighting
+            .lights
+            .iter()
+            .find(|l| l.casts_shadow)
+            .zip(lighting.shadow_region.as_ref())
+            .map(|(light, region)| Self::build(light, region, lighting.shadow_map_px, items))
+    }
+
     fn build(
         light: &DirectionalLight,
         region: &Aabb,
@@ -548,6 +749,10 @@ impl ShadowMap {
         };
         rasterize_into(
             &mut buffer,
+            &Every {
+                width: size_px as i64,
+                height: size_px as i64,
+            },
             Projection::Orthographic { x0, y0, texel },
             &light_from_world,
             items,
@@ -649,7 +854,7 @@ pub struct Shader<'s, 'a> {
     lighting: &'s Lighting,
     /// Per item, in the world frame.
     world: Vec<WorldVertices>,
-    shadow: Option<ShadowMap>,
+    shadow: Option<Cow<'s, ShadowMap>>,
     shadow_light: Option<usize>,
     camera_center_world: [f64; 3],
 }
@@ -662,14 +867,34 @@ impl<'s, 'a> Shader<'s, 'a> {
         items: &'s [DrawItem<'a>],
         lighting: &'s Lighting,
     ) -> Self {
+        let shadow = ShadowMap::of_lighting(lighting, items).map(Cow::Owned);
+        Self::with(camera_from_world, items, lighting, shadow)
+    }
+
+    /// As [`Shader::new`], with the shadow map built beforehand: `shadow` must be
+    /// [`ShadowMap::of_lighting`] of the same `lighting` and `items`.
+    pub fn with_shadow_map(
+        camera_from_world: &Affine3,
+        items: &'s [DrawItem<'a>],
+        lighting: &'s Lighting,
+        shadow: Option<&'s ShadowMap>,
+    ) -> Self {
+        Self::with(
+            camera_from_world,
+            items,
+            lighting,
+            shadow.map(Cow::Borrowed),
+        )
+    }
+
+    fn with(
+        camera_from_world: &Affine3,
+        items: &'s [DrawItem<'a>],
+        lighting: &'s Lighting,
+        shadow: Option<Cow<'s, ShadowMap>>,
+    ) -> Self {
         let world_from_camera = camera_from_world.inverse().unwrap_or(Affine3::IDENTITY);
         let camera_center_world = world_from_camera.translation;
-        let shadow = lighting
-            .lights
-            .iter()
-            .find(|l| l.casts_shadow)
-            .zip(lighting.shadow_region.as_ref())
-            .map(|(light, region)| ShadowMap::build(light, region, lighting.shadow_map_px, items));
         let shadow_light = lighting.lights.iter().position(|l| l.casts_shadow);
         let world = items
             .iter()

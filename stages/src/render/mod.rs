@@ -14,6 +14,10 @@
 //! gets a camera file (intrinsics, the table-from-camera pose, and the pixels each object
 //! covers).
 //!
+//! Cost: only silhouette pixels are sampled `supersampling`² times, the rest once (the same
+//! bytes as sampling all of them, see [`render_picture_shadowed`]), and the views of one
+//! scene share its shadow map ([`LayoutScene`]).
+//!
 //! An object is drawn as MesaTask's reader (`dataset/reconstruct_blender.py`) places it: the
 //! asset's vertices in its table-aligned frame (the frame `mesa assets` measures), moved so
 //! their bounding-box centre is at the origin, scaled per axis to the layout's `size`, turned
@@ -26,6 +30,7 @@ pub mod asset;
 pub mod camera;
 
 use std::collections::BTreeMap;
+use std::sync::OnceLock;
 
 use mesa_schemas::render::{RenderCameraArtifact, RENDER_CAMERA_SCHEMA};
 use mesa_schemas::DatasetLayout;
@@ -36,8 +41,9 @@ use thiserror::Error;
 use crate::image_io::{encode_rgb8, encode_rgba8, ImageError};
 use crate::mesh::{normalize3, Aabb, Affine3, TriMesh};
 use crate::raster::{
-    linear_to_srgb_u8, srgb_u8_to_linear, visibility, DirectionalLight, DrawItem, Lighting, Shader,
-    SurfaceMaterial,
+    linear_to_srgb_u8, srgb_u8_to_linear, visibility, visibility_of_selected, DirectionalLight,
+    DrawItem, Lighting, PinholeCamera, SampleMask, Shader, ShadowMap, SurfaceMaterial,
+    VisibilityBuffer,
 };
 
 pub use asset::{load_render_asset, AssetPart, RenderAsset, RenderAssetError};
@@ -496,41 +502,184 @@ pub fn render_picture(
     lighting: &Lighting,
     supersampling: u32,
 ) -> Picture {
-    let f = supersampling.max(1) as usize;
+    let shadow = ShadowMap::of_lighting(lighting, items);
+    render_picture_shadowed(items, camera, lighting, supersampling, shadow.as_ref())
+}
+
+/// The camera whose pixel `(x, y)` is the first sample, `(0, 0)`, of pixel `(x, y)` of
+/// `camera` sampled `factor × factor` ([`PinholeCamera::supersampled`]): that camera's
+/// intrinsics divided by the factor. For a factor that is a power of two the division is
+/// exact, and so is every sample: the same depth, triangle and barycentrics bit for bit.
+fn first_sample_camera(camera: &PinholeCamera, factor: u32) -> PinholeCamera {
+    let big = camera.supersampled(factor);
+    let k = factor as f64;
+    PinholeCamera {
+        width: camera.width,
+        height: camera.height,
+        fx: big.fx / k,
+        fy: big.fy / k,
+        cx: big.cx / k,
+        cy: big.cy / k,
+    }
+}
+
+/// Which pixels need all their samples: those where the first samples of the pixel and of its
+/// right, lower and lower-right neighbours (which enclose all its samples) or its centre see
+/// different items, grown by one pixel, so that a part thinner than a pixel between first
+/// samples is still found where a neighbour sees it. Everywhere else one item covers the
+/// pixel, and its first sample is the pixel.
+fn silhouette_pixels(first: &VisibilityBuffer, centres: &VisibilityBuffer) -> Vec<bool> {
+    let (w, h) = (first.width as usize, first.height as usize);
+    let mut differs = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let p = y * w + x;
+            let item = first.item[p];
+            let at = |dx: usize, dy: usize| {
+                let (xx, yy) = (x + dx, y + dy);
+                // Past the last row or column the enclosing samples are unknown.
+                if xx >= w || yy >= h {
+                    None
+                } else {
+                    Some(first.item[yy * w + xx])
+                }
+            };
+            differs[p] = centres.item[p] != item
+                || [at(1, 0), at(0, 1), at(1, 1)]
+                    .iter()
+                    .any(|other| *other != Some(item));
+        }
+    }
+    let mut selected = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            if !differs[y * w + x] {
+                continue;
+            }
+            for yy in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+                for xx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                    selected[yy * w + xx] = true;
+                }
+            }
+        }
+    }
+    selected
+}
+
+/// [`render_picture`] with the shadow map built beforehand (`shadow`: [`ShadowMap::of_lighting`]
+/// of the same `lighting` and `items`), so that the views of one scene share it.
+///
+/// Only silhouette pixels ([`silhouette_pixels`]) are sampled `supersampling`² times; the
+/// others are shaded once at their first sample. Where the silhouette test is right (one item
+/// under all samples of a pixel it leaves out) the picture is the same, byte for byte, as
+/// sampling every pixel fully: that pixel's samples all hit that item, and its colour is that
+/// item's shade at its first sample either way.
+pub fn render_picture_shadowed(
+    items: &[DrawItem<'_>],
+    camera: &ViewCamera,
+    lighting: &Lighting,
+    supersampling: u32,
+    shadow: Option<&ShadowMap>,
+) -> Picture {
+    render_selected(
+        items,
+        camera,
+        lighting,
+        supersampling,
+        shadow,
+        silhouette_pixels,
+    )
+}
+
+/// Which pixels are sampled fully, from the first samples and the centres.
+type Selection = fn(&VisibilityBuffer, &VisibilityBuffer) -> Vec<bool>;
+
+/// [`render_picture_shadowed`] with the pixels sampled fully chosen by `select`.
+fn render_selected(
+    items: &[DrawItem<'_>],
+    camera: &ViewCamera,
+    lighting: &Lighting,
+    supersampling: u32,
+    shadow: Option<&ShadowMap>,
+    select: Selection,
+) -> Picture {
+    let f = supersampling.max(1);
     let intrinsics = camera.intrinsics;
-    let big = intrinsics.supersampled(f as u32);
     let camera_from_table = camera
         .table_from_camera
         .inverse()
         .unwrap_or(Affine3::IDENTITY);
-    let vis = visibility(&big, &camera_from_table, items);
-    let shader = Shader::new(&camera_from_table, items, lighting);
+    let shader = Shader::with_shadow_map(&camera_from_table, items, lighting, shadow);
     let (w, h) = (intrinsics.width as usize, intrinsics.height as usize);
-    let bw = big.width as usize;
-    let mut rgba = vec![0u8; w * h * 4];
     // What each pixel's centre (u, v) sees, as the camera files say pixels are sampled: the
     // silhouettes of the picture in SPEC 2's convention, comparable with masks.
     let centres = visibility(&intrinsics, &camera_from_table, items);
-    let instances: Vec<u32> = centres
-        .item
-        .iter()
-        .map(|&i| {
-            if i == u32::MAX {
-                0
-            } else {
-                items[i as usize].instance
+    let instances: Vec<u32> = centres.instance_ids(items);
+    let mut rgba = vec![0u8; w * h * 4];
+    let mut put = |p: usize, color: [f32; 3], alpha: u8| {
+        for k in 0..3 {
+            rgba[p * 4 + k] = linear_to_srgb_u8(color[k]);
+        }
+        rgba[p * 4 + 3] = alpha;
+    };
+    if f == 1 {
+        for (p, &item) in centres.item.iter().enumerate() {
+            if item != u32::MAX {
+                put(
+                    p,
+                    shader.shade(item, centres.triangle[p], centres.barycentric[p]),
+                    255,
+                );
             }
-        })
-        .collect();
-    // (drawn item, first sample index, samples) of the pixel being resolved.
+        }
+        return Picture {
+            width: intrinsics.width,
+            height: intrinsics.height,
+            rgba,
+            instances,
+        };
+    }
+    let first = visibility(
+        &first_sample_camera(&intrinsics, f),
+        &camera_from_table,
+        items,
+    );
+    let mask = SampleMask::new(
+        intrinsics.width,
+        intrinsics.height,
+        f,
+        &select(&first, &centres),
+    );
+    let samples = visibility_of_selected(
+        &intrinsics.supersampled(f),
+        &camera_from_table,
+        items,
+        &mask,
+    );
+    let f = f as usize;
+    // (drawn item, sample index, samples) of the pixel being resolved.
     let mut hits: Vec<(u32, usize, usize)> = Vec::with_capacity(f * f);
     for y in 0..h {
         for x in 0..w {
+            let p = y * w + x;
+            if mask.sample(x as u32, y as u32, 0, 0).is_none() {
+                let item = first.item[p];
+                if item != u32::MAX {
+                    put(
+                        p,
+                        shader.shade(item, first.triangle[p], first.barycentric[p]),
+                        255,
+                    );
+                }
+                continue;
+            }
             hits.clear();
             for dy in 0..f {
                 for dx in 0..f {
-                    let o = (y * f + dy) * bw + x * f + dx;
-                    let item = vis.item[o];
+                    let o = mask
+                        .sample(x as u32, y as u32, dx as u32, dy as u32)
+                        .expect("a selected pixel");
+                    let item = samples.item[o];
                     if item == u32::MAX {
                         continue;
                     }
@@ -540,22 +689,22 @@ pub fn render_picture(
                     }
                 }
             }
-            let p = y * w + x;
             let covered: usize = hits.iter().map(|(_, _, n)| n).sum();
             if covered == 0 {
                 continue;
             }
             let mut acc = [0f32; 3];
             for &(item, o, n) in &hits {
-                let c = shader.shade(item, vis.triangle[o], vis.barycentric[o]);
+                let c = shader.shade(item, samples.triangle[o], samples.barycentric[o]);
                 for k in 0..3 {
                     acc[k] += c[k] * n as f32;
                 }
             }
-            for k in 0..3 {
-                rgba[p * 4 + k] = linear_to_srgb_u8(acc[k] / covered as f32);
-            }
-            rgba[p * 4 + 3] = ((covered * 255 + f * f / 2) / (f * f)) as u8;
+            put(
+                p,
+                acc.map(|a| a / covered as f32),
+                ((covered * 255 + f * f / 2) / (f * f)) as u8,
+            );
         }
     }
     Picture {
@@ -620,6 +769,10 @@ pub struct LayoutScene<'a> {
     pub frame: Aabb,
     /// The lights.
     pub lighting: Lighting,
+    /// The shadow map of `lighting` over the objects and the table, built by the first view
+    /// and shared by the others (it does not depend on the camera); so `lighting` and
+    /// `objects` must not change once a view is rendered.
+    shadow: OnceLock<Option<ShadowMap>>,
 }
 
 impl<'a> LayoutScene<'a> {
@@ -647,6 +800,7 @@ impl<'a> LayoutScene<'a> {
             table,
             frame,
             lighting: lighting(Some(shadow_region), config.shadows),
+            shadow: OnceLock::new(),
         }
     }
 
@@ -675,7 +829,16 @@ impl<'a> LayoutScene<'a> {
         config: &RenderConfig,
     ) -> Result<RenderedView, RenderError> {
         let items = draw_items(self.objects, Some(&self.table));
-        let picture = render_picture(&items, camera, &self.lighting, config.supersampling);
+        let shadow = self
+            .shadow
+            .get_or_init(|| ShadowMap::of_lighting(&self.lighting, &items));
+        let picture = render_picture_shadowed(
+            &items,
+            camera,
+            &self.lighting,
+            config.supersampling,
+            shadow.as_ref(),
+        );
         let pixels = picture.instance_pixels();
         let visible_px = self
             .objects
@@ -750,6 +913,212 @@ mod tests {
     use super::*;
     use approx::assert_abs_diff_eq;
     use proptest::prelude::*;
+
+    /// The picture of sampling every pixel `f × f` times and shading each item once per
+    /// pixel at its first sample: the renderer before silhouette sampling, kept as the
+    /// reference.
+    fn every_sample_reference(
+        items: &[DrawItem<'_>],
+        camera: &ViewCamera,
+        lighting: &Lighting,
+        f: usize,
+    ) -> Vec<u8> {
+        let intrinsics = camera.intrinsics;
+        let big = intrinsics.supersampled(f as u32);
+        let camera_from_table = camera.table_from_camera.inverse().expect("pose");
+        let vis = visibility(&big, &camera_from_table, items);
+        let shader = Shader::new(&camera_from_table, items, lighting);
+        let (w, h, bw) = (
+            intrinsics.width as usize,
+            intrinsics.height as usize,
+            big.width as usize,
+        );
+        let mut rgba = vec![0u8; w * h * 4];
+        for y in 0..h {
+            for x in 0..w {
+                let mut hits: Vec<(u32, usize, usize)> = Vec::new();
+                for dy in 0..f {
+                    for dx in 0..f {
+                        let o = (y * f + dy) * bw + x * f + dx;
+                        let item = vis.item[o];
+                        if item == u32::MAX {
+                            continue;
+                        }
+                        match hits.iter_mut().find(|(i, _, _)| *i == item) {
+                            Some((_, _, n)) => *n += 1,
+                            None => hits.push((item, o, 1)),
+                        }
+                    }
+                }
+                let covered: usize = hits.iter().map(|(_, _, n)| n).sum();
+                if covered == 0 {
+                    continue;
+                }
+                let mut acc = [0f32; 3];
+                for &(item, o, n) in &hits {
+                    let c = shader.shade(item, vis.triangle[o], vis.barycentric[o]);
+                    for k in 0..3 {
+                        acc[k] += c[k] * n as f32;
+                    }
+                }
+                let p = y * w + x;
+                for k in 0..3 {
+                    rgba[p * 4 + k] = linear_to_srgb_u8(acc[k] / covered as f32);
+                }
+                rgba[p * 4 + 3] = ((covered * 255 + f * f / 2) / (f * f)) as u8;
+            }
+        }
+        rgba
+    }
+
+    /// Boxes at several sizes and turns, a thin tilted slab and a pole thinner than a pixel,
+    /// on the table, in each scene view.
+    #[test]
+    fn silhouette_sampling_gives_the_pictures_of_sampling_every_pixel() {
+        let turned = |yaw: f64, pitch: f64, at: [f64; 3]| {
+            let (cy, sy) = (yaw.cos(), yaw.sin());
+            let (cp, sp) = (pitch.cos(), pitch.sin());
+            let yaw_m = Affine3 {
+                linear: [[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]],
+                translation: [0.0; 3],
+            };
+            let pitch_m = Affine3 {
+                linear: [[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]],
+                translation: [0.0; 3],
+            };
+            Affine3::from_translation(at).mul(&yaw_m.mul(&pitch_m))
+        };
+        let shapes = [
+            (
+                TriMesh::cuboid([0.2, 0.15, 0.1]),
+                turned(0.3, 0.0, [0.3, 0.3, 0.05]),
+            ),
+            (
+                TriMesh::cuboid([0.05, 0.05, 0.25]),
+                turned(1.1, 0.2, [0.7, 0.4, 0.13]),
+            ),
+            (
+                TriMesh::cuboid([0.3, 0.2, 0.004]),
+                turned(-0.4, 0.5, [0.5, 0.15, 0.08]),
+            ),
+            (
+                TriMesh::cuboid([0.008, 0.008, 0.3]),
+                turned(0.0, 0.3, [0.2, 0.5, 0.15]),
+            ),
+            (
+                TriMesh::cuboid([0.12, 0.12, 0.12]),
+                turned(0.8, 0.8, [0.8, 0.2, 0.08]),
+            ),
+        ];
+        let materials: Vec<SurfaceMaterial> = (0..shapes.len())
+            .map(|i| {
+                SurfaceMaterial::plain([0.2 + 0.15 * i as f32, 0.5, 0.8 - 0.1 * i as f32], 0.3)
+            })
+            .collect();
+        let table = TableGeometry::new([0.0, 100.0, 0.0, 60.0], None);
+        let mut items: Vec<DrawItem<'_>> = shapes
+            .iter()
+            .zip(&materials)
+            .enumerate()
+            .map(|(i, ((mesh, pose), material))| DrawItem {
+                mesh,
+                world_from_mesh: *pose,
+                material,
+                instance: i as u32 + 1,
+                casts_shadow: true,
+                vertex_colors: None,
+            })
+            .collect();
+        items.push(DrawItem {
+            mesh: &table.slab,
+            world_from_mesh: Affine3::IDENTITY,
+            material: &table.slab_material,
+            instance: 0,
+            casts_shadow: false,
+            vertex_colors: None,
+        });
+        let frame = camera::scene_box([0.0, 1.0, 0.0, 0.6], 0.35);
+        let region = Aabb {
+            min: [-0.1, -0.1, -0.05],
+            max: [1.1, 0.7, 0.4],
+        };
+        let light = lighting(Some(region), true);
+        let (w, h) = (160, 120);
+        let mut selected_share = Vec::new();
+        for view in SceneView::ALL {
+            let cam = camera::scene_camera(view, &frame, w, h, 39.6, 1.5);
+            let reference = every_sample_reference(&items, &cam, &light, 2);
+            let picture = render_picture(&items, &cam, &light, 2);
+            let differing = reference
+                .chunks_exact(4)
+                .zip(picture.rgba.chunks_exact(4))
+                .filter(|(a, b)| a != b)
+                .count();
+            assert_eq!(differing, 0, "{view:?}: {differing} pixels differ");
+            // Every pixel selected: the sparse pass is the full one.
+            let shadow = ShadowMap::of_lighting(&light, &items);
+            let all = render_selected(&items, &cam, &light, 2, shadow.as_ref(), |f, _| {
+                vec![true; f.item.len()]
+            });
+            assert_eq!(all.rgba, reference, "{view:?}");
+            // Control: no pixel selected (each shaded once, fully covered, at its first
+            // sample) loses the anti-aliased edges, and the comparison sees it.
+            let none = render_selected(&items, &cam, &light, 2, shadow.as_ref(), |f, _| {
+                vec![false; f.item.len()]
+            });
+            let lost = reference
+                .chunks_exact(4)
+                .zip(none.rgba.chunks_exact(4))
+                .filter(|(a, b)| a != b)
+                .count();
+            assert!(lost > 100, "{view:?}: {lost}");
+            let first = visibility(
+                &first_sample_camera(&cam.intrinsics, 2),
+                &cam.table_from_camera.inverse().expect("pose"),
+                &items,
+            );
+            let centres = visibility(
+                &cam.intrinsics,
+                &cam.table_from_camera.inverse().expect("pose"),
+                &items,
+            );
+            let chosen = silhouette_pixels(&first, &centres);
+            selected_share.push(chosen.iter().filter(|&&c| c).count() as f64 / (w * h) as f64);
+        }
+        // Silhouette sampling samples a minority of the pixels fully.
+        assert!(
+            selected_share.iter().all(|&s| s < 0.5),
+            "{selected_share:?}"
+        );
+
+        // The limit: a part narrower than half a pixel can fall between the first samples and
+        // the centres all along its length (here a 1.5 mm pole, about 0.2 px wide): those
+        // pixels keep the colour of what is behind it. Only they differ.
+        let pole = TriMesh::cuboid([0.0015, 0.0015, 0.3]);
+        let pole_material = SurfaceMaterial::plain([0.9, 0.1, 0.1], 0.3);
+        items.push(DrawItem {
+            mesh: &pole,
+            world_from_mesh: turned(0.0, 0.3, [0.45, 0.5, 0.15]),
+            material: &pole_material,
+            instance: 9,
+            casts_shadow: true,
+            vertex_colors: None,
+        });
+        for view in SceneView::ALL {
+            let cam = camera::scene_camera(view, &frame, w, h, 39.6, 1.5);
+            let reference = every_sample_reference(&items, &cam, &light, 2);
+            let picture = render_picture(&items, &cam, &light, 2);
+            let differing = reference
+                .chunks_exact(4)
+                .zip(picture.rgba.chunks_exact(4))
+                .filter(|(a, b)| a != b)
+                .count();
+            assert!(
+                differing <= h as usize / 2,
+                "{view:?}: {differing} pixels differ"
+            );
+        }
+    }
 
     proptest! {
         /// Placed as MesaTask's reader places it: the asset's box centre lands on `position`
