@@ -8,9 +8,9 @@
 #
 #   bench/check_vs_fcl.sh [DIR]     (DIR: where the demo dataset goes; default a temp folder)
 #
-# Needs a Python with trimesh, numpy, scipy and python-fcl:
+# Needs a Python with trimesh, numpy, scipy, networkx (trimesh's fix_normals) and python-fcl:
 #   python3 -m venv /work/venv-check
-#   /work/venv-check/bin/pip install trimesh numpy scipy python-fcl
+#   /work/venv-check/bin/pip install trimesh numpy scipy networkx python-fcl
 # (CHECK_BENCH_PYTHON chooses another interpreter.)
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
