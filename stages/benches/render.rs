@@ -67,7 +67,7 @@ fn bench(c: &mut Criterion) {
             SceneView::ALL
                 .iter()
                 .map(|view| scene.render_view(*view, &config).expect("render"))
-                .count()
+                .collect::<Vec<_>>()
         })
     });
     let no_shadows = RenderConfig {

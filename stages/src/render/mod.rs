@@ -673,38 +673,13 @@ fn render_selected(
                 }
                 continue;
             }
-            hits.clear();
-            for dy in 0..f {
-                for dx in 0..f {
-                    let o = mask
-                        .sample(x as u32, y as u32, dx as u32, dy as u32)
-                        .expect("a selected pixel");
-                    let item = samples.item[o];
-                    if item == u32::MAX {
-                        continue;
-                    }
-                    match hits.iter_mut().find(|(i, _, _)| *i == item) {
-                        Some((_, _, n)) => *n += 1,
-                        None => hits.push((item, o, 1)),
-                    }
-                }
+            let pixel = (0..f * f).map(|j| {
+                mask.sample(x as u32, y as u32, (j % f) as u32, (j / f) as u32)
+                    .expect("a selected pixel")
+            });
+            if let Some((color, alpha)) = resolve(&shader, &samples, pixel, f * f, &mut hits) {
+                put(p, color, alpha);
             }
-            let covered: usize = hits.iter().map(|(_, _, n)| n).sum();
-            if covered == 0 {
-                continue;
-            }
-            let mut acc = [0f32; 3];
-            for &(item, o, n) in &hits {
-                let c = shader.shade(item, samples.triangle[o], samples.barycentric[o]);
-                for k in 0..3 {
-                    acc[k] += c[k] * n as f32;
-                }
-            }
-            put(
-                p,
-                acc.map(|a| a / covered as f32),
-                ((covered * 255 + f * f / 2) / (f * f)) as u8,
-            );
         }
     }
     Picture {
@@ -713,6 +688,45 @@ fn render_selected(
         rgba,
         instances,
     }
+}
+
+/// The colour and alpha of a pixel from its `per_pixel` samples (`samples`: their indices in
+/// `buffer`, in order): each item hit is shaded once, at its first sample, and weighted by its
+/// samples; the mean is over the samples that hit something, alpha their fraction. `None`
+/// when no sample hits anything. `hits` is scratch space.
+fn resolve(
+    shader: &Shader<'_, '_>,
+    buffer: &VisibilityBuffer,
+    samples: impl Iterator<Item = usize>,
+    per_pixel: usize,
+    hits: &mut Vec<(u32, usize, usize)>,
+) -> Option<([f32; 3], u8)> {
+    hits.clear();
+    for o in samples {
+        let item = buffer.item[o];
+        if item == u32::MAX {
+            continue;
+        }
+        match hits.iter_mut().find(|(i, _, _)| *i == item) {
+            Some((_, _, n)) => *n += 1,
+            None => hits.push((item, o, 1)),
+        }
+    }
+    let covered: usize = hits.iter().map(|(_, _, n)| n).sum();
+    if covered == 0 {
+        return None;
+    }
+    let mut acc = [0f32; 3];
+    for &(item, o, n) in hits.iter() {
+        let c = shader.shade(item, buffer.triangle[o], buffer.barycentric[o]);
+        for k in 0..3 {
+            acc[k] += c[k] * n as f32;
+        }
+    }
+    Some((
+        acc.map(|a| a / covered as f32),
+        ((covered * 255 + per_pixel / 2) / per_pixel) as u8,
+    ))
 }
 
 /// One rendered view: its picture (PNG) and camera file.
@@ -914,9 +928,9 @@ mod tests {
     use approx::assert_abs_diff_eq;
     use proptest::prelude::*;
 
-    /// The picture of sampling every pixel `f × f` times and shading each item once per
-    /// pixel at its first sample: the renderer before silhouette sampling, kept as the
-    /// reference.
+    /// The picture of sampling every pixel `f × f` times (a full supersampled visibility
+    /// buffer) and resolving each pixel as the renderer does: the renderer before silhouette
+    /// sampling, kept as the reference for which samples a pixel has.
     fn every_sample_reference(
         items: &[DrawItem<'_>],
         camera: &ViewCamera,
@@ -934,38 +948,17 @@ mod tests {
             big.width as usize,
         );
         let mut rgba = vec![0u8; w * h * 4];
+        let mut hits = Vec::new();
         for y in 0..h {
             for x in 0..w {
-                let mut hits: Vec<(u32, usize, usize)> = Vec::new();
-                for dy in 0..f {
-                    for dx in 0..f {
-                        let o = (y * f + dy) * bw + x * f + dx;
-                        let item = vis.item[o];
-                        if item == u32::MAX {
-                            continue;
-                        }
-                        match hits.iter_mut().find(|(i, _, _)| *i == item) {
-                            Some((_, _, n)) => *n += 1,
-                            None => hits.push((item, o, 1)),
-                        }
-                    }
-                }
-                let covered: usize = hits.iter().map(|(_, _, n)| n).sum();
-                if covered == 0 {
-                    continue;
-                }
-                let mut acc = [0f32; 3];
-                for &(item, o, n) in &hits {
-                    let c = shader.shade(item, vis.triangle[o], vis.barycentric[o]);
+                let pixel = (0..f * f).map(|j| (y * f + j / f) * bw + x * f + j % f);
+                if let Some((color, alpha)) = resolve(&shader, &vis, pixel, f * f, &mut hits) {
+                    let p = y * w + x;
                     for k in 0..3 {
-                        acc[k] += c[k] * n as f32;
+                        rgba[p * 4 + k] = linear_to_srgb_u8(color[k]);
                     }
+                    rgba[p * 4 + 3] = alpha;
                 }
-                let p = y * w + x;
-                for k in 0..3 {
-                    rgba[p * 4 + k] = linear_to_srgb_u8(acc[k] / covered as f32);
-                }
-                rgba[p * 4 + 3] = ((covered * 255 + f * f / 2) / (f * f)) as u8;
             }
         }
         rgba
