@@ -10,7 +10,10 @@
 //! - a person's fields are never changed, every field mesa writes has its source; the API key
 //!   is in no file and no output;
 //! - after the offline backend, `mesa assets` keeps the index record bytes of the assets whose
-//!   annotation did not change (and changes those whose did: the control).
+//!   annotation did not change (and changes those whose did: the control);
+//! - `assets/annotate/rejects.jsonl` (and `instance_rejects.jsonl`) hold the last run's
+//!   rejects: a run that rejects nothing removes the earlier file (the control: a run that
+//!   rejects writes it again).
 
 mod common;
 
@@ -177,8 +180,9 @@ fn the_live_path_validates_rejects_caches_and_keeps_a_persons_fields() {
         }
     }
     // Four replies rejected, each with its reason.
-    let rejects: Vec<Value> = std::fs::read_to_string(dir.join("assets/annotate/rejects.jsonl"))
-        .expect("rejects")
+    let rejects_path = dir.join("assets/annotate/rejects.jsonl");
+    let rejects_text = std::fs::read_to_string(&rejects_path).expect("rejects");
+    let rejects: Vec<Value> = rejects_text
         .lines()
         .map(|l| serde_json::from_str(l).expect("json line"))
         .collect();
@@ -251,11 +255,22 @@ fn the_live_path_validates_rejects_caches_and_keeps_a_persons_fields() {
     let (success, out2) = annotate(dir, &["--backend", "llm"]);
     assert!(success, "{out2}");
     assert!(out2.contains("0 to annotate"), "{out2}");
+    // That run rejected nothing, so the first run's rejects are gone (they would be stale).
+    assert!(!rejects_path.exists(), "stale rejects left: {out2}");
+    assert!(
+        out2.contains("removed assets/annotate/rejects.jsonl"),
+        "{out2}"
+    );
     let (success, out3) = annotate(dir, &["--backend", "llm", "--force"]);
     assert!(success, "{out3}");
     assert!(
         out3.contains("mock-vlm: 0 requests, 6 cache hits"),
         "{out3}"
+    );
+    // The control: a run that rejects (the cached replies, validated again) writes them again.
+    assert_eq!(
+        std::fs::read_to_string(&rejects_path).expect("rejects written again"),
+        rejects_text
     );
     assert_eq!(server.requests(), 6, "zero requests on reruns");
     assert_eq!(
@@ -267,7 +282,30 @@ fn the_live_path_validates_rejects_caches_and_keeps_a_persons_fields() {
     let (success, out4) = annotate(dir, &["--backend", "llm", "--force"]);
     assert!(success, "{out4}");
     assert_eq!(server.requests(), 12, "{out4}");
-    assert_no_key(dir, &[&out, &out2, &out3, &out4]);
+    assert!(rejects_path.exists(), "{out4}");
+
+    // A run that annotates and whose replies are all valid leaves no rejects behind.
+    let valid = MockServer::start(|request, _| {
+        let mut body = request.json();
+        body["seed"] = json!(2);
+        Reply::completion(&model(&body))
+    });
+    let config = std::fs::read_to_string(dir.join("mesa.toml")).expect("config");
+    std::fs::write(
+        dir.join("mesa.toml"),
+        config.replace(&server.base_url, &valid.base_url),
+    )
+    .expect("config");
+    std::fs::remove_dir_all(dir.join(".mesa/cache/chat")).expect("rm cache");
+    let (success, out5) = annotate(dir, &["--backend", "llm", "--force"]);
+    assert!(success, "{out5}");
+    assert!(
+        out5.contains("2 annotated") && out5.contains("0 replies rejected"),
+        "{out5}"
+    );
+    assert_eq!(valid.requests(), 2, "{out5}");
+    assert!(!rejects_path.exists(), "stale rejects left: {out5}");
+    assert_no_key(dir, &[&out, &out2, &out3, &out4, &out5]);
 }
 
 /// A provider's output for a batch input: each request answered by the model, in reverse
@@ -552,10 +590,14 @@ fn instances_get_labels_from_their_crop_and_the_photo_and_keep_a_persons_text() 
         .expect("rejects");
     assert_eq!(rejects.lines().count(), 1);
     assert!(rejects.contains("not valid JSON"), "{rejects}");
-    // A rerun sends nothing.
+    // A rerun sends nothing, rejects nothing, and leaves no stale rejects.
     let (success, out2) = annotate_instances(dir, &["--backend", "llm"]);
     assert!(success, "{out2}");
     assert_eq!(server.requests(), 3);
+    assert!(
+        !dir.join("assets/annotate/instance_rejects.jsonl").exists(),
+        "{out2}"
+    );
     // The written file is still a valid input: lift reads it.
     let lift = mesa()
         .args(["lift", "--progress", "off"])
