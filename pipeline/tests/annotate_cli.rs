@@ -10,7 +10,17 @@
 //! - a person's fields are never changed, every field mesa writes has its source; the API key
 //!   is in no file and no output;
 //! - after the offline backend, `mesa assets` keeps the index record bytes of the assets whose
-//!   annotation did not change (and changes those whose did: the control).
+//!   annotation did not change (and changes those whose did: the control);
+//! - `assets/annotate/rejects.jsonl` (and `instance_rejects.jsonl`) hold the last run's
+//!   rejects: a run that rejects nothing removes the earlier file (the control: a run that
+//!   rejects writes it again);
+//! - MesaTask's retrieval (scripts/mesatask_retrieval.py, its reading re-implemented; a Python
+//!   with numpy and compress_pickle from `MESA_PYTHON` or `.venv-tools`, SKIPPED without one
+//!   unless `MESA_REQUIRE_TOOLS`) reads every uid's size of the merged file, in each bbox form,
+//!   as mesa's reader does, filters on onTable / mark_deletion / is_composite as mesa does,
+//!   reads a person's entries as before the merge, and reads the release's
+//!   Asset_annotation.json and sbert_text_features.pkl; the controls are forms mesa takes and
+//!   MesaTask does not read the same, and a merge that changes a person's bbox.
 
 mod common;
 
@@ -38,21 +48,32 @@ fn person_annotations() -> Value {
     })
 }
 
-/// A library of three synthetic assets, indexed by `mesa assets`.
-fn dataset(base_url: &str) -> tempfile::TempDir {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let library = dir.path().join("assets/library");
-    std::fs::create_dir_all(&library).expect("mkdir");
-    for (uid, mesh) in [
+/// The three synthetic assets of [`dataset`].
+fn library() -> Vec<(&'static str, Mesh)> {
+    vec![
         ("mug_white", Mesh::vessel(0.04, 0.095, 0.004, 0.007)),
         ("bowl_blue", Mesh::vessel(0.075, 0.06, 0.004, 0.006)),
         ("book_red", Mesh::cuboid([0.15, 0.03, 0.22])),
-    ] {
+    ]
+}
+
+/// A library of three synthetic assets with the person's annotations, indexed by `mesa assets`.
+fn dataset(base_url: &str) -> tempfile::TempDir {
+    dataset_of(base_url, library(), &person_annotations())
+}
+
+/// A library of `assets` with `annotations` (written as a person would), indexed by
+/// `mesa assets`.
+fn dataset_of(base_url: &str, assets: Vec<(&str, Mesh)>, annotations: &Value) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let library = dir.path().join("assets/library");
+    std::fs::create_dir_all(&library).expect("mkdir");
+    for (uid, mesh) in assets {
         std::fs::write(library.join(format!("{uid}.glb")), mesh.to_glb(1.0)).expect("write");
     }
     std::fs::write(
         dir.path().join("assets/annotations.json"),
-        serde_json::to_vec_pretty(&person_annotations()).expect("json"),
+        serde_json::to_vec_pretty(annotations).expect("json"),
     )
     .expect("write");
     std::fs::write(
@@ -177,8 +198,9 @@ fn the_live_path_validates_rejects_caches_and_keeps_a_persons_fields() {
         }
     }
     // Four replies rejected, each with its reason.
-    let rejects: Vec<Value> = std::fs::read_to_string(dir.join("assets/annotate/rejects.jsonl"))
-        .expect("rejects")
+    let rejects_path = dir.join("assets/annotate/rejects.jsonl");
+    let rejects_text = std::fs::read_to_string(&rejects_path).expect("rejects");
+    let rejects: Vec<Value> = rejects_text
         .lines()
         .map(|l| serde_json::from_str(l).expect("json line"))
         .collect();
@@ -251,11 +273,22 @@ fn the_live_path_validates_rejects_caches_and_keeps_a_persons_fields() {
     let (success, out2) = annotate(dir, &["--backend", "llm"]);
     assert!(success, "{out2}");
     assert!(out2.contains("0 to annotate"), "{out2}");
+    // That run rejected nothing, so the first run's rejects are gone (they would be stale).
+    assert!(!rejects_path.exists(), "stale rejects left: {out2}");
+    assert!(
+        out2.contains("removed assets/annotate/rejects.jsonl"),
+        "{out2}"
+    );
     let (success, out3) = annotate(dir, &["--backend", "llm", "--force"]);
     assert!(success, "{out3}");
     assert!(
         out3.contains("mock-vlm: 0 requests, 6 cache hits"),
         "{out3}"
+    );
+    // The control: a run that rejects (the cached replies, validated again) writes them again.
+    assert_eq!(
+        std::fs::read_to_string(&rejects_path).expect("rejects written again"),
+        rejects_text
     );
     assert_eq!(server.requests(), 6, "zero requests on reruns");
     assert_eq!(
@@ -267,7 +300,42 @@ fn the_live_path_validates_rejects_caches_and_keeps_a_persons_fields() {
     let (success, out4) = annotate(dir, &["--backend", "llm", "--force"]);
     assert!(success, "{out4}");
     assert_eq!(server.requests(), 12, "{out4}");
-    assert_no_key(dir, &[&out, &out2, &out3, &out4]);
+    assert!(rejects_path.exists(), "{out4}");
+
+    // A run that annotates and whose replies are all valid leaves no rejects behind.
+    let valid = MockServer::start(|request, _| {
+        let mut body = request.json();
+        body["seed"] = json!(2);
+        Reply::completion(&model(&body))
+    });
+    let config = std::fs::read_to_string(dir.join("mesa.toml")).expect("config");
+    std::fs::write(
+        dir.join("mesa.toml"),
+        config.replace(&server.base_url, &valid.base_url),
+    )
+    .expect("config");
+    std::fs::remove_dir_all(dir.join(".mesa/cache/chat")).expect("rm cache");
+    let (success, out5) = annotate(dir, &["--backend", "llm", "--force"]);
+    assert!(success, "{out5}");
+    assert!(
+        out5.contains("2 annotated") && out5.contains("0 replies rejected"),
+        "{out5}"
+    );
+    assert_eq!(valid.requests(), 2, "{out5}");
+    assert!(!rejects_path.exists(), "stale rejects left: {out5}");
+    assert_no_key(dir, &[&out, &out2, &out3, &out4, &out5]);
+
+    // MesaTask's retrieval reads the file the live path merged as mesa does.
+    if let Some(python) = common::python_with("numpy, compress_pickle", "MesaTask's reader") {
+        let path = dir.join("assets/annotations.json");
+        let after = mesatask_reads(&python, &path, &[]).0;
+        assert_eq!(disagreements_with_mesa(&after, &path), Vec::<String>::new());
+        let before = mesatask_reads_value(&python, &person_annotations());
+        assert_eq!(
+            changed_person_reads(&person_annotations(), &before, &after),
+            Vec::<String>::new()
+        );
+    }
 }
 
 /// A provider's output for a batch input: each request answered by the model, in reverse
@@ -552,10 +620,14 @@ fn instances_get_labels_from_their_crop_and_the_photo_and_keep_a_persons_text() 
         .expect("rejects");
     assert_eq!(rejects.lines().count(), 1);
     assert!(rejects.contains("not valid JSON"), "{rejects}");
-    // A rerun sends nothing.
+    // A rerun sends nothing, rejects nothing, and leaves no stale rejects.
     let (success, out2) = annotate_instances(dir, &["--backend", "llm"]);
     assert!(success, "{out2}");
     assert_eq!(server.requests(), 3);
+    assert!(
+        !dir.join("assets/annotate/instance_rejects.jsonl").exists(),
+        "{out2}"
+    );
     // The written file is still a valid input: lift reads it.
     let lift = mesa()
         .args(["lift", "--progress", "off"])
@@ -702,5 +774,366 @@ fn bad_usage_and_missing_inputs_say_what_to_do() {
     assert!(
         stderr.contains("MESA_ANNOTATE_UNSET_KEY") && stderr.contains("[annotations.llm]"),
         "{stderr}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// MesaTask's retrieval as the reader of the merged file (scripts/mesatask_retrieval.py).
+
+/// scripts/mesatask_retrieval.py on `annotations` with `extra` arguments: its per-uid lines by
+/// uid, and its other lines in order.
+fn mesatask_reads(
+    python: &Path,
+    annotations: &Path,
+    extra: &[&str],
+) -> (BTreeMap<String, Value>, Vec<Value>) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/mesatask_retrieval.py");
+    let out = std::process::Command::new(python)
+        .arg(script)
+        .arg(annotations)
+        .args(extra)
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "mesatask_retrieval.py {}: {}",
+        annotations.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (mut by_uid, mut others) = (BTreeMap::new(), Vec::new());
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        let value: Value = serde_json::from_str(line).expect("a JSON line");
+        match value["uid"].as_str() {
+            Some(uid) => {
+                by_uid.insert(uid.to_owned(), value);
+            }
+            None => others.push(value),
+        }
+    }
+    (by_uid, others)
+}
+
+/// [`mesatask_reads`] of an annotation document (written to a scratch file).
+fn mesatask_reads_value(python: &Path, annotations: &Value) -> BTreeMap<String, Value> {
+    let scratch = tempfile::tempdir().expect("tempdir");
+    let path = scratch.path().join("annotations.json");
+    std::fs::write(&path, serde_json::to_vec_pretty(annotations).expect("json")).expect("write");
+    mesatask_reads(python, &path, &[]).0
+}
+
+/// Where MesaTask's reading of `annotations` (`reads`) and mesa's reader disagree, one line per
+/// uid and field: the size ([x, z, y], within 1e-9, or both without one) and whether the asset
+/// passes the retrieval filter (onTable, mark_deletion, is_composite).
+fn disagreements_with_mesa(reads: &BTreeMap<String, Value>, annotations: &Path) -> Vec<String> {
+    let ours = mesa_stages::annotations::Annotations::read(annotations).expect("mesa reads it");
+    let mut out = Vec::new();
+    let uids: Vec<&str> = ours.iter().map(|(uid, _)| uid).collect();
+    let theirs: Vec<&str> = reads.keys().map(String::as_str).collect();
+    if uids != theirs {
+        out.push(format!("uids: mesa {uids:?}, MesaTask {theirs:?}"));
+    }
+    for (uid, annotation) in ours.iter() {
+        let Some(read) = reads.get(uid) else { continue };
+        let size: Option<Vec<f64>> = read["size"]
+            .as_array()
+            .map(|a| a.iter().map(|v| v.as_f64().expect("a number")).collect());
+        let mesa_size = annotation.bbox.map(|b| b.size_table_frame());
+        let same = match (&size, &mesa_size) {
+            (Some(t), Some(o)) => {
+                t.len() == 3 && t.iter().zip(o).all(|(t, o)| (t - o).abs() <= 1e-9)
+            }
+            (None, None) => true,
+            _ => false,
+        };
+        if !same {
+            out.push(format!(
+                "{uid}: size {size:?} (MesaTask; {}) but {mesa_size:?} (mesa)",
+                read["problem"]
+            ));
+        }
+        if read["kept"].as_bool() != Some(annotation.rejection().is_none()) {
+            out.push(format!(
+                "{uid}: MesaTask's filter keeps it: {} (onTable {}, mark_deletion {}, \
+                 is_composite {}), mesa's rejects it for {:?}",
+                read["kept"],
+                read["on_table"],
+                read["mark_deletion"],
+                read["is_composite"],
+                annotation.rejection()
+            ));
+        }
+    }
+    out
+}
+
+/// Which reads of a person's entries (`original`) changed between `before` and `after`: each
+/// read of fields the person set (the size of an entry with a bbox in any form; onTable; the
+/// filter's verdict when the person's fields decide it; mark_deletion and is_composite, which
+/// mesa never writes).
+fn changed_person_reads(
+    original: &Value,
+    before: &BTreeMap<String, Value>,
+    after: &BTreeMap<String, Value>,
+) -> Vec<String> {
+    let mut out = Vec::new();
+    for (uid, entry) in original.as_object().expect("an object") {
+        let (Some(b), Some(a)) = (before.get(uid), after.get(uid)) else {
+            out.push(format!("{uid}: not read before or after the merge"));
+            continue;
+        };
+        let has = |keys: &[&str]| keys.iter().any(|k| entry.get(*k).is_some());
+        let mut keys = vec!["mark_deletion", "is_composite"];
+        if has(&["bbox", "min_point", "max_point"]) {
+            keys.extend(["size", "problem", "breaks_query"]);
+        }
+        if has(&["onTable"]) {
+            keys.push("on_table");
+        }
+        if has(&["onTable"]) || b["mark_deletion"] == true || b["is_composite"] == true {
+            keys.push("kept");
+        }
+        for key in keys {
+            if b[key] != a[key] {
+                out.push(format!("{uid}.{key}: {} before, {} after", b[key], a[key]));
+            }
+        }
+    }
+    out
+}
+
+/// The library of [`dataset`] and three more assets, for every bbox form.
+fn forms_library() -> Vec<(&'static str, Mesh)> {
+    let mut assets = library();
+    assets.extend([
+        ("vase_green", Mesh::vessel(0.05, 0.2, 0.004, 0.006)),
+        ("box_tan", Mesh::cuboid([0.3, 0.1, 0.2])),
+        ("tray_grey", Mesh::cuboid([0.4, 0.02, 0.3])),
+    ]);
+    assets
+}
+
+/// The person's annotations of [`forms_library`]: each bbox form MesaTask's reader takes
+/// (`bbox` x/y/z, `bbox.size`, `bbox.min/max`, top-level `min_point/max_point`), and each
+/// field its filter reads, on entries mesa completes.
+fn annotations_in_every_form() -> Value {
+    let mut all = person_annotations();
+    all["vase_green"] = json!({"category": "vase", "onTable": false,
+                               "bbox": {"size": {"x": 0.1, "y": 0.2, "z": 0.1}}});
+    all["box_tan"] = json!({"mark_deletion": true,
+                            "bbox": {"min": {"x": -0.15, "y": 0.0, "z": -0.1},
+                                     "max": {"x": 0.15, "y": 0.1, "z": 0.1}}});
+    all["tray_grey"] = json!({"description": "A flat grey serving tray.", "is_composite": true,
+                              "min_point": [-0.2, 0.0, -0.15], "max_point": [0.2, 0.02, 0.15]});
+    all
+}
+
+/// Text features for `uids`: row k is e_k plus 0.05 everywhere (each row its own best match).
+fn text_features(uids: &[String], cols: usize) -> mesa_stages::pickle::TextFeatures {
+    let mut data_le = Vec::new();
+    for k in 0..uids.len() {
+        for j in 0..cols {
+            let value: f32 = if j == k % cols { 1.05 } else { 0.05 };
+            data_le.extend_from_slice(&value.to_le_bytes());
+        }
+    }
+    mesa_stages::pickle::TextFeatures {
+        uids: uids.to_vec(),
+        kind: mesa_stages::pickle::FloatKind::F32,
+        cols,
+        data_le,
+    }
+}
+
+#[test]
+fn mesatasks_retrieval_reads_the_merged_annotations_and_the_release_as_mesa_does() {
+    let Some(python) = common::python_with("numpy, compress_pickle", "MesaTask's retrieval reader")
+    else {
+        return;
+    };
+    let original = annotations_in_every_form();
+    let data = dataset_of("http://127.0.0.1:9/v1", forms_library(), &original);
+    let dir = data.path();
+    let path = dir.join("assets/annotations.json");
+    let before = mesatask_reads(&python, &path, &[]).0;
+    assert_eq!(
+        disagreements_with_mesa(&before, &path),
+        Vec::<String>::new()
+    );
+    let (success, out) = annotate(dir, &[]);
+    assert!(success, "{out}");
+    assert!(
+        out.contains("5 to annotate (offline): 5 annotated"),
+        "{out}"
+    );
+    let merged = read_json(&path);
+    let after = mesatask_reads(&python, &path, &[]).0;
+
+    // Every uid's size read their way is mesa's, and so is the filter's verdict.
+    assert_eq!(disagreements_with_mesa(&after, &path), Vec::<String>::new());
+    // Every asset is now a candidate of their retrieval (before, the mug had no size).
+    assert!(before["mug_white"]["size"].is_null());
+    assert_eq!(after.len(), forms_library().len());
+    for (uid, read) in &after {
+        assert!(
+            read["size"].is_array() && read["breaks_query"] == false,
+            "{uid}: {read}"
+        );
+    }
+    // The person's entries read as before the merge; mesa added a bbox only to entries that
+    // had none in any form.
+    assert_eq!(
+        changed_person_reads(&original, &before, &after),
+        Vec::<String>::new()
+    );
+    for uid in ["book_red", "vase_green", "box_tan", "tray_grey"] {
+        assert!(merged[uid]["mesa_sources"].get("bbox").is_none(), "{uid}");
+    }
+    assert_eq!(merged["mug_white"]["mesa_sources"]["bbox"], "mesh");
+    // Their filter has the person's three to drop.
+    let dropped: Vec<&str> = after
+        .iter()
+        .filter(|(_, read)| read["kept"] == false)
+        .map(|(uid, _)| uid.as_str())
+        .collect();
+    assert_eq!(dropped, ["box_tan", "tray_grey", "vase_green"]);
+
+    // The controls: forms mesa's reader takes and theirs does not read the same (a `size`
+    // list breaks their whole query, corners as objects are skipped, the string "False" is
+    // truthy to them), and a merge that changed a person's bbox, are caught.
+    let scratch = tempfile::tempdir().expect("tempdir");
+    let mut corrupted = merged.clone();
+    corrupted["book_red"]["bbox"] = json!({"size": [0.15, 0.03, 0.22]});
+    corrupted["tray_grey"]["min_point"] = json!({"x": -0.2, "y": 0.0, "z": -0.15});
+    corrupted["tray_grey"]["max_point"] = json!({"x": 0.2, "y": 0.02, "z": 0.15});
+    corrupted["mug_white"]["onTable"] = json!("False");
+    let corrupted_path = scratch.path().join("corrupted.json");
+    std::fs::write(&corrupted_path, corrupted.to_string()).expect("write");
+    let reads = mesatask_reads(&python, &corrupted_path, &[]).0;
+    assert_eq!(reads["book_red"]["breaks_query"], true);
+    let found = disagreements_with_mesa(&reads, &corrupted_path);
+    let named: Vec<&str> = found
+        .iter()
+        .map(|line| line.split(':').next().expect("uid"))
+        .collect();
+    assert_eq!(named, ["book_red", "mug_white", "tray_grey"], "{found:#?}");
+    let mut overwritten = merged.clone();
+    overwritten["book_red"]["bbox"]["x"] = json!(0.16);
+    let changed = changed_person_reads(
+        &original,
+        &before,
+        &mesatask_reads_value(&python, &overwritten),
+    );
+    assert!(
+        changed.len() == 1 && changed[0].starts_with("book_red.size"),
+        "{changed:?}"
+    );
+
+    // The release, as MesaTask's config.yaml names its files: Asset_annotation.json and
+    // sbert_text_features.pkl (loaded with compress_pickle), then their retrieval of one
+    // asset's description and size.
+    let uids: Vec<String> = merged
+        .as_object()
+        .expect("object")
+        .keys()
+        .cloned()
+        .collect();
+    let cols = 16;
+    std::fs::write(
+        dir.join("assets/text_features.npy"),
+        text_features(&uids, cols).to_npy(),
+    )
+    .expect("write");
+    std::fs::write(dir.join("assets/text_uids.json"), json!(uids).to_string()).expect("write");
+    std::fs::create_dir_all(dir.join("scenes")).expect("mkdir");
+    let release = scratch.path().join("release");
+    let out = mesa()
+        .args(["release", "--progress", "off", "--assets", "none"])
+        .arg(dir)
+        .arg(&release)
+        .output()
+        .expect("release");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let released = release.join("Asset_annotation.json");
+    let ours = mesa_stages::annotations::Annotations::read(&released).expect("mesa reads it");
+    let query = "bowl_blue";
+    let target = ours
+        .get(query)
+        .expect("bowl")
+        .bbox
+        .expect("bbox")
+        .size_table_frame();
+    let target_args: Vec<String> = target.iter().map(|v| format!("{v}")).collect();
+    let pkl = release.join("sbert_text_features.pkl");
+    let (reads, others) = mesatask_reads(
+        &python,
+        &released,
+        &[
+            "--features",
+            pkl.to_str().expect("utf-8 path"),
+            "--target-size",
+            &target_args[0],
+            &target_args[1],
+            &target_args[2],
+            "--query-uid",
+            query,
+            "--top-k-final",
+            &uids.len().to_string(),
+        ],
+    );
+    assert_eq!(
+        disagreements_with_mesa(&reads, &released),
+        Vec::<String>::new()
+    );
+    for (uid, read) in &reads {
+        let mut read = read.clone();
+        // Their size step: the cosine of [x, z, y] with the target, in float32.
+        let size = ours
+            .get(uid)
+            .expect("entry")
+            .bbox
+            .expect("bbox")
+            .size_table_frame();
+        let dot: f64 = size.iter().zip(&target).map(|(a, b)| a * b).sum();
+        let norm = |v: &[f64; 3]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
+        let cosine = dot / (norm(&size) * norm(&target));
+        let theirs = read["size_similarity"].as_f64().expect("similarity");
+        assert!(
+            (theirs - cosine).abs() < 1e-6,
+            "{uid}: {theirs} vs {cosine}"
+        );
+        read.as_object_mut()
+            .expect("object")
+            .remove("size_similarity");
+        assert_eq!(
+            read, after[uid],
+            "{uid}: the release reads as assets/annotations.json"
+        );
+    }
+    assert_eq!(
+        others[0],
+        json!({"features": uids.len(), "cols": cols, "uids_without_entry": []})
+    );
+    let retrieval = &others[1];
+    let ranked: Vec<&str> = retrieval["ranked"]
+        .as_array()
+        .expect("ranked")
+        .iter()
+        .map(|pair| pair[0].as_str().expect("uid"))
+        .collect();
+    assert_eq!(ranked.len(), uids.len(), "{retrieval}");
+    assert_eq!(ranked[0], query, "its own text and size rank first");
+    let kept_by_mesa: Vec<&str> = ranked
+        .iter()
+        .copied()
+        .filter(|uid| ours.get(uid).expect("entry").rejection().is_none())
+        .collect();
+    assert_eq!(retrieval["retrieved"], json!(kept_by_mesa), "{retrieval}");
+    assert!(
+        kept_by_mesa.len() < ranked.len(),
+        "the filter dropped the person's three"
     );
 }

@@ -634,16 +634,7 @@ impl DatasetStage for AnnotateAssetsStage {
             write_atomic(&annotations_path, new_text.as_bytes())
                 .with_context(|| format!("{}: cannot write", annotations_path.display()))?;
         }
-        if !rejects.is_empty() {
-            let mut lines = String::new();
-            for reject in &rejects {
-                lines.push_str(&to_sorted_line(reject)?);
-                lines.push('\n');
-            }
-            let path = ctx.dataset.join(ANNOTATE_REJECTS);
-            write_atomic(&path, lines.as_bytes())
-                .with_context(|| format!("{}: cannot write", path.display()))?;
-        }
+        notes.extend(write_rejects(ctx.dataset, ANNOTATE_REJECTS, &rejects)?);
         let (by_source, placeholders) = count_sources(&document);
         summary.fields_by_source = by_source;
         summary.placeholder_assets = placeholders;
@@ -660,6 +651,41 @@ impl DatasetStage for AnnotateAssetsStage {
             record,
         })
     }
+}
+
+/// Writes this run's rejected replies to `rel`, or, when it has none, removes the file an
+/// earlier run wrote: as the runner removes a scene output its last run wrote and this one
+/// does not, so that the file always holds the last run's rejects and never stale ones.
+/// Returns the note saying a file was removed.
+fn write_rejects(
+    dataset: &Path,
+    rel: &str,
+    rejects: &[AnnotateReject],
+) -> anyhow::Result<Option<String>> {
+    let path = dataset.join(rel);
+    if rejects.is_empty() {
+        return match std::fs::remove_file(&path) {
+            Ok(()) => Ok(Some(format!(
+                "removed {rel}, which the last run wrote and this one does not (no reply was \
+                 rejected; it would be stale)"
+            ))),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(e).with_context(|| {
+                format!(
+                    "{}: cannot remove the rejects of the last run (remove it by hand)",
+                    path.display()
+                )
+            }),
+        };
+    }
+    let mut lines = String::new();
+    for reject in rejects {
+        lines.push_str(&to_sorted_line(reject)?);
+        lines.push('\n');
+    }
+    write_atomic(&path, lines.as_bytes())
+        .with_context(|| format!("{}: cannot write", path.display()))?;
+    Ok(None)
 }
 
 fn format_summary(
@@ -1067,16 +1093,7 @@ impl DatasetStage for AnnotateInstancesStage {
             None => {}
         }
         let rejects: Vec<AnnotateReject> = rejects.into_values().collect();
-        if !rejects.is_empty() {
-            let mut lines = String::new();
-            for reject in &rejects {
-                lines.push_str(&to_sorted_line(reject)?);
-                lines.push('\n');
-            }
-            let path = ctx.dataset.join(INSTANCE_REJECTS);
-            write_atomic(&path, lines.as_bytes())
-                .with_context(|| format!("{}: cannot write", path.display()))?;
-        }
+        notes.extend(write_rejects(ctx.dataset, INSTANCE_REJECTS, &rejects)?);
         let elapsed_s = started.elapsed().as_secs_f64();
         let mut text = format!(
             "annotate instances: {} scenes ({}): {annotated} instances annotated in {written} \

@@ -21,7 +21,6 @@ pub fn mesa() -> Command {
     Command::cargo_bin("mesa").expect("the mesa binary")
 }
 
-/// `../shared` beside the repository (or `$MESA_SHARED`).
 /// A Python with `bpy` (Blender 4.3 as a module: `MESA_BLENDER_PYTHON`, which scripts/test.sh
 /// sets, or `MESA_PYTHON`), or a skip naming `what` (a failure under MESA_REQUIRE_TOOLS).
 #[allow(dead_code)]
@@ -47,6 +46,35 @@ pub fn blender(what: &str) -> Option<PathBuf> {
     found
 }
 
+/// A Python that imports `modules` (comma-separated): `MESA_PYTHON`, else the repository's
+/// `.venv-tools` (scripts/test.sh installs it); None says SKIPPED naming `what`, and fails
+/// under `MESA_REQUIRE_TOOLS`.
+pub fn python_with(modules: &str, what: &str) -> Option<PathBuf> {
+    let candidates = [
+        std::env::var_os("MESA_PYTHON").map(PathBuf::from),
+        Some(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.venv-tools/bin/python")),
+    ];
+    let found = candidates.into_iter().flatten().find(|python| {
+        std::process::Command::new(python)
+            .args(["-c", &format!("import {modules}")])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    });
+    if found.is_none() {
+        let how = format!(
+            "set MESA_PYTHON to a Python with {modules}; scripts/test.sh installs one from \
+             scripts/requirements-tools.txt"
+        );
+        assert!(
+            std::env::var_os("MESA_REQUIRE_TOOLS").is_none(),
+            "{what}: no Python with {modules} and MESA_REQUIRE_TOOLS is set ({how})"
+        );
+        eprintln!("SKIPPED: {what} ({how})");
+    }
+    found
+}
+
+/// `../shared` beside the repository (or `$MESA_SHARED`).
 pub fn shared() -> PathBuf {
     std::env::var_os("MESA_SHARED")
         .map(PathBuf::from)
