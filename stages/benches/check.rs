@@ -3,8 +3,9 @@
 //!
 //! The scene is a `mesa demo` true layout (real procedural assets: bowls, mugs, lamps, books,
 //! decomposed by `mesa assets`' adaptive decomposition), the one with the number of objects
-//! closest to 15. Shapes are loaded once (the asset index's cache); each iteration places every
-//! object's convex parts (position, rotation, scale) and checks:
+//! closest to 15. Shapes and meshes are loaded once (the asset index's cache); each iteration
+//! places every object's convex parts (position, rotation, scale), and the meshes of the objects
+//! judged on them (loose objects, deep pairs, steep supports), and checks:
 //!
 //! - `collisions`: every pair's penetration depth (what trimesh's `CollisionManager` answers:
 //!   `bench/check_vs_fcl.sh` compares the two on the same convex parts);
@@ -24,8 +25,11 @@ use mesa_schemas::artifacts::{AssetIndexArtifact, ShapesArtifact};
 use mesa_schemas::DatasetLayout;
 use mesa_stages::annotations::Annotations;
 use mesa_stages::assets::{index_asset, AssetsConfig};
+use mesa_stages::check::solid::AssetMesh;
 use mesa_stages::check::{check_scene, collisions_of, AssetShape, PhysicsScene, Tolerances};
 use mesa_stages::demo::{write_demo, DemoOptions};
+use mesa_stages::export::VisualMesh;
+use mesa_stages::glb_read::read_glb;
 
 fn read<T: serde::de::DeserializeOwned>(path: &Path) -> T {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -41,10 +45,12 @@ fn indexed_shapes(dataset: &Path) -> BTreeMap<String, Arc<AssetShape>> {
         .filter_map(|(uid, r)| {
             let (s, g) = (r.shapes.as_ref()?, r.geometry.as_ref()?);
             let artifact: ShapesArtifact = read(&dataset.join(&s.file));
-            Some((
-                uid.clone(),
-                Arc::new(AssetShape::new(uid, &artifact, g).expect("shape")),
-            ))
+            let bytes = std::fs::read(dataset.join(&r.file)).expect("glb");
+            let visual = VisualMesh::from_glb(&read_glb(&bytes).expect("glb"), g);
+            let shape = AssetShape::new(uid, &artifact, g)
+                .expect("shape")
+                .with_mesh(AssetMesh::new(visual.positions_m, visual.triangles));
+            Some((uid.clone(), Arc::new(shape)))
         })
         .collect()
 }
@@ -82,12 +88,12 @@ fn demo_scene() -> (DatasetLayout, BTreeMap<String, Arc<AssetShape>>) {
             annotations.get(uid),
             &AssetsConfig::default(),
         );
-        let shape = AssetShape::new(
-            uid,
-            &indexed.shapes.expect("shapes"),
-            &indexed.geometry.expect("geometry"),
-        )
-        .expect("shape");
+        let geometry = indexed.geometry.expect("geometry");
+        // With its mesh, as `mesa check` holds it: loose objects are judged on it.
+        let visual = VisualMesh::from_glb(&read_glb(&bytes).expect("glb"), &geometry);
+        let shape = AssetShape::new(uid, &indexed.shapes.expect("shapes"), &geometry)
+            .expect("shape")
+            .with_mesh(AssetMesh::new(visual.positions_m, visual.triangles));
         shapes.insert(uid.clone(), Arc::new(shape));
     }
     (layout, shapes)

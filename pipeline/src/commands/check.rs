@@ -13,12 +13,15 @@ use std::sync::{Arc, Mutex};
 use anyhow::Context as _;
 use clap::{Args as ClapArgs, ValueEnum};
 use mesa_schemas::artifacts::{
-    AssetIndexArtifact, CheckArtifact, CheckFindings, CheckSummaryArtifact, RateSummary,
-    SettleStatus, SettleSummary, ShapesArtifact, CHECK_SUMMARY_SCHEMA,
+    AssetIndexArtifact, AssetRecord, CheckArtifact, CheckFindings, CheckSummaryArtifact,
+    RateSummary, SettleStatus, SettleSummary, ShapesArtifact, CHECK_SUMMARY_SCHEMA,
 };
 use mesa_schemas::LayoutObject;
 use mesa_stages::annotations::Annotations;
+use mesa_stages::check::solid::AssetMesh;
 use mesa_stages::check::{check_layout, AssetShape, CheckedLayout, LayoutSource, SETTLED_LAYOUT};
+use mesa_stages::export::VisualMesh;
+use mesa_stages::glb_read::read_glb;
 use mesa_stages::graph::{annotated_containers, GraphOptions, GraphScene};
 use serde::Serialize;
 
@@ -27,7 +30,7 @@ use mesa_stages::paths::scene::CHECK;
 
 use crate::cli::{Global, SceneArgs};
 use crate::dataset_cache::DatasetCache;
-use crate::fsio::{read_json, sha256_hex, sweep_tmp_for, write_atomic};
+use crate::fsio::{read_bounded, read_json, sha256_hex, sweep_tmp_for, write_atomic, GLB_LIMIT};
 use crate::layouts::read_dataset_layout;
 use crate::runner::{digest_of, discover_scenes, Scene, SceneOutput, SceneStage, StageContext};
 
@@ -169,8 +172,39 @@ impl ShapeLibrary {
         }
         let artifact: ShapesArtifact = serde_json::from_slice(&bytes)
             .map_err(|e| format!("{}: {e} (run `mesa assets --force`)", path.display()))?;
-        AssetShape::new(uid, &artifact, geometry).map_err(|e| format!("{}: {e}", path.display()))
+        let shape = AssetShape::new(uid, &artifact, geometry)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        // The mesh is read only if an object of this asset is loose (its parts reach too far
+        // at its scale) or collides.
+        let (dataset, uid, record) = (dataset.to_owned(), uid.to_owned(), record.clone());
+        Ok(shape.with_mesh_loader(move || {
+            read_asset_mesh(&dataset, &uid, &record)
+                .map(|m| AssetMesh::new(m.positions_m, m.triangles))
+        }))
     }
+}
+
+/// An asset's triangle mesh in the frame of its index record (table-aligned, centred on its
+/// box), read from its GLB, which must still be the one indexed.
+pub fn read_asset_mesh(
+    dataset: &Path,
+    uid: &str,
+    record: &AssetRecord,
+) -> Result<VisualMesh, String> {
+    let geometry = record.geometry.as_ref().ok_or_else(|| {
+        format!("asset {uid} has no geometry in {INDEX} (run `mesa assets --force`)")
+    })?;
+    let path = dataset.join(&record.file);
+    let bytes = read_bounded(&path, GLB_LIMIT)
+        .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+    if sha256_hex(&bytes) != record.glb_sha256 {
+        return Err(format!(
+            "{}: not the file indexed in {INDEX} (run `mesa assets`)",
+            path.display()
+        ));
+    }
+    let mesh = read_glb(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(VisualMesh::from_glb(&mesh, geometry))
 }
 
 /// The `check` stage.

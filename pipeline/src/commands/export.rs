@@ -14,18 +14,17 @@ use clap::{Args as ClapArgs, ValueEnum};
 use mesa_schemas::artifacts::{ExportArtifact, MassSource, UncheckedObject};
 use mesa_stages::check::{AssetShape, Pose};
 use mesa_stages::export::{export_scene, ExportObject, ExportRequest, VisualMesh};
-use mesa_stages::glb_read::read_glb;
 use mesa_stages::paths::dataset::{ANNOTATIONS, ASSET_SIM, INDEX};
 use mesa_stages::paths::scene::{
     COARSE_LAYOUT, EXPORT_MANIFEST, LAYOUT_CANDIDATES, REFINED_LAYOUT, SETTLED_LAYOUT,
 };
 use serde::Serialize;
 
-use super::check::ShapeLibrary;
+use super::check::{read_asset_mesh, ShapeLibrary};
 use crate::cli::{Global, SceneArgs};
 use crate::dataset_cache::DatasetCache;
 use crate::exit::UsageError;
-use crate::fsio::{read_bounded, read_json, write_atomic, GLB_LIMIT};
+use crate::fsio::{read_json, write_atomic};
 use crate::layouts::{present_layouts, read_dataset_layout};
 use crate::progress::Tick;
 use crate::runner::{
@@ -148,14 +147,7 @@ impl ExportLibrary {
             .shapes
             .record(uid)
             .ok_or_else(|| format!("asset {uid} is not in {INDEX} (run `mesa assets`)"))?;
-        let geometry = record.geometry.as_ref().ok_or_else(|| {
-            format!("asset {uid} has no geometry in {INDEX} (run `mesa assets --force`)")
-        })?;
-        let path = dataset.join(&record.file);
-        let bytes = read_bounded(&path, GLB_LIMIT)
-            .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
-        let mesh = read_glb(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
-        Ok(VisualMesh::from_glb(&mesh, geometry))
+        read_asset_mesh(dataset, uid, record)
     }
 }
 

@@ -555,10 +555,16 @@ pub fn dataset_shapes(dir: &Path) -> BTreeMap<String, Arc<mesa_stages::check::As
         .filter_map(|(uid, record)| {
             let (s, g) = (record.shapes.as_ref()?, record.geometry.as_ref()?);
             let artifact: mesa_schemas::artifacts::ShapesArtifact = read_json(&dir.join(&s.file));
-            Some((
-                uid.clone(),
-                Arc::new(mesa_stages::check::AssetShape::new(uid, &artifact, g).expect("shape")),
-            ))
+            // With its mesh, as `mesa check` holds it (loose objects are judged on it).
+            let (dataset, id, rec) = (dir.to_owned(), uid.clone(), record.clone());
+            let shape = mesa_stages::check::AssetShape::new(uid, &artifact, g)
+                .expect("shape")
+                .with_mesh_loader(move || {
+                    mesa_pipeline::commands::check::read_asset_mesh(&dataset, &id, &rec).map(|m| {
+                        mesa_stages::check::solid::AssetMesh::new(m.positions_m, m.triangles)
+                    })
+                });
+            Some((uid.clone(), Arc::new(shape)))
         })
         .collect()
 }

@@ -221,52 +221,61 @@ impl Grid {
     }
 }
 
-/// The distance from `p` to the triangle `abc` (Ericson, Real-Time Collision Detection 5.1.5).
+/// The distance from `p` to the triangle `abc`.
 pub fn distance_point_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
+    let q = closest_point_triangle(p, a, b, c);
+    let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+}
+
+/// The point of the triangle `abc` nearest to `p` (Ericson, Real-Time Collision Detection
+/// 5.1.5); for a degenerate triangle, the nearest of its corners.
+pub fn closest_point_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
     let sub = |u: [f64; 3], v: [f64; 3]| [u[0] - v[0], u[1] - v[1], u[2] - v[2]];
     let dot = |u: [f64; 3], v: [f64; 3]| u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
     let at = |s: f64, u: [f64; 3], t: f64, v: [f64; 3]| -> [f64; 3] {
         std::array::from_fn(|k| a[k] + s * u[k] + t * v[k])
     };
-    let norm = |u: [f64; 3]| dot(u, u).sqrt();
     let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
     let (d1, d2) = (dot(ab, ap), dot(ac, ap));
     if d1 <= 0.0 && d2 <= 0.0 {
-        return norm(ap);
+        return a;
     }
     let bp = sub(p, b);
     let (d3, d4) = (dot(ab, bp), dot(ac, bp));
     if d3 >= 0.0 && d4 <= d3 {
-        return norm(bp);
+        return b;
     }
     let vc = d1 * d4 - d3 * d2;
     if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
         let v = d1 / (d1 - d3);
-        return norm(sub(p, at(v, ab, 0.0, ac)));
+        return at(v, ab, 0.0, ac);
     }
     let cp = sub(p, c);
     let (d5, d6) = (dot(ab, cp), dot(ac, cp));
     if d6 >= 0.0 && d5 <= d6 {
-        return norm(cp);
+        return c;
     }
     let vb = d5 * d2 - d1 * d6;
     if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
         let w = d2 / (d2 - d6);
-        return norm(sub(p, at(0.0, ab, w, ac)));
+        return at(0.0, ab, w, ac);
     }
     let va = d3 * d6 - d5 * d4;
     if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
         let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        let q: [f64; 3] = std::array::from_fn(|k| b[k] + w * (c[k] - b[k]));
-        return norm(sub(p, q));
+        return std::array::from_fn(|k| b[k] + w * (c[k] - b[k]));
     }
     let denom = va + vb + vc;
     if denom.abs() < f64::MIN_POSITIVE {
-        // A degenerate triangle: the nearest of its corners.
-        return norm(ap).min(norm(bp)).min(norm(cp));
+        let d2 = |q: [f64; 3]| dot(sub(p, q), sub(p, q));
+        return [a, b, c]
+            .into_iter()
+            .min_by(|x, y| d2(*x).total_cmp(&d2(*y)))
+            .unwrap_or(a);
     }
     let (v, w) = (vb / denom, vc / denom);
-    norm(sub(p, at(v, ab, w, ac)))
+    at(v, ab, w, ac)
 }
 
 /// Sample points of a convex part: its hull's vertices and 7 points of each face.

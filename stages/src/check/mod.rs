@@ -17,6 +17,12 @@
 //!   MesaTask's released code would call colliding (closer than 5 cm: it counts touching and
 //!   nearby objects).
 //!
+//! Convex parts reach a little outside the mesh they cover, and a layout's scale multiplies
+//! that reach. An object whose parts may reach past its mesh by more than
+//! [`shapes::LOOSE_REACH_M`] at its scale is *loose*: its collisions, falls, table contact and
+//! zone are judged on its own triangle mesh ([`solid`]), and a collision the parts find between
+//! any two objects is at least as deep as the deepest point of one mesh inside the other.
+//!
 //! [`settle`] moves objects by the least motion that removes collisions and floating while
 //! keeping the scene graph's `in` and `above` relations.
 
@@ -25,6 +31,7 @@ pub mod scene;
 pub mod settle;
 pub mod shapes;
 pub mod simulate;
+pub mod solid;
 
 use std::sync::Arc;
 
@@ -187,7 +194,7 @@ impl PhysicsScene {
                     instance: object.instance.clone(),
                     reach_m: shape.as_ref().map_or(0.0, |s| s.reach_at(&pose)),
                     body: shape.and_then(|shape| {
-                        Body::new(shape.place(&pose))
+                        Body::of_shape(&shape, &pose)
                             .ok_or_else(|| format!("asset {}: no convex part", shape.uid))
                     }),
                 }
@@ -454,10 +461,81 @@ fn box_overlap(a: &Bounds, b: &Bounds) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// The depth a pair is judged at, given the deepest overlap of their parts.
+///
+/// A pair the parts find deeper than `penetration_m` is measured on the meshes too
+/// ([`solid::deepest`]: the deepest point of one mesh inside the other):
+/// - when either object is loose, that is the depth (its parts bulge past its mesh, so their
+///   overlap overstates it);
+/// - else the depth is the larger of the two: several parts meeting inside a solid each overlap
+///   a piercing object less than the solid does. Only an object of several parts can hold a
+///   point deeper than the parts' overlap (a point inside one convex part must move at least its
+///   depth in that part to get out), and only a gain beyond [`DEPTH_GAIN_M`] is measured.
+///
+/// Without meshes, the parts' depth.
+pub fn judged_depth(a: &Body, b: &Body, parts_depth_m: f64, penetration_m: f64) -> f64 {
+    if parts_depth_m <= penetration_m {
+        return parts_depth_m;
+    }
+    let loose = a.judged_solid().is_some() || b.judged_solid().is_some();
+    if !loose && a.hulls.len() == 1 && b.hulls.len() == 1 {
+        return parts_depth_m;
+    }
+    let (Some(Ok(x)), Some(Ok(y))) = (a.solid(), b.solid()) else {
+        return parts_depth_m;
+    };
+    let floor = if loose {
+        penetration_m
+    } else {
+        parts_depth_m + DEPTH_GAIN_M
+    };
+    let a_in_b = if loose || b.hulls.len() > 1 {
+        solid::deepest(x, y, floor)
+    } else {
+        0.0
+    };
+    let b_in_a = if loose || a.hulls.len() > 1 {
+        solid::deepest(y, x, floor)
+    } else {
+        0.0
+    };
+    let mesh = a_in_b.max(b_in_a);
+    if loose {
+        mesh
+    } else {
+        mesh.max(parts_depth_m)
+    }
+}
+
+/// How much deeper than their parts' overlap two objects that are not loose must be on their
+/// meshes for it to count (metres): the slack the exact-mesh reference allows a depth.
+pub const DEPTH_GAIN_M: f64 = 0.001;
+
 /// A contact holds an object up when the way out of it (from the object toward the other)
 /// points down by more than this (the sine of about 3°): the other pushes back with an upward
 /// component. A contact exactly side by side holds nothing.
 const SUPPORT_MIN_DOWNWARD: f64 = 0.05;
+
+/// A contact whose way out points down at least this much (the cosine of 60°) holds an object
+/// up on the parts' word. A steeper one (a pen leaning on a book's edge) is judged on the
+/// meshes: the vertical gap is the gap across the contact over this slope, so parts within
+/// 0.5 mm of their mesh ([`shapes::LOOSE_REACH_M`]) put a flat enough contact within 1 mm
+/// of the meshes' vertical gap, and a steep one up to 10 mm off.
+const SUPPORT_FLAT_DOWNWARD: f64 = 0.5;
+
+/// The two meshes when a pair is judged on them: either object loose, both meshes read.
+fn on_meshes<'x>(
+    body: &'x Body,
+    other: &'x Body,
+) -> Option<(solid::SolidAt<'x>, solid::SolidAt<'x>)> {
+    if !(body.loose() || other.loose()) {
+        return None;
+    }
+    match (body.solid(), other.solid()) {
+        (Some(Ok(m)), Some(Ok(o))) => Some((m, o)),
+        _ => None,
+    }
+}
 
 /// How far `body` could fall before touching the table top or one of `others` (index,
 /// body), and onto what; 0 when it already rests on something.
@@ -467,21 +545,44 @@ const SUPPORT_MIN_DOWNWARD: f64 = 0.05;
 /// in a direction pointing down (a fruit leaning on another fruit's side rests on it). Else it
 /// falls straight down: see [`fall_distance`] (measured from `touch_m` higher, so that a part
 /// sunk into what carries it by less than that lands on it).
+///
+/// A loose body's lowest point is its mesh's, and a pair with a loose body is judged on the
+/// two meshes ([`solid::fall_onto`]: vertical rays between them; resting within `touch_m`), as
+/// is a pair whose only support is a steep contact ([`SUPPORT_FLAT_DOWNWARD`]).
 pub fn fall_of<'a>(
     body: &Body,
     others: impl Iterator<Item = (usize, &'a Body)> + Clone,
     touch_m: f64,
 ) -> (f64, Support) {
-    let mut gap = body.bounds.min[2].max(0.0);
+    let mut gap = body.judged_bounds().min[2].max(0.0);
     if gap <= touch_m {
         return (0.0, Support::Table);
+    }
+    // Pairs with a loose object are judged on their meshes.
+    let mut over = Support::Table;
+    let mut steep_on_meshes: Vec<usize> = Vec::new();
+    for (j, other) in others.clone() {
+        let Some((m, o)) = on_meshes(body, other) else {
+            continue;
+        };
+        if let Some(d) = solid::fall_onto(m, o) {
+            if d <= touch_m {
+                return (0.0, Support::Object(j));
+            }
+            if d < gap {
+                gap = d;
+                over = Support::Object(j);
+            }
+        }
     }
     for (j, other) in others.clone() {
         if body.bounds.distance(&other.bounds) > touch_m
             || other.bounds.min[2] >= body.bounds.max[2]
+            || on_meshes(body, other).is_some()
         {
             continue;
         }
+        let mut steep = false;
         for hm in &body.hulls {
             for hf in &other.hulls {
                 if hm.bounds.distance(&hf.bounds) > touch_m {
@@ -489,16 +590,39 @@ pub fn fall_of<'a>(
                 }
                 let p = proximity(hm, hf);
                 if p.signed_distance_m <= touch_m && p.normal[2] < -SUPPORT_MIN_DOWNWARD {
-                    return (0.0, Support::Object(j));
+                    if p.normal[2] <= -SUPPORT_FLAT_DOWNWARD {
+                        return (0.0, Support::Object(j));
+                    }
+                    steep = true;
                 }
             }
         }
+        if steep {
+            // Held only on a steep contact: the vertical gap is the parts' gap over the slope,
+            // so their reach counts several times over; judged on the meshes when they can be.
+            match (body.solid(), other.solid()) {
+                (Some(Ok(m)), Some(Ok(o))) => {
+                    steep_on_meshes.push(j);
+                    if let Some(d) = solid::fall_onto(m, o) {
+                        if d <= touch_m {
+                            return (0.0, Support::Object(j));
+                        }
+                        if d < gap {
+                            gap = d;
+                            over = Support::Object(j);
+                        }
+                    }
+                }
+                _ => return (0.0, Support::Object(j)),
+            }
+        }
     }
-    let mut over = Support::Table;
     for (j, other) in others {
         if !body.bounds.overlaps_xy(&other.bounds, 0.0)
             || other.bounds.min[2] >= body.bounds.max[2] + touch_m
             || body.bounds.min[2] - other.bounds.max[2] >= gap
+            || on_meshes(body, other).is_some()
+            || steep_on_meshes.contains(&j)
         {
             continue;
         }
@@ -557,7 +681,7 @@ pub fn violations_of(
     tolerances: &Tolerances,
 ) -> Vec<(ViolationKind, f64)> {
     let mut out = Vec::new();
-    let b = &body.bounds;
+    let b = &body.judged_bounds();
     let beyond = [
         zone[0] - b.min[0],
         b.max[0] - zone[1],
@@ -590,11 +714,12 @@ pub fn collisions_of(scene: &PhysicsScene, penetration_m: f64) -> Vec<Collision>
         for &j in &checked[x + 1..] {
             let Some(b) = scene.body(j) else { continue };
             if let Some(contact) = pair_contact_deeper_than(a, b, 0.0, penetration_m) {
-                if contact.depth_m > penetration_m {
+                let depth_m = judged_depth(a, b, contact.depth_m, penetration_m);
+                if depth_m > penetration_m {
                     out.push(Collision {
                         a: i,
                         b: j,
-                        depth_m: contact.depth_m,
+                        depth_m,
                         normal: contact.normal,
                     });
                 }
@@ -629,11 +754,12 @@ pub fn check_scene(scene: &PhysicsScene, tolerances: &Tolerances) -> Findings {
             if contact.near {
                 findings.mesatask_rule_pairs += 1;
             }
-            if contact.depth_m > tolerances.penetration_m {
+            let depth_m = judged_depth(a, b, contact.depth_m, tolerances.penetration_m);
+            if depth_m > tolerances.penetration_m {
                 findings.collisions.push(Collision {
                     a: i,
                     b: j,
-                    depth_m: contact.depth_m,
+                    depth_m,
                     normal: contact.normal,
                 });
             }

@@ -99,22 +99,32 @@ pub fn check_layout(
             names.join(", ")
         ));
     }
-    // Parts that reach past the mesh by more than the tolerance at this scale: the depths and
-    // contacts of these objects are uncertain by that much.
-    let bulging: Vec<String> = scene
+    // Loose objects (parts reaching past their mesh at this scale) are judged on their meshes;
+    // one whose mesh cannot be read is judged on its parts, uncertain by their reach.
+    let unjudged: Vec<String> = scene
         .objects
         .iter()
-        .filter(|o| o.reach_m > tolerances.penetration_m)
-        .map(|o| format!("{} ({:.1} mm)", o.instance, o.reach_m * 1000.0))
+        .filter_map(|o| {
+            let body = o.body.as_ref().ok().filter(|b| b.loose())?;
+            let why = match body.solid() {
+                Some(Ok(_)) => return None,
+                Some(Err(e)) => e.to_owned(),
+                None => "no mesh given".to_owned(),
+            };
+            Some(format!(
+                "{} ({:.1} mm: {why})",
+                o.instance,
+                o.reach_m * 1000.0
+            ))
+        })
         .collect();
-    if !bulging.is_empty() {
+    if !unjudged.is_empty() {
         warnings.push(format!(
-            "{}: the collision parts of {} reach outside their meshes by more than \
-             penetration_tolerance_mm at the layout's scale: their depths and contacts are \
-             uncertain by that much (`mesa assets --force` with a smaller \
-             [assets] decomposition_tolerance_m makes finer parts)",
+            "{}: the collision parts of {} reach outside their meshes at the layout's scale and \
+             their meshes could not be read: their depths and contacts are uncertain by that \
+             much (rerun `mesa assets`)",
             source.file,
-            bulging.join(", ")
+            unjudged.join(", ")
         ));
     }
     let before = findings.to_schema(&scene);
@@ -356,15 +366,16 @@ fn settle_layout(
         }
         _ => None,
     };
-    // The scene as settled: after a simulation, placed anew (rotations changed).
-    let (final_scene, final_findings) = match (&settled, &simulation) {
-        (Some(_), Some(_)) => {
+    // The scene as settled, placed anew from the layout as written: a simulation turns objects,
+    // and rounding positions to a micrometre can break a contact the moves left exactly
+    // touching (a toothbrush leaning on another, a knife edge the written layout must hold).
+    let (final_scene, final_findings) = match &settled {
+        Some(_) => {
             let placed = PhysicsScene::from_layout(&moved, shape_of);
             let found = check_scene(&placed, &tolerances);
             (Some(placed), Some(found))
         }
-        (Some(s), None) => (Some(s.scene.clone()), Some(s.findings.clone())),
-        _ => (None, None),
+        None => (None, None),
     };
     let displacements: Vec<Displacement> = layout
         .objects
@@ -508,7 +519,12 @@ fn settle_layout(
                 ))
             } else if !found.physical() {
                 Some(format!(
-                    "after the simulation, the check finds {}",
+                    "{}, the check of the layout as written finds {}",
+                    if simulation.is_some() {
+                        "after the simulation"
+                    } else {
+                        "after the moves"
+                    },
                     remaining(found, placed)
                 ))
             } else if max_displacement_cm > config.settling.max_displacement_cm {

@@ -658,8 +658,9 @@ fn drop_all(mover: &mut Mover<'_>, order: &[usize]) {
         let Ok(body) = &mover.scene.objects[i].body else {
             continue;
         };
-        if body.bounds.min[2] < 0.0 {
-            let up = -body.bounds.min[2];
+        let lowest = body.judged_bounds().min[2];
+        if lowest < 0.0 {
+            let up = -lowest;
             mover.shift(i, [0.0, 0.0, up]);
             continue;
         }

@@ -9,6 +9,9 @@ use super::*;
 use crate::assets::shapes::collision_shapes;
 use crate::assets::synthetic::Mesh;
 use crate::assets::{table_aligned_from_gltf, AssetsConfig};
+use crate::check::geometry::Bounds;
+use crate::check::settle::{settle, SettleConfig};
+use crate::check::solid::AssetMesh;
 use crate::mesh::quat_from_axis_angle;
 
 /// An asset's collision shape as `mesa assets` makes it from a mesh in the glTF frame.
@@ -39,11 +42,14 @@ fn shape(uid: &str, mesh: &Mesh) -> Arc<AssetShape> {
                 .collect()
         })
         .collect();
-    Arc::new(AssetShape::from_parts(
-        uid,
-        parts,
-        std::array::from_fn(|k| hi[k] - lo[k]),
-    ))
+    let centred: Vec<[f64; 3]> = aligned
+        .iter()
+        .map(|p| [p[0] - c[0], p[1] - c[1], p[2] - c[2]])
+        .collect();
+    Arc::new(
+        AssetShape::from_parts(uid, parts, std::array::from_fn(|k| hi[k] - lo[k]))
+            .with_mesh(AssetMesh::new(centred, mesh.triangles.clone())),
+    )
 }
 
 /// A box of `size` (table x, y, z), metres.
@@ -99,7 +105,7 @@ fn scene(items: &[Item]) -> PhysicsScene {
             .map(|item| PlacedObject {
                 instance: item.name.to_owned(),
                 reach_m: item.shape.reach_at(&item.pose),
-                body: Body::new(item.shape.place(&item.pose)).ok_or_else(|| "empty".to_owned()),
+                body: Body::of_shape(&item.shape, &item.pose).ok_or_else(|| "empty".to_owned()),
             })
             .collect(),
     }
@@ -385,10 +391,13 @@ fn the_reach_of_parts_grows_with_the_scale_a_layout_applies() {
          "rotation": [0, 0, 0, 1], "size": [367.5, 15.75, 15.75],
          "scale_factor": [21, 21, 21]}]}"#;
     let layout: DatasetLayout = serde_json::from_str(text).expect("layout");
-    let pencil = Arc::new(AssetShape::clone(&cuboid([0.175, 0.0075, 0.0075])).with_reach_m(0.0005));
-    let s = PhysicsScene::from_layout(&layout, |_| Ok(Arc::clone(&pencil)));
-    assert_abs_diff_eq!(s.objects[0].reach_m, 0.0005, epsilon = 1e-12);
-    assert_abs_diff_eq!(s.objects[1].reach_m, 0.0105, epsilon = 1e-12);
+    let with_mesh = AssetShape::clone(&cuboid([0.175, 0.0075, 0.0075])).with_reach_m(0.0005);
+    let without_mesh = AssetShape::from_parts(
+        "pencil",
+        with_mesh.parts().iter().map(|(p, _)| p.clone()).collect(),
+        with_mesh.size_m,
+    )
+    .with_reach_m(0.0005);
     let config = CheckConfig::default();
     let source = super::scene::LayoutSource {
         layout: &layout,
@@ -396,6 +405,25 @@ fn the_reach_of_parts_grows_with_the_scale_a_layout_applies() {
         sha256: "0",
         scene_id: "office_table_0001",
     };
+    // With its mesh, the scaled pencil is judged on it: nothing to warn about.
+    let with_mesh = Arc::new(with_mesh);
+    let checked = super::check_layout(
+        source,
+        |_| Ok(Arc::clone(&with_mesh)),
+        &[false, false],
+        &crate::graph::GraphOptions::default(),
+        &config,
+        false,
+    );
+    assert!(
+        !checked.warnings.iter().any(|w| w.contains("reach outside")),
+        "{:?}",
+        checked.warnings
+    );
+    let pencil = Arc::new(without_mesh);
+    let s = PhysicsScene::from_layout(&layout, |_| Ok(Arc::clone(&pencil)));
+    assert_abs_diff_eq!(s.objects[0].reach_m, 0.0005, epsilon = 1e-12);
+    assert_abs_diff_eq!(s.objects[1].reach_m, 0.0105, epsilon = 1e-12);
     let checked = super::check_layout(
         source,
         |_| Ok(Arc::clone(&pencil)),
@@ -410,7 +438,12 @@ fn the_reach_of_parts_grows_with_the_scale_a_layout_applies() {
         .filter(|w| w.contains("reach outside their meshes"))
         .collect();
     assert_eq!(named.len(), 1, "{:?}", checked.warnings);
-    assert!(named[0].contains("pencil_1 (10.5 mm)"), "{}", named[0]);
+    // This pencil has no mesh to be judged on: it is named, with why.
+    assert!(
+        named[0].contains("pencil_1 (10.5 mm: no mesh given)"),
+        "{}",
+        named[0]
+    );
     assert!(!named[0].contains("pencil_0"), "{}", named[0]);
 }
 
@@ -538,4 +571,193 @@ fn a_scene_over_the_part_budget_is_not_simulated_and_says_so() {
     let report = within.artifact.settle.as_ref().expect("settle report");
     assert!(within.settled.is_some(), "{report:?}");
     assert!(report.simulation.is_some());
+}
+
+/// A synthetic mesh (glTF frame) as the check holds an asset's mesh: table-aligned, centred
+/// on its box.
+fn asset_mesh(mesh: &Mesh) -> AssetMesh {
+    let aligned: Vec<[f64; 3]> = mesh
+        .positions
+        .iter()
+        .map(|p| table_aligned_from_gltf(*p, 0.0))
+        .collect();
+    let b = aligned.iter().fold(Bounds::empty(), |b, p| {
+        b.union(&Bounds { min: *p, max: *p })
+    });
+    let c = b.center();
+    AssetMesh::new(
+        aligned
+            .iter()
+            .map(|p| [p[0] - c[0], p[1] - c[1], p[2] - c[2]])
+            .collect(),
+        mesh.triangles.clone(),
+    )
+}
+
+/// A box of `size` whose one part bulges past it by `bulge` on every side (measured reach
+/// `bulge`), with its mesh to be judged on, or without (the control).
+fn bulging_box(size: [f64; 3], bulge: f64, with_mesh: bool) -> Arc<AssetShape> {
+    let outer = size.map(|v| v + 2.0 * bulge);
+    let part = AssetShape::clone(&cuboid(outer)).with_reach_m(bulge);
+    let part = AssetShape::from_parts(
+        "pencil",
+        part.parts()
+            .iter()
+            .map(|(points, _)| points.clone())
+            .collect(),
+        size,
+    )
+    .with_reach_m(bulge);
+    Arc::new(if with_mesh {
+        part.with_mesh(asset_mesh(&Mesh::cuboid([size[0], size[2], size[1]])))
+    } else {
+        part
+    })
+}
+
+fn scaled(mut item: Item, scale: f64) -> Item {
+    item.pose.scale = [scale; 3];
+    item
+}
+
+/// A pencil whose part bulges 1 mm past its mesh, scaled ×4 (4 mm at that scale), lying on the
+/// table; a book 1 mm beside its mesh, a ball on it, a ball 3 mm over it.
+fn loose_pencil_scene(with_mesh: bool) -> Vec<Item> {
+    let pencil = bulging_box([0.175, 0.0075, 0.0075], 0.001, with_mesh);
+    let book = cuboid([0.2, 0.15, 0.03]);
+    let ball = ball(0.01);
+    vec![
+        // The mesh is 0.7 × 0.03 × 0.03 at ×4, its bottom on the table.
+        scaled(at("pencil_0", &pencil, [0.5, 0.3, 0.015]), 4.0),
+        at("book_0", &book, [0.5, 0.3 + 0.015 + 0.001 + 0.075, 0.015]),
+        at("ball_0", &ball, [0.4, 0.3, 0.03 + 0.01]),
+        at("ball_1", &ball, [0.6, 0.3, 0.03 + 0.003 + 0.01]),
+    ]
+}
+
+#[test]
+fn a_loose_object_is_judged_on_its_mesh() {
+    let (s, f) = check(&loose_pencil_scene(true));
+    assert!(s.objects[0].body.as_ref().expect("body").loose());
+    assert!(f.collisions.is_empty(), "{:?}", f.collisions);
+    assert!(f.violations.is_empty(), "{:?}", f.violations);
+    // Ball 0 rests on the pencil's mesh; ball 1 floats 3 mm over it.
+    let floating: Vec<usize> = f.floating.iter().map(|x| x.object).collect();
+    assert_eq!(floating, vec![3], "{:?}", f.falls);
+    assert_abs_diff_eq!(f.floating[0].gap_m, 0.003, epsilon = 2e-4);
+    assert_eq!(f.floating[0].over, Support::Object(0));
+    // Control: judged on its bulging part, the pencil sinks 4 mm into the table, collides with
+    // the book (3 mm) and the ball (4 mm), and holds the upper ball up.
+    let (_, f) = check(&loose_pencil_scene(false));
+    let pairs: Vec<(usize, usize)> = f.collisions.iter().map(|c| (c.a, c.b)).collect();
+    assert_eq!(pairs, vec![(0, 1), (0, 2)], "{:?}", f.collisions);
+    assert!(
+        f.violations
+            .iter()
+            .any(|(i, kind, _)| *i == 0 && *kind == ViolationKind::BelowTable),
+        "{:?}",
+        f.violations
+    );
+    assert!(f.floating.is_empty(), "{:?}", f.floating);
+}
+
+#[test]
+fn a_loose_object_settles_onto_its_mesh() {
+    // The pencil's mesh 5 mm over the table, its part (4 mm bigger at ×4) 1 mm over it:
+    // settling drops it by what its mesh can fall.
+    let run = |with_mesh: bool| {
+        let pencil = bulging_box([0.175, 0.0075, 0.0075], 0.001, with_mesh);
+        let s = scene(&[scaled(at("pencil_0", &pencil, [0.5, 0.3, 0.02]), 4.0)]);
+        let settled = settle(
+            &s,
+            &[None],
+            &Tolerances::default(),
+            &SettleConfig::default(),
+        );
+        assert!(settled.findings.clean(), "{:?}", settled.findings);
+        settled.offsets_m[0][2]
+    };
+    assert_abs_diff_eq!(run(true), -0.005, epsilon = 1e-4);
+    // Control: on the part, it already rests (1 mm is within the floating tolerance).
+    assert_abs_diff_eq!(run(false), 0.0, epsilon = 1e-9);
+}
+
+#[test]
+fn a_collision_is_as_deep_as_the_deepest_point_of_one_mesh_inside_the_other() {
+    // A towel of two parts meeting at x = 0.5; a 2 cm wide phone buried 27 mm under its top
+    // across that seam. Each part overlaps the phone by 1 cm along x (the way out of a part),
+    // but the phone is 27.85 mm deep in the towel.
+    let size = [0.3, 0.2, 0.06];
+    let half = cuboid([0.15, 0.2, 0.06]);
+    let shift = |dx: f64| -> Vec<[f64; 3]> {
+        half.parts()[0]
+            .0
+            .iter()
+            .map(|p| [p[0] + dx, p[1], p[2]])
+            .collect()
+    };
+    let parts = AssetShape::from_parts("towel", vec![shift(-0.075), shift(0.075)], size);
+    let phone = cuboid([0.02, 0.07, 0.0017]);
+    let items = |towel: &Arc<AssetShape>| {
+        vec![
+            at("towel_0", towel, [0.5, 0.3, 0.03]),
+            at("phone_0", &phone, [0.5, 0.3, 0.06 - 0.027]),
+        ]
+    };
+    let phone_mesh =
+        AssetShape::clone(&phone).with_mesh(asset_mesh(&Mesh::cuboid([0.02, 0.0017, 0.07])));
+    let phone_judged = Arc::new(phone_mesh);
+    let towel = Arc::new(
+        parts
+            .clone()
+            .with_mesh(asset_mesh(&Mesh::cuboid([size[0], size[2], size[1]]))),
+    );
+    let mut with_meshes = items(&towel);
+    with_meshes[1].shape = phone_judged;
+    let (_, f) = check(&with_meshes);
+    assert_eq!(f.collisions.len(), 1, "{:?}", f.collisions);
+    assert_abs_diff_eq!(f.collisions[0].depth_m, 0.027 + 0.00085, epsilon = 2e-4);
+    // Control: on the parts alone, the depth is the 1 cm way out of one part.
+    let (_, f) = check(&items(&Arc::new(parts)));
+    assert_eq!(f.collisions.len(), 1, "{:?}", f.collisions);
+    assert_abs_diff_eq!(f.collisions[0].depth_m, 0.01, epsilon = 2e-4);
+}
+
+#[test]
+fn a_steep_contact_is_judged_on_the_meshes() {
+    // A ball 1.5 mm from a box's top edge, the contact 70° from vertical: its parts are within
+    // the touch distance in a direction pointing down, but straight down it misses the box
+    // (its lowest point over the box's top is beyond the edge) and could fall 37 mm.
+    let bx = cuboid([0.1, 0.1, 0.05]);
+    let ball_with_mesh = ball(0.02);
+    let (s, c) = (70f64.to_radians().sin(), 70f64.to_radians().cos());
+    let centre = [0.35 + 0.0215 * s, 0.3, 0.05 + 0.0215 * c];
+    let items = |ball: &Arc<AssetShape>| {
+        vec![
+            at("box_0", &bx, [0.3, 0.3, 0.025]),
+            at("ball_0", ball, centre),
+        ]
+    };
+    let (scene, f) = check(&items(&ball_with_mesh));
+    // Neither is loose: the steep contact alone sends the pair to the meshes.
+    assert!(scene
+        .objects
+        .iter()
+        .all(|o| !o.body.as_ref().expect("body").loose()));
+    let floating: Vec<usize> = f.floating.iter().map(|x| x.object).collect();
+    assert_eq!(floating, vec![1], "{:?}", f.falls);
+    assert_abs_diff_eq!(f.floating[0].gap_m, centre[2] - 0.02, epsilon = 5e-4);
+    // Control: without meshes, the parts' word stands: it rests on the box.
+    let parts_only = Arc::new(AssetShape::from_parts(
+        "ball",
+        ball_with_mesh
+            .parts()
+            .iter()
+            .map(|(p, _)| p.clone())
+            .collect(),
+        ball_with_mesh.size_m,
+    ));
+    let (_, f) = check(&items(&parts_only));
+    assert!(f.floating.is_empty(), "{:?}", f.falls);
+    assert_eq!(f.falls[1].over, Support::Object(0));
 }

@@ -1,0 +1,801 @@
+//! An object's own triangle mesh placed by its layout: what `check` judges on where the convex
+//! parts are not faithful enough.
+//!
+//! Convex parts reach outside the mesh they cover by up to the reach `mesa assets` measured,
+//! and a layout's scale multiplies it (a pencil part 0.5 mm outside its mesh is 10 mm outside
+//! at ×21). An object whose parts may reach past its mesh by more than half the penetration
+//! tolerance at its layout's scale is *loose* ([`super::Body::loose`]): its collisions, falls and
+//! table contact are measured here, on the meshes, as the exact-mesh reference of the tests
+//! does (`scripts/mesh_reference.py`):
+//! - **depth**: the largest distance to the other mesh's surface of a point of one object
+//!   (its vertices and area-uniform surface samples) inside the other — a lower bound of the
+//!   penetration depth, exact at the deepest point sampled. A collision found on parts between
+//!   any two objects takes at least this depth: several convex parts meeting inside a solid
+//!   each overlap a piercing object less than the solid does.
+//! - **inside**: signed crossings of a ray along each axis (the winding number of a closed
+//!   mesh; several overlapping closed pieces count once), the majority of the three axes, so a
+//!   crack in the surface misleads at most one of them.
+//! - **fall**: the shortest vertical ray from the object's points down to the other mesh or
+//!   from the other's points up to it (0 when a point of one lies inside the other).
+//!
+//! Hand-written because parry3d's `TriMesh` tells inside from outside by pseudo-normals, which
+//! need one closed manifold surface (asset meshes are often several overlapping pieces), and
+//! has no vertical-ray walk over the triangles that answers "every hit below this point".
+
+use super::geometry::Bounds;
+use super::shapes::Pose;
+use crate::assets::reach::closest_point_triangle;
+use crate::mesh::quat_to_matrix;
+
+/// Triangles per leaf, at most.
+const LEAF: usize = 4;
+
+/// Surface samples taken on a mesh besides its vertices (area-uniform, deterministic).
+pub const SURFACE_SAMPLES: usize = 4000;
+
+/// An asset's triangle mesh in the frame of its collision parts (table-aligned, metres,
+/// relative to the centre of its bounding box), with the points the queries use.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AssetMesh {
+    positions_m: Vec<[f64; 3]>,
+    triangles: Vec<[u32; 3]>,
+    /// The vertices, then [`SURFACE_SAMPLES`] area-uniform samples of the surface.
+    points_m: Vec<[f64; 3]>,
+}
+
+impl AssetMesh {
+    /// A mesh of `positions_m` (the parts' frame) and `triangles` (indices into it; triangles
+    /// naming a missing vertex are left out).
+    pub fn new(positions_m: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Self {
+        let n = positions_m.len() as u32;
+        let triangles: Vec<[u32; 3]> = triangles
+            .into_iter()
+            .filter(|t| t.iter().all(|&i| i < n))
+            .collect();
+        let mut points_m = positions_m.clone();
+        points_m.extend(surface_samples(&positions_m, &triangles, SURFACE_SAMPLES));
+        Self {
+            positions_m,
+            triangles,
+            points_m,
+        }
+    }
+
+    /// The number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// The mesh placed by `pose` (scaled along the asset's axes, turned, moved: as the parts).
+    pub fn place(&self, pose: &Pose) -> Solid {
+        let m = quat_to_matrix(pose.rotation_xyzw);
+        let s = pose.scale;
+        let t = pose.position_m;
+        let map = |p: &[f64; 3]| -> [f64; 3] {
+            let q = [p[0] * s[0], p[1] * s[1], p[2] * s[2]];
+            std::array::from_fn(|r| t[r] + m[r][0] * q[0] + m[r][1] * q[1] + m[r][2] * q[2])
+        };
+        let positions: Vec<[f64; 3]> = self.positions_m.iter().map(map).collect();
+        let corners: Vec<[[f64; 3]; 3]> = self
+            .triangles
+            .iter()
+            .map(|tri| tri.map(|i| positions[i as usize]))
+            .collect();
+        let points: Vec<[f64; 3]> = self.points_m.iter().map(map).collect();
+        Solid::new(corners, points)
+    }
+}
+
+/// Area-uniform points on the triangles: the k-th of `count` at the k-th step of the cumulative
+/// area, at a point of the R2 low-discrepancy sequence within its triangle.
+fn surface_samples(positions: &[[f64; 3]], triangles: &[[u32; 3]], count: usize) -> Vec<[f64; 3]> {
+    let areas: Vec<f64> = triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| positions[i as usize]);
+            0.5 * norm(cross(sub(b, a), sub(c, a)))
+        })
+        .collect();
+    let total: f64 = areas.iter().sum();
+    if total.is_nan() || total <= 0.0 || !total.is_finite() {
+        return Vec::new();
+    }
+    const A1: f64 = 0.754_877_666_246_692_7;
+    const A2: f64 = 0.569_840_290_998_053_2;
+    let mut out = Vec::with_capacity(count);
+    let (mut tri, mut below) = (0usize, 0.0f64);
+    for k in 0..count {
+        let target = (k as f64 + 0.5) / count as f64 * total;
+        while tri + 1 < areas.len() && below + areas[tri] < target {
+            below += areas[tri];
+            tri += 1;
+        }
+        let (mut r1, mut r2) = ((0.5 + k as f64 * A1).fract(), (0.5 + k as f64 * A2).fract());
+        if r1 + r2 > 1.0 {
+            (r1, r2) = (1.0 - r1, 1.0 - r2);
+        }
+        let [a, b, c] = triangles[tri].map(|i| positions[i as usize]);
+        out.push(std::array::from_fn(|d| {
+            a[d] + r1 * (b[d] - a[d]) + r2 * (c[d] - a[d])
+        }));
+    }
+    out
+}
+
+/// A node: its box, and either its children (`count == 0`: `first` is the right child, the
+/// left one follows the node) or its triangles (`first..first + count`).
+#[derive(Debug, Clone)]
+struct Node {
+    min: [f64; 3],
+    max: [f64; 3],
+    first: u32,
+    count: u32,
+}
+
+/// A walk's nodes to visit: a fixed array (the tree is balanced: its depth is about
+/// log2(triangles / LEAF), and each level leaves one node waiting), no allocation per query.
+struct Stack {
+    nodes: [u32; 96],
+    len: usize,
+}
+
+impl Stack {
+    fn new() -> Self {
+        Self {
+            nodes: [0; 96],
+            len: 1,
+        }
+    }
+
+    fn push(&mut self, n: u32) {
+        self.nodes[self.len] = n;
+        self.len += 1;
+    }
+
+    fn pop(&mut self) -> Option<u32> {
+        self.len = self.len.checked_sub(1)?;
+        Some(self.nodes[self.len])
+    }
+}
+
+/// A placed mesh: its triangles in a bounding-volume tree, its points, its box (table frame,
+/// metres).
+#[derive(Debug, Clone)]
+pub struct Solid {
+    nodes: Vec<Node>,
+    triangles: Vec<[[f64; 3]; 3]>,
+    points: Vec<[f64; 3]>,
+    bounds: Bounds,
+}
+
+impl Solid {
+    fn new(triangles: Vec<[[f64; 3]; 3]>, points: Vec<[f64; 3]>) -> Self {
+        let mut bounds = Bounds::empty();
+        for p in triangles.iter().flatten() {
+            bounds = bounds.union(&Bounds { min: *p, max: *p });
+        }
+        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
+        let mut nodes = Vec::with_capacity(2 * triangles.len() / LEAF + 1);
+        if !triangles.is_empty() {
+            build(&triangles, &mut order, 0, &mut nodes);
+        }
+        Self {
+            nodes,
+            triangles: order.iter().map(|&i| triangles[i as usize]).collect(),
+            points,
+            bounds,
+        }
+    }
+
+    /// The mesh's box (empty without triangles).
+    pub fn bounds(&self) -> Bounds {
+        self.bounds
+    }
+
+    /// Visits the triangles whose boxes meet `bounds`.
+    fn in_box(&self, bounds: &Bounds, mut visit: impl FnMut(&[[f64; 3]; 3])) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = Stack::new();
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n as usize];
+            if (0..3).any(|k| node.max[k] < bounds.min[k] || node.min[k] > bounds.max[k]) {
+                continue;
+            }
+            if node.count > 0 {
+                let range = node.first as usize..(node.first + node.count) as usize;
+                self.triangles[range].iter().for_each(&mut visit);
+            } else {
+                stack.push(node.first);
+                stack.push(n + 1);
+            }
+        }
+    }
+
+    /// Visits the triangles whose boxes meet the line through `p` along `axis`.
+    fn on_line(&self, axis: usize, p: [f64; 3], mut visit: impl FnMut(&[[f64; 3]; 3])) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let mut stack = Stack::new();
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n as usize];
+            if p[u] < node.min[u] || p[u] > node.max[u] || p[v] < node.min[v] || p[v] > node.max[v]
+            {
+                continue;
+            }
+            if node.count > 0 {
+                let range = node.first as usize..(node.first + node.count) as usize;
+                self.triangles[range].iter().for_each(&mut visit);
+            } else {
+                stack.push(node.first);
+                stack.push(n + 1);
+            }
+        }
+    }
+
+    /// The winding number of `p` counted on the ray from it along `+axis`: the signed
+    /// crossings of the surface (outward normals pointing along the ray count +1).
+    fn crossings(&self, axis: usize, p: [f64; 3]) -> i32 {
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let mut sum = 0;
+        self.on_line(axis, p, |t| {
+            if let Some((sign, at)) = cover(t, u, v, axis, p, true) {
+                if at > p[axis] {
+                    sum += sign;
+                }
+            }
+        });
+        sum
+    }
+
+    /// Whether `p` lies inside the mesh (two of the three axis rays say so).
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        if !self.bounds.overlaps(&Bounds { min: p, max: p }, 0.0) {
+            return false;
+        }
+        let votes = (0..3).filter(|&axis| self.crossings(axis, p) != 0).count();
+        votes >= 2
+    }
+
+    /// The distance from `p` to the nearest triangle.
+    pub fn distance(&self, p: [f64; 3]) -> f64 {
+        self.nearest(p).0
+    }
+
+    /// The distance from `p` to the nearest triangle, and the nearest point (`p` itself with
+    /// an infinite distance for a mesh without triangles).
+    pub fn nearest(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
+        if self.nodes.is_empty() {
+            return (f64::INFINITY, p);
+        }
+        let mut best2 = f64::INFINITY;
+        let mut best = p;
+        let mut stack = Stack::new();
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n as usize];
+            if box_distance2(node, p) >= best2 {
+                continue;
+            }
+            if node.count > 0 {
+                let range = node.first as usize..(node.first + node.count) as usize;
+                for t in &self.triangles[range] {
+                    let q = closest_point_triangle(p, t[0], t[1], t[2]);
+                    let d = sub(p, q);
+                    let d2 = dot(d, d);
+                    if d2 < best2 {
+                        best2 = d2;
+                        best = q;
+                    }
+                }
+            } else {
+                // The nearer child last, so it is searched first.
+                let (right, left) = (node.first, n + 1);
+                let (dl, dr) = (
+                    box_distance2(&self.nodes[left as usize], p),
+                    box_distance2(&self.nodes[right as usize], p),
+                );
+                if dl <= dr {
+                    stack.push(right);
+                    stack.push(left);
+                } else {
+                    stack.push(left);
+                    stack.push(right);
+                }
+            }
+        }
+        (best2.sqrt(), best)
+    }
+
+    /// What the vertical line through `p` meets: whether `p` is inside (the signed crossings
+    /// above it), how far below it the nearest surface point under it is, and how far above
+    /// it the nearest over it (a surface within a nanometre of `p` counts as 0 either way).
+    fn column(&self, p: [f64; 3]) -> Column {
+        let mut column = Column {
+            inside: false,
+            below: None,
+            above: None,
+        };
+        let mut crossings = 0;
+        self.on_line(2, p, |t| {
+            if let Some((sign, z)) = cover(t, 0, 1, 2, p, true) {
+                if z > p[2] {
+                    crossings += sign;
+                }
+                let (down, up) = (p[2] - z, z - p[2]);
+                if down >= -1e-9 {
+                    let d = down.max(0.0);
+                    column.below = Some(column.below.map_or(d, |b: f64| b.min(d)));
+                }
+                if up >= -1e-9 {
+                    let d = up.max(0.0);
+                    column.above = Some(column.above.map_or(d, |b: f64| b.min(d)));
+                }
+            }
+        });
+        column.inside = crossings != 0;
+        column
+    }
+}
+
+/// What a vertical line through a point meets ([`Solid::column`]).
+struct Column {
+    inside: bool,
+    below: Option<f64>,
+    above: Option<f64>,
+}
+
+/// A placed mesh moved by `offset` (a settled object moves without its mesh being rebuilt).
+#[derive(Debug, Clone, Copy)]
+pub struct SolidAt<'a> {
+    /// The mesh as placed by the layout.
+    pub solid: &'a Solid,
+    /// How far it has moved since, metres.
+    pub offset: [f64; 3],
+}
+
+impl SolidAt<'_> {
+    /// The box, moved.
+    pub fn bounds(&self) -> Bounds {
+        self.solid.bounds.translated(self.offset)
+    }
+
+    fn local(&self, p: [f64; 3]) -> [f64; 3] {
+        sub(p, self.offset)
+    }
+
+    fn points(&self) -> impl Iterator<Item = [f64; 3]> + '_ {
+        self.solid.points.iter().map(|p| add(*p, self.offset))
+    }
+
+    /// Whether `p` (table frame) lies inside.
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        self.solid.contains(self.local(p))
+    }
+}
+
+/// The depth is found to within this, metres.
+pub const DEPTH_RESOLUTION_M: f64 = 0.000_5;
+
+/// Pieces of triangle measured in one [`deepest`] search, at most (the resolution is then
+/// coarser than [`DEPTH_RESOLUTION_M`]: the result stays a lower bound of the depth).
+const MOST_PIECES: usize = 200_000;
+
+/// The largest distance to `b`'s surface of a point of `a`'s surface inside `b`, metres (0 when
+/// none is), to within [`DEPTH_RESOLUTION_M`] where it exceeds `floor_m`, and at most `floor_m`
+/// otherwise (a caller judging against a tolerance need not measure a contact face finely).
+///
+/// A branch and bound over `a`'s triangles that meet `b`'s box. A piece of triangle whose
+/// centre lies outside `b`, `d` from its surface, with corners at most `r` from the centre,
+/// holds no point deeper than `r - d`; one whose centre lies inside holds none deeper than the
+/// distance from its farthest corner to the surface point nearest the centre (a point's depth
+/// is at most its distance to any surface point, and a triangle's farthest point from a point
+/// is a corner). The piece most promising is halved while its bound beats the deepest
+/// point found (by more than the resolution) and `floor_m`, and `r` exceeds the resolution.
+pub fn deepest(a: SolidAt<'_>, b: SolidAt<'_>, floor_m: f64) -> f64 {
+    let bb = b.bounds();
+    if !a.bounds().overlaps(&bb, 0.0) {
+        return 0.0;
+    }
+    let local_box = bb.translated(scale(a.offset, -1.0));
+    let mut best = 0.0f64;
+    let mut measured = 0usize;
+    // Each piece with the most it could hold; the most promising is split first, so the search
+    // ends as soon as no piece can beat the deepest point found.
+    let mut open: std::collections::BinaryHeap<Piece> = std::collections::BinaryHeap::new();
+    let measure = |t: [[f64; 3]; 3],
+                   best: &mut f64,
+                   measured: &mut usize,
+                   open: &mut std::collections::BinaryHeap<Piece>| {
+        let c = scale(add(add(t[0], t[1]), t[2]), 1.0 / 3.0);
+        let r = t.iter().map(|p| norm(sub(*p, c))).fold(0.0, f64::max);
+        let q = b.local(c);
+        let (distance, surface) = b.solid.nearest(q);
+        *measured += 1;
+        // Inside or not, nothing deeper than distance + r: no need to know which.
+        if distance + r <= (*best + DEPTH_RESOLUTION_M).max(floor_m) {
+            return;
+        }
+        let (d, bound) = if b.solid.contains(q) {
+            // A point of the piece is no deeper than its distance to the surface point nearest
+            // the centre, at most that of the farthest corner (much less than distance + r
+            // where the piece lies parallel to the surface).
+            let farthest = t
+                .iter()
+                .map(|p| norm(sub(b.local(*p), surface)))
+                .fold(0.0, f64::max);
+            (distance, farthest)
+        } else {
+            (-distance, r - distance)
+        };
+        *best = best.max(d);
+        if r > DEPTH_RESOLUTION_M && bound > (*best + DEPTH_RESOLUTION_M).max(floor_m) {
+            open.push(Piece { bound, t });
+        }
+    };
+    let mut first = Vec::new();
+    a.solid
+        .in_box(&local_box, |t| first.push(t.map(|p| add(p, a.offset))));
+    for t in first {
+        measure(t, &mut best, &mut measured, &mut open);
+    }
+    while let Some(piece) = open.pop() {
+        if piece.bound <= (best + DEPTH_RESOLUTION_M).max(floor_m) {
+            break;
+        }
+        if measured >= MOST_PIECES {
+            // Out of budget: the deepest point found stands (a lower bound).
+            break;
+        }
+        // Halved across its longest side: pieces stay well shaped (a sliver of a scaled-up
+        // pencil face, metres long and centimetres wide, becomes pieces as wide as long).
+        let t = piece.t;
+        let k = (0..3)
+            .max_by(|&i, &j| {
+                let li = norm(sub(t[(i + 1) % 3], t[i]));
+                let lj = norm(sub(t[(j + 1) % 3], t[j]));
+                li.total_cmp(&lj).then(j.cmp(&i))
+            })
+            .unwrap_or(0);
+        let (p, q, o) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
+        let m = mid(p, q);
+        for t in [[p, m, o], [m, q, o]] {
+            measure(t, &mut best, &mut measured, &mut open);
+        }
+    }
+    best
+}
+
+/// A piece of triangle waiting in [`deepest`]'s search, ordered by the most it could hold.
+struct Piece {
+    bound: f64,
+    t: [[f64; 3]; 3],
+}
+
+impl PartialEq for Piece {
+    fn eq(&self, other: &Self) -> bool {
+        self.bound.total_cmp(&other.bound).is_eq()
+    }
+}
+
+impl Eq for Piece {}
+
+impl PartialOrd for Piece {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Piece {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.bound.total_cmp(&other.bound)
+    }
+}
+
+fn mid(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    scale(add(a, b), 0.5)
+}
+
+/// How far `moving` could fall straight down onto `fixed`, metres, if `fixed` is under it
+/// at all: 0 when a point of one lies inside the other; else the shortest vertical ray from
+/// `moving`'s points down to `fixed` or from `fixed`'s points up to `moving`.
+pub fn fall_onto(moving: SolidAt<'_>, fixed: SolidAt<'_>) -> Option<f64> {
+    let (mb, fb) = (moving.bounds(), fixed.bounds());
+    if !mb.overlaps_xy(&fb, 0.0) || fb.min[2] >= mb.max[2] {
+        return None;
+    }
+    let in_column = |b: &Bounds, p: &[f64; 3]| {
+        p[0] >= b.min[0] && p[0] <= b.max[0] && p[1] >= b.min[1] && p[1] <= b.max[1]
+    };
+    let mut best: Option<f64> = None;
+    // Down from the moving object's points; a point inside the other means sunk: it rests.
+    for p in moving
+        .points()
+        .filter(|p| in_column(&fb, p) && p[2] >= fb.min[2] - 1e-9)
+    {
+        let q = fixed.local(p);
+        let column = fixed.solid.column(q);
+        // The vertical line's word alone is fooled by a crack or an open rim: confirmed by
+        // the three axes.
+        if column.inside && fixed.solid.contains(q) {
+            return Some(0.0);
+        }
+        if let Some(g) = column.below {
+            best = Some(best.map_or(g, |b| b.min(g)));
+        }
+    }
+    for p in fixed
+        .points()
+        .filter(|p| in_column(&mb, p) && p[2] <= mb.max[2] + 1e-9)
+    {
+        let q = moving.local(p);
+        let column = moving.solid.column(q);
+        if column.inside && moving.solid.contains(q) {
+            return Some(0.0);
+        }
+        if let Some(g) = column.above {
+            best = Some(best.map_or(g, |b| b.min(g)));
+        }
+    }
+    best
+}
+
+/// Whether triangle `t` covers `p` seen along `axis` (in the plane of axes `u`, `v`, a cyclic
+/// order after `axis`), with the sign of its normal along `axis` and where along `axis` the
+/// line through `p` meets it. With `exclusive`, a point on an edge shared by two triangles is
+/// covered by exactly one of them (a rasterizer's top-left rule), so a ray through an edge
+/// counts one crossing.
+fn cover(
+    t: &[[f64; 3]; 3],
+    u: usize,
+    v: usize,
+    axis: usize,
+    p: [f64; 3],
+    exclusive: bool,
+) -> Option<(i32, f64)> {
+    let q = |x: &[f64; 3]| [x[u], x[v]];
+    let (a, b, c) = (q(&t[0]), q(&t[1]), q(&t[2]));
+    let area = cross2(sub2(b, a), sub2(c, a));
+    if area == 0.0 || !area.is_finite() {
+        return None;
+    }
+    let (sign, a3, b3, c3) = if area > 0.0 {
+        (1, t[0], t[1], t[2])
+    } else {
+        (-1, t[0], t[2], t[1])
+    };
+    let (a, b, c) = (q(&a3), q(&b3), q(&c3));
+    let pp = [p[u], p[v]];
+    let mut w = [0.0; 3];
+    for (k, (x, y)) in [(b, c), (c, a), (a, b)].into_iter().enumerate() {
+        let e = cross2(sub2(y, x), sub2(pp, x));
+        if e < 0.0 {
+            return None;
+        }
+        if e == 0.0 && exclusive {
+            let d = sub2(y, x);
+            if !(d[1] < 0.0 || (d[1] == 0.0 && d[0] > 0.0)) {
+                return None;
+            }
+        }
+        w[k] = e;
+    }
+    let total = area.abs();
+    let at = (w[0] * a3[axis] + w[1] * b3[axis] + w[2] * c3[axis]) / total;
+    Some((sign, at))
+}
+
+fn build(
+    triangles: &[[[f64; 3]; 3]],
+    order: &mut [u32],
+    offset: u32,
+    nodes: &mut Vec<Node>,
+) -> u32 {
+    let mut min = [f64::INFINITY; 3];
+    let mut max = [f64::NEG_INFINITY; 3];
+    let mut cmin = [f64::INFINITY; 3];
+    let mut cmax = [f64::NEG_INFINITY; 3];
+    for &i in order.iter() {
+        let t = &triangles[i as usize];
+        for k in 0..3 {
+            let lo = t[0][k].min(t[1][k]).min(t[2][k]);
+            let hi = t[0][k].max(t[1][k]).max(t[2][k]);
+            min[k] = min[k].min(lo);
+            max[k] = max[k].max(hi);
+            let c = lo + hi;
+            cmin[k] = cmin[k].min(c);
+            cmax[k] = cmax[k].max(c);
+        }
+    }
+    let id = nodes.len() as u32;
+    nodes.push(Node {
+        min,
+        max,
+        first: offset,
+        count: order.len() as u32,
+    });
+    if order.len() <= LEAF {
+        return id;
+    }
+    let axis = (0..3)
+        .max_by(|&a, &b| (cmax[a] - cmin[a]).total_cmp(&(cmax[b] - cmin[b])))
+        .unwrap_or(0);
+    let mid = order.len() / 2;
+    let key = |i: &u32| {
+        let t = &triangles[*i as usize];
+        t[0][axis].min(t[1][axis]).min(t[2][axis]) + t[0][axis].max(t[1][axis]).max(t[2][axis])
+    };
+    order.select_nth_unstable_by(mid, |a, b| key(a).total_cmp(&key(b)).then(a.cmp(b)));
+    let (left, right) = order.split_at_mut(mid);
+    build(triangles, left, offset, nodes);
+    let r = build(triangles, right, offset + mid as u32, nodes);
+    nodes[id as usize].first = r;
+    nodes[id as usize].count = 0;
+    id
+}
+
+fn box_distance2(node: &Node, p: [f64; 3]) -> f64 {
+    (0..3)
+        .map(|k| {
+            let d = (node.min[k] - p[k]).max(p[k] - node.max[k]).max(0.0);
+            d * d
+        })
+        .sum()
+}
+
+fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+fn sub2(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+fn cross2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    a[0] * b[1] - a[1] * b[0]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::assets::synthetic::Mesh;
+    use crate::assets::table_aligned_from_gltf;
+
+    /// A synthetic mesh (glTF frame) as the check holds an asset's: table-aligned, centred on
+    /// its box.
+    fn asset(mesh: &Mesh) -> AssetMesh {
+        let aligned: Vec<[f64; 3]> = mesh
+            .positions
+            .iter()
+            .map(|p| table_aligned_from_gltf(*p, 0.0))
+            .collect();
+        let b = aligned.iter().fold(Bounds::empty(), |b, p| {
+            b.union(&Bounds { min: *p, max: *p })
+        });
+        let c = b.center();
+        AssetMesh::new(
+            aligned.iter().map(|p| sub(*p, c)).collect(),
+            mesh.triangles.clone(),
+        )
+    }
+
+    /// A box of width, depth and height (table frame).
+    fn block(w: f64, d: f64, h: f64) -> Mesh {
+        Mesh::cuboid([w, h, d])
+    }
+
+    fn pose(at: [f64; 3]) -> Pose {
+        Pose {
+            position_m: at,
+            rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+            scale: [1.0; 3],
+        }
+    }
+
+    fn at(solid: &Solid) -> SolidAt<'_> {
+        SolidAt {
+            solid,
+            offset: [0.0; 3],
+        }
+    }
+
+    #[test]
+    fn inside_outside_and_distance_of_a_box() {
+        let cube = asset(&block(0.1, 0.1, 0.1));
+        let s = cube.place(&pose([0.0; 3]));
+        assert!(s.contains([0.0, 0.0, 0.0]));
+        assert!(s.contains([0.049, 0.049, -0.049]));
+        assert!(!s.contains([0.051, 0.0, 0.0]));
+        assert!((s.distance([0.0, 0.0, 0.0]) - 0.05).abs() < 1e-12);
+        assert!((s.distance([0.0, 0.0, 0.08]) - 0.03).abs() < 1e-12);
+        // A vertical ray through an edge and a vertex of the grid counts one crossing.
+        assert!(s.contains([0.0, 0.0, 0.01]));
+        assert!(s.contains([0.02, -0.02, 0.0]));
+    }
+
+    #[test]
+    fn two_overlapping_closed_pieces_are_one_solid() {
+        let other = Mesh::cuboid([0.1, 0.1, 0.1]).translated([0.05, 0.0, 0.0]);
+        let two = Mesh::cuboid([0.1, 0.1, 0.1]).merged(&other);
+        let s = asset(&two).place(&pose([0.0; 3]));
+        // Centred on the pair's box: the pieces span x in [-0.075, 0.025] and [-0.025, 0.075].
+        // In both: winding number 2, still inside.
+        assert!(s.contains([0.0, 0.0, 0.0]));
+        assert!(s.contains([0.05, 0.0, 0.0]));
+        assert!(s.contains([-0.05, 0.0, 0.0]));
+        assert!(!s.contains([0.085, 0.0, 0.0]));
+    }
+
+    #[test]
+    fn depth_of_a_thin_object_buried_in_another() {
+        // A 1.7 mm phone 27 mm deep inside a towel 100 mm thick: depth about 27 mm, whatever
+        // the phone's thinness.
+        let towel = asset(&block(0.3, 0.3, 0.1)).place(&pose([0.0, 0.0, 0.05]));
+        let phone = asset(&block(0.07, 0.15, 0.0017)).place(&pose([0.0, 0.0, 0.073]));
+        let d = deepest(at(&phone), at(&towel), 0.0);
+        assert!((d - 0.027).abs() < 1e-3, "{d}");
+        // Control: the phone lying on the towel is not inside it.
+        let on = asset(&block(0.07, 0.15, 0.0017)).place(&pose([0.0, 0.0, 0.101]));
+        assert_eq!(deepest(at(&on), at(&towel), 0.0), 0.0);
+    }
+
+    #[test]
+    fn falls_on_meshes() {
+        let table_box = asset(&block(0.2, 0.2, 0.02)).place(&pose([0.0, 0.0, 0.01]));
+        let ball = asset(&Mesh::sphere(0.03, 12, 24)).place(&pose([0.0, 0.0, 0.02 + 0.03 + 0.005]));
+        let gap = fall_onto(at(&ball), at(&table_box)).expect("over it");
+        assert!((gap - 0.005).abs() < 2e-4, "{gap}");
+        // Beside it: nothing under.
+        let beside = asset(&Mesh::sphere(0.03, 12, 24)).place(&pose([0.5, 0.0, 0.1]));
+        assert_eq!(fall_onto(at(&beside), at(&table_box)), None);
+        // Sunk in: 0.
+        let sunk = asset(&Mesh::sphere(0.03, 12, 24)).place(&pose([0.0, 0.0, 0.045]));
+        assert_eq!(fall_onto(at(&sunk), at(&table_box)), Some(0.0));
+        // Moved by an offset, as settling moves it.
+        let moved = SolidAt {
+            solid: &ball,
+            offset: [0.0, 0.0, 0.01],
+        };
+        let gap = fall_onto(moved, at(&table_box)).expect("over it");
+        assert!((gap - 0.015).abs() < 2e-4, "{gap}");
+    }
+
+    #[test]
+    fn samples_are_spread_by_area_and_the_same_every_time() {
+        let m = Mesh::cuboid([0.4, 0.1, 0.1]);
+        let a = asset(&m);
+        assert_eq!(a, asset(&m));
+        let samples = &a.points_m[m.positions.len()..];
+        assert_eq!(samples.len(), SURFACE_SAMPLES);
+        // The two 0.1 × 0.1 ends hold 2 / 18 of the area.
+        let ends = samples.iter().filter(|p| p[0].abs() > 0.2 - 1e-12).count();
+        let expected = SURFACE_SAMPLES as f64 * 2.0 / 18.0;
+        assert!((ends as f64 - expected).abs() < 0.05 * expected, "{ends}");
+    }
+}
