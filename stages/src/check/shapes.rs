@@ -349,7 +349,11 @@ impl Body {
         let (shape, pose) = self.solid.source.as_ref()?;
         shape.mesh.load.as_ref()?;
         let placed = self.solid.placed.get_or_init(|| match shape.mesh() {
-            Some(Ok(mesh)) => Ok(Arc::new(mesh.place(pose))),
+            Some(Ok(mesh)) => Ok(Arc::new(mesh.place(
+                pose.position_m,
+                pose.rotation_xyzw,
+                pose.scale,
+            ))),
             Some(Err(e)) => Err(e),
             None => Err("no mesh".to_owned()),
         });

@@ -23,7 +23,6 @@
 //! has no vertical-ray walk over the triangles that answers "every hit below this point".
 
 use super::geometry::Bounds;
-use super::shapes::Pose;
 use crate::assets::reach::closest_point_triangle;
 use crate::mesh::quat_to_matrix;
 
@@ -66,11 +65,12 @@ impl AssetMesh {
         self.triangles.len()
     }
 
-    /// The mesh placed by `pose` (scaled along the asset's axes, turned, moved: as the parts).
-    pub fn place(&self, pose: &Pose) -> Solid {
-        let m = quat_to_matrix(pose.rotation_xyzw);
-        let s = pose.scale;
-        let t = pose.position_m;
+    /// The mesh scaled by `scale` along the asset's axes, turned by `rotation_xyzw`, moved to
+    /// `position_m` (as a layout places the parts: [`super::shapes::Pose`]).
+    pub fn place(&self, position_m: [f64; 3], rotation_xyzw: [f64; 4], scale: [f64; 3]) -> Solid {
+        let m = quat_to_matrix(rotation_xyzw);
+        let s = scale;
+        let t = position_m;
         let map = |p: &[f64; 3]| -> [f64; 3] {
             let q = [p[0] * s[0], p[1] * s[1], p[2] * s[2]];
             std::array::from_fn(|r| t[r] + m[r][0] * q[0] + m[r][1] * q[1] + m[r][2] * q[2])
@@ -710,12 +710,9 @@ mod tests {
         Mesh::cuboid([w, h, d])
     }
 
-    fn pose(at: [f64; 3]) -> Pose {
-        Pose {
-            position_m: at,
-            rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
-            scale: [1.0; 3],
-        }
+    /// Placed at `at`, unturned, unscaled.
+    fn placed(mesh: &AssetMesh, at: [f64; 3]) -> Solid {
+        mesh.place(at, [0.0, 0.0, 0.0, 1.0], [1.0; 3])
     }
 
     fn at(solid: &Solid) -> SolidAt<'_> {
@@ -728,7 +725,7 @@ mod tests {
     #[test]
     fn inside_outside_and_distance_of_a_box() {
         let cube = asset(&block(0.1, 0.1, 0.1));
-        let s = cube.place(&pose([0.0; 3]));
+        let s = placed(&cube, [0.0; 3]);
         assert!(s.contains([0.0, 0.0, 0.0]));
         assert!(s.contains([0.049, 0.049, -0.049]));
         assert!(!s.contains([0.051, 0.0, 0.0]));
@@ -743,7 +740,7 @@ mod tests {
     fn two_overlapping_closed_pieces_are_one_solid() {
         let other = Mesh::cuboid([0.1, 0.1, 0.1]).translated([0.05, 0.0, 0.0]);
         let two = Mesh::cuboid([0.1, 0.1, 0.1]).merged(&other);
-        let s = asset(&two).place(&pose([0.0; 3]));
+        let s = placed(&asset(&two), [0.0; 3]);
         // Centred on the pair's box: the pieces span x in [-0.075, 0.025] and [-0.025, 0.075].
         // In both: winding number 2, still inside.
         assert!(s.contains([0.0, 0.0, 0.0]));
@@ -756,26 +753,29 @@ mod tests {
     fn depth_of_a_thin_object_buried_in_another() {
         // A 1.7 mm phone 27 mm deep inside a towel 100 mm thick: depth about 27 mm, whatever
         // the phone's thinness.
-        let towel = asset(&block(0.3, 0.3, 0.1)).place(&pose([0.0, 0.0, 0.05]));
-        let phone = asset(&block(0.07, 0.15, 0.0017)).place(&pose([0.0, 0.0, 0.073]));
+        let towel = placed(&asset(&block(0.3, 0.3, 0.1)), [0.0, 0.0, 0.05]);
+        let phone = placed(&asset(&block(0.07, 0.15, 0.0017)), [0.0, 0.0, 0.073]);
         let d = deepest(at(&phone), at(&towel), 0.0);
         assert!((d - 0.027).abs() < 1e-3, "{d}");
         // Control: the phone lying on the towel is not inside it.
-        let on = asset(&block(0.07, 0.15, 0.0017)).place(&pose([0.0, 0.0, 0.101]));
+        let on = placed(&asset(&block(0.07, 0.15, 0.0017)), [0.0, 0.0, 0.101]);
         assert_eq!(deepest(at(&on), at(&towel), 0.0), 0.0);
     }
 
     #[test]
     fn falls_on_meshes() {
-        let table_box = asset(&block(0.2, 0.2, 0.02)).place(&pose([0.0, 0.0, 0.01]));
-        let ball = asset(&Mesh::sphere(0.03, 12, 24)).place(&pose([0.0, 0.0, 0.02 + 0.03 + 0.005]));
+        let table_box = placed(&asset(&block(0.2, 0.2, 0.02)), [0.0, 0.0, 0.01]);
+        let ball = placed(
+            &asset(&Mesh::sphere(0.03, 12, 24)),
+            [0.0, 0.0, 0.02 + 0.03 + 0.005],
+        );
         let gap = fall_onto(at(&ball), at(&table_box)).expect("over it");
         assert!((gap - 0.005).abs() < 2e-4, "{gap}");
         // Beside it: nothing under.
-        let beside = asset(&Mesh::sphere(0.03, 12, 24)).place(&pose([0.5, 0.0, 0.1]));
+        let beside = placed(&asset(&Mesh::sphere(0.03, 12, 24)), [0.5, 0.0, 0.1]);
         assert_eq!(fall_onto(at(&beside), at(&table_box)), None);
         // Sunk in: 0.
-        let sunk = asset(&Mesh::sphere(0.03, 12, 24)).place(&pose([0.0, 0.0, 0.045]));
+        let sunk = placed(&asset(&Mesh::sphere(0.03, 12, 24)), [0.0, 0.0, 0.045]);
         assert_eq!(fall_onto(at(&sunk), at(&table_box)), Some(0.0));
         // Moved by an offset, as settling moves it.
         let moved = SolidAt {
