@@ -565,7 +565,7 @@ pub fn fall_of<'a>(
         let Some((m, o)) = on_meshes(body, other) else {
             continue;
         };
-        if let Some(d) = solid::fall_onto(m, o) {
+        if let Some(d) = solid::fall_onto(m, o, touch_m, gap) {
             if d <= touch_m {
                 return (0.0, Support::Object(j));
             }
@@ -603,7 +603,7 @@ pub fn fall_of<'a>(
             match (body.solid(), other.solid()) {
                 (Some(Ok(m)), Some(Ok(o))) => {
                     steep_on_meshes.push(j);
-                    if let Some(d) = solid::fall_onto(m, o) {
+                    if let Some(d) = solid::fall_onto(m, o, touch_m, gap) {
                         if d <= touch_m {
                             return (0.0, Support::Object(j));
                         }

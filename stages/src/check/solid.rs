@@ -34,12 +34,20 @@ pub const SURFACE_SAMPLES: usize = 4000;
 
 /// An asset's triangle mesh in the frame of its collision parts (table-aligned, metres,
 /// relative to the centre of its bounding box), with the points the queries use.
+///
+/// The bounding-volume tree over the triangles is built once, here, in the asset's frame;
+/// placing the mesh keeps its shape and refits its boxes to the placed triangles (an affine
+/// map keeps every triangle in its leaf; only the boxes change), so a layout's placement costs
+/// a pass over the vertices and nodes, not a sort.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AssetMesh {
     positions_m: Vec<[f64; 3]>,
+    /// In the tree's order: a leaf's triangles are consecutive.
     triangles: Vec<[u32; 3]>,
     /// The vertices, then [`SURFACE_SAMPLES`] area-uniform samples of the surface.
     points_m: Vec<[f64; 3]>,
+    /// The tree over `triangles`, boxes in the asset's frame.
+    nodes: Vec<Node>,
 }
 
 impl AssetMesh {
@@ -53,10 +61,20 @@ impl AssetMesh {
             .collect();
         let mut points_m = positions_m.clone();
         points_m.extend(surface_samples(&positions_m, &triangles, SURFACE_SAMPLES));
+        let corners: Vec<[[f64; 3]; 3]> = triangles
+            .iter()
+            .map(|t| t.map(|i| positions_m[i as usize]))
+            .collect();
+        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
+        let mut nodes = Vec::with_capacity(2 * triangles.len() / LEAF + 1);
+        if !triangles.is_empty() {
+            build(&corners, &mut order, 0, &mut nodes);
+        }
         Self {
+            triangles: order.iter().map(|&i| triangles[i as usize]).collect(),
             positions_m,
-            triangles,
             points_m,
+            nodes,
         }
     }
 
@@ -82,7 +100,45 @@ impl AssetMesh {
             .map(|tri| tri.map(|i| positions[i as usize]))
             .collect();
         let points: Vec<[f64; 3]> = self.points_m.iter().map(map).collect();
-        Solid::new(corners, points)
+        let mut nodes = self.nodes.clone();
+        refit(&mut nodes, &corners);
+        let bounds = nodes.first().map_or(Bounds::empty(), |root| Bounds {
+            min: root.min,
+            max: root.max,
+        });
+        Solid {
+            nodes,
+            triangles: corners,
+            points,
+            bounds,
+        }
+    }
+}
+
+/// Sets every node's box to what its placed triangles span: children come after their parent
+/// (the left one right after it, the right one at `first`), so a backward pass meets every
+/// child before its parent.
+fn refit(nodes: &mut [Node], triangles: &[[[f64; 3]; 3]]) {
+    for n in (0..nodes.len()).rev() {
+        let (mut min, mut max) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        let node = &nodes[n];
+        if node.count > 0 {
+            let range = node.first as usize..(node.first + node.count) as usize;
+            for p in triangles[range].iter().flatten() {
+                for k in 0..3 {
+                    min[k] = min[k].min(p[k]);
+                    max[k] = max[k].max(p[k]);
+                }
+            }
+        } else {
+            let (left, right) = (&nodes[n + 1], &nodes[node.first as usize]);
+            for k in 0..3 {
+                min[k] = left.min[k].min(right.min[k]);
+                max[k] = left.max[k].max(right.max[k]);
+            }
+        }
+        nodes[n].min = min;
+        nodes[n].max = max;
     }
 }
 
@@ -124,7 +180,7 @@ fn surface_samples(positions: &[[f64; 3]], triangles: &[[u32; 3]], count: usize)
 
 /// A node: its box, and either its children (`count == 0`: `first` is the right child, the
 /// left one follows the node) or its triangles (`first..first + count`).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 struct Node {
     min: [f64; 3],
     max: [f64; 3],
@@ -169,24 +225,6 @@ pub struct Solid {
 }
 
 impl Solid {
-    fn new(triangles: Vec<[[f64; 3]; 3]>, points: Vec<[f64; 3]>) -> Self {
-        let mut bounds = Bounds::empty();
-        for p in triangles.iter().flatten() {
-            bounds = bounds.union(&Bounds { min: *p, max: *p });
-        }
-        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
-        let mut nodes = Vec::with_capacity(2 * triangles.len() / LEAF + 1);
-        if !triangles.is_empty() {
-            build(&triangles, &mut order, 0, &mut nodes);
-        }
-        Self {
-            nodes,
-            triangles: order.iter().map(|&i| triangles[i as usize]).collect(),
-            points,
-            bounds,
-        }
-    }
-
     /// The mesh's box (empty without triangles).
     pub fn bounds(&self) -> Bounds {
         self.bounds
@@ -310,17 +348,47 @@ impl Solid {
     }
 
     /// What the vertical line through `p` meets: whether `p` is inside (the signed crossings
-    /// above it), how far below it the nearest surface point under it is, and how far above
-    /// it the nearest over it (a surface within a nanometre of `p` counts as 0 either way).
-    fn column(&self, p: [f64; 3]) -> Column {
+    /// above it; only with `need_inside`, else `false`), how far below it the nearest surface
+    /// point under it is, and how far above it the nearest over it (a surface within a
+    /// nanometre of `p` counts as 0 either way).
+    ///
+    /// Only gaps shorter than `below_limit` (under `p`) and `above_limit` (over it) are sought:
+    /// a node of the tree wholly under `p` is skipped when its top is `below_limit` or more
+    /// under it, one wholly over `p` when its bottom is `above_limit` or more over it and the
+    /// crossings are not needed. What is found under a limit is exact.
+    fn column(&self, p: [f64; 3], need_inside: bool, below_limit: f64, above_limit: f64) -> Column {
         let mut column = Column {
             inside: false,
             below: None,
             above: None,
         };
+        if self.nodes.is_empty() {
+            return column;
+        }
         let mut crossings = 0;
-        self.on_line(2, p, |t| {
-            if let Some((sign, z)) = cover(t, 0, 1, 2, p, true) {
+        let mut stack = Stack::new();
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n as usize];
+            if p[0] < node.min[0] || p[0] > node.max[0] || p[1] < node.min[1] || p[1] > node.max[1]
+            {
+                continue;
+            }
+            if node.max[2] < p[2] && p[2] - node.max[2] >= below_limit {
+                continue;
+            }
+            if node.min[2] > p[2] && !need_inside && node.min[2] - p[2] >= above_limit {
+                continue;
+            }
+            if node.count == 0 {
+                stack.push(node.first);
+                stack.push(n + 1);
+                continue;
+            }
+            let range = node.first as usize..(node.first + node.count) as usize;
+            for t in &self.triangles[range] {
+                let Some((sign, z)) = cover(t, 0, 1, 2, p, true) else {
+                    continue;
+                };
                 if z > p[2] {
                     crossings += sign;
                 }
@@ -334,8 +402,8 @@ impl Solid {
                     column.above = Some(column.above.map_or(d, |b: f64| b.min(d)));
                 }
             }
-        });
-        column.inside = crossings != 0;
+        }
+        column.inside = need_inside && crossings != 0;
         column
     }
 }
@@ -501,7 +569,17 @@ fn mid(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 /// How far `moving` could fall straight down onto `fixed`, metres, if `fixed` is under it
 /// at all: 0 when a point of one lies inside the other; else the shortest vertical ray from
 /// `moving`'s points down to `fixed` or from `fixed`'s points up to `moving`.
-pub fn fall_onto(moving: SolidAt<'_>, fixed: SolidAt<'_>) -> Option<f64> {
+///
+/// Only a gap shorter than `limit_m` is sought (`None` when there is none), and the search
+/// stops at the first within `touch_m` (which it returns: the object rests): what the caller
+/// asks is "does it rest, else is this the shortest fall so far", and points and parts of the
+/// tree that cannot answer shorter are skipped.
+pub fn fall_onto(
+    moving: SolidAt<'_>,
+    fixed: SolidAt<'_>,
+    touch_m: f64,
+    limit_m: f64,
+) -> Option<f64> {
     let (mb, fb) = (moving.bounds(), fixed.bounds());
     if !mb.overlaps_xy(&fb, 0.0) || fb.min[2] >= mb.max[2] {
         return None;
@@ -509,37 +587,55 @@ pub fn fall_onto(moving: SolidAt<'_>, fixed: SolidAt<'_>) -> Option<f64> {
     let in_column = |b: &Bounds, p: &[f64; 3]| {
         p[0] >= b.min[0] && p[0] <= b.max[0] && p[1] >= b.min[1] && p[1] <= b.max[1]
     };
-    let mut best: Option<f64> = None;
+    // The shortest gap found so far, or the limit.
+    let mut best = limit_m;
     // Down from the moving object's points; a point inside the other means sunk: it rests.
     for p in moving
         .points()
         .filter(|p| in_column(&fb, p) && p[2] >= fb.min[2] - 1e-9)
     {
+        if p[2] - fb.max[2] >= best {
+            continue;
+        }
         let q = fixed.local(p);
-        let column = fixed.solid.column(q);
+        // Only a point within the other's height can be inside it.
+        let column = fixed
+            .solid
+            .column(q, p[2] <= fb.max[2], best, f64::NEG_INFINITY);
         // The vertical line's word alone is fooled by a crack or an open rim: confirmed by
         // the three axes.
         if column.inside && fixed.solid.contains(q) {
             return Some(0.0);
         }
-        if let Some(g) = column.below {
-            best = Some(best.map_or(g, |b| b.min(g)));
+        if let Some(g) = column.below.filter(|&g| g < best) {
+            best = g;
+            if best <= touch_m {
+                return Some(best);
+            }
         }
     }
     for p in fixed
         .points()
         .filter(|p| in_column(&mb, p) && p[2] <= mb.max[2] + 1e-9)
     {
+        if mb.min[2] - p[2] >= best {
+            continue;
+        }
         let q = moving.local(p);
-        let column = moving.solid.column(q);
+        let column = moving
+            .solid
+            .column(q, p[2] >= mb.min[2], f64::NEG_INFINITY, best);
         if column.inside && moving.solid.contains(q) {
             return Some(0.0);
         }
-        if let Some(g) = column.above {
-            best = Some(best.map_or(g, |b| b.min(g)));
+        if let Some(g) = column.above.filter(|&g| g < best) {
+            best = g;
+            if best <= touch_m {
+                return Some(best);
+            }
         }
     }
-    best
+    (best < limit_m).then_some(best)
 }
 
 /// Whether triangle `t` covers `p` seen along `axis` (in the plane of axes `u`, `v`, a cyclic
@@ -769,20 +865,26 @@ mod tests {
             &asset(&Mesh::sphere(0.03, 12, 24)),
             [0.0, 0.0, 0.02 + 0.03 + 0.005],
         );
-        let gap = fall_onto(at(&ball), at(&table_box)).expect("over it");
+        let gap = fall_onto(at(&ball), at(&table_box), 0.0, f64::INFINITY).expect("over it");
         assert!((gap - 0.005).abs() < 2e-4, "{gap}");
         // Beside it: nothing under.
         let beside = placed(&asset(&Mesh::sphere(0.03, 12, 24)), [0.5, 0.0, 0.1]);
-        assert_eq!(fall_onto(at(&beside), at(&table_box)), None);
+        assert_eq!(
+            fall_onto(at(&beside), at(&table_box), 0.0, f64::INFINITY),
+            None
+        );
         // Sunk in: 0.
         let sunk = placed(&asset(&Mesh::sphere(0.03, 12, 24)), [0.0, 0.0, 0.045]);
-        assert_eq!(fall_onto(at(&sunk), at(&table_box)), Some(0.0));
+        assert_eq!(
+            fall_onto(at(&sunk), at(&table_box), 0.0, f64::INFINITY),
+            Some(0.0)
+        );
         // Moved by an offset, as settling moves it.
         let moved = SolidAt {
             solid: &ball,
             offset: [0.0, 0.0, 0.01],
         };
-        let gap = fall_onto(moved, at(&table_box)).expect("over it");
+        let gap = fall_onto(moved, at(&table_box), 0.0, f64::INFINITY).expect("over it");
         assert!((gap - 0.015).abs() < 2e-4, "{gap}");
     }
 
