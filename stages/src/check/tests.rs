@@ -761,3 +761,44 @@ fn a_steep_contact_is_judged_on_the_meshes() {
     assert!(f.floating.is_empty(), "{:?}", f.falls);
     assert_eq!(f.falls[1].over, Support::Object(0));
 }
+
+/// After a simulation in which everything came to rest, a layout the check does not find at
+/// rest (here a box sunk 5 mm into the table, as a tilted glass's mesh ends) gets the
+/// least-motion moves once more; not after one in which something still moves (the control).
+#[test]
+fn a_calm_simulation_is_tidied_by_the_least_motion_moves() {
+    use super::simulate::{SimMotion, Simulation};
+    let text = r#"{"item_placement_zone": [0, 100, 0, 100], "objects": [
+        {"instance": "box_0", "retrieved_uid": "box", "position": [50, 50, 4.5],
+         "rotation": [0, 0, 0, 1], "size": [10, 10, 10], "scale_factor": [1, 1, 1]}]}"#;
+    let layout: DatasetLayout = serde_json::from_str(text).expect("layout");
+    let box_shape = cuboid([0.1, 0.1, 0.1]);
+    let shape_of = |_: &mesa_schemas::LayoutObject| Ok(Arc::clone(&box_shape));
+    let config = CheckConfig::default();
+    let motion = |window_motion_m: f64| Simulation {
+        motions: vec![Some(SimMotion {
+            position_m: [0.5, 0.5, 0.045],
+            turn_xyzw: [0.0, 0.0, 0.0, 1.0],
+            turn_deg: 0.0,
+            moved_m: 0.0,
+            window_motion_m,
+            fell: false,
+        })],
+        steps: 1,
+    };
+    let mut tidied = layout.clone();
+    super::scene::tidy_after_simulation(&mut tidied, &motion(0.0), &[None], &config, &shape_of);
+    let z = tidied.objects[0].position_cm.0[2];
+    assert!((4.95..=5.1).contains(&z), "z = {z} cm");
+    let notes = &tidied.objects[0].provenance.as_ref().expect("a note").notes;
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.starts_with("settled after the simulation")),
+        "{notes:?}"
+    );
+    // The control: something still moved over the rest window: left as the simulation left it.
+    let mut kept = layout.clone();
+    super::scene::tidy_after_simulation(&mut kept, &motion(0.01), &[None], &config, &shape_of);
+    assert_eq!(kept, layout);
+}
