@@ -15,26 +15,20 @@
 //! `MESA_CHECK_BENCH_DATASET` (a dataset with `assets/index/`) and `MESA_CHECK_BENCH_LAYOUT` (a
 //! dataset layout file) bench that scene instead (what the comparison script does).
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use common::read;
 use criterion::{criterion_group, criterion_main, Criterion};
 use mesa_schemas::artifacts::{AssetIndexArtifact, ShapesArtifact};
-use mesa_schemas::DatasetLayout;
-use mesa_stages::annotations::Annotations;
-use mesa_stages::assets::{index_asset, AssetsConfig};
 use mesa_stages::check::solid::AssetMesh;
 use mesa_stages::check::{check_scene, collisions_of, AssetShape, PhysicsScene, Tolerances};
-use mesa_stages::demo::{write_demo, DemoOptions};
 use mesa_stages::export::VisualMesh;
 use mesa_stages::glb_read::read_glb;
-
-fn read<T: serde::de::DeserializeOwned>(path: &Path) -> T {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
 
 /// Shapes from a dataset's asset index.
 fn indexed_shapes(dataset: &Path) -> BTreeMap<String, Arc<AssetShape>> {
@@ -55,50 +49,6 @@ fn indexed_shapes(dataset: &Path) -> BTreeMap<String, Arc<AssetShape>> {
         .collect()
 }
 
-/// A demo scene of about 15 objects and the shapes of its assets.
-fn demo_scene() -> (DatasetLayout, BTreeMap<String, Arc<AssetShape>>) {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let summary = write_demo(dir.path(), &DemoOptions::default().with_scenes(6)).expect("demo");
-    let scene = summary
-        .scenes
-        .iter()
-        .min_by_key(|s| (s.objects as i64 - 15).abs())
-        .expect("a scene");
-    let layout: DatasetLayout = read(
-        &dir.path()
-            .join("scenes")
-            .join(&scene.table_type)
-            .join(&scene.scene_id)
-            .join("truth/layout.json"),
-    );
-    let annotations =
-        Annotations::read(&dir.path().join("assets/annotations.json")).expect("annotations");
-    let mut shapes = BTreeMap::new();
-    for object in &layout.objects {
-        let uid = &object.retrieved_uid;
-        if shapes.contains_key(uid) {
-            continue;
-        }
-        let bytes =
-            std::fs::read(dir.path().join(format!("assets/library/{uid}.glb"))).expect("glb");
-        let indexed = index_asset(
-            uid,
-            "",
-            &bytes,
-            annotations.get(uid),
-            &AssetsConfig::default(),
-        );
-        let geometry = indexed.geometry.expect("geometry");
-        // With its mesh, as `mesa check` holds it: loose objects are judged on it.
-        let visual = VisualMesh::from_glb(&read_glb(&bytes).expect("glb"), &geometry);
-        let shape = AssetShape::new(uid, &indexed.shapes.expect("shapes"), &geometry)
-            .expect("shape")
-            .with_mesh(AssetMesh::new(visual.positions_m, visual.triangles));
-        shapes.insert(uid.clone(), Arc::new(shape));
-    }
-    (layout, shapes)
-}
-
 fn bench(c: &mut Criterion) {
     let (layout, shapes) = match (
         std::env::var_os("MESA_CHECK_BENCH_DATASET"),
@@ -108,7 +58,10 @@ fn bench(c: &mut Criterion) {
             read(&PathBuf::from(layout)),
             indexed_shapes(Path::new(&dataset)),
         ),
-        _ => demo_scene(),
+        _ => {
+            let scene = common::demo_scene();
+            (scene.layout, scene.shapes)
+        }
     };
     let parts: usize = layout
         .objects
