@@ -59,6 +59,7 @@ pub mod retrieve;
 pub mod seeding;
 pub mod tasks;
 pub mod text;
+mod tri_tree;
 
 /// Bytes as lowercase hex.
 pub fn hex(bytes: &[u8]) -> String {

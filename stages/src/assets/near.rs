@@ -12,21 +12,10 @@
 //! parry3d's `f32` millimetres ([`NearTest::slack_m`]).
 //!
 //! Hand-written because parry3d's tree has no "any leaf within a distance" walk with early
-//! exit, and its traversal allocates per query.
+//! exit, and its traversal allocates per query; the tree is [`crate::tri_tree`]'s.
 
 use super::reach::distance_point_triangle;
-
-/// Triangles per leaf, at most.
-const LEAF: usize = 4;
-
-/// A node: its box, and either its children (`count == 0`: `first` is the right child, the
-/// left one follows the node) or its triangles (`first..first + count` of the ordered list).
-struct Node {
-    min: [f64; 3],
-    max: [f64; 3],
-    first: u32,
-    count: u32,
-}
+use crate::tri_tree::{self, Node, Stack};
 
 /// A bounding-volume tree over a mesh's triangles, for "within a distance" tests.
 pub(crate) struct NearTest {
@@ -47,11 +36,7 @@ impl NearTest {
             .iter()
             .flatten()
             .fold(0.0f64, |m, v| m.max(v.abs()));
-        let mut order: Vec<u32> = (0..corners.len() as u32).collect();
-        let mut nodes = Vec::with_capacity(2 * corners.len() / LEAF + 1);
-        if !corners.is_empty() {
-            build(&corners, &mut order, 0, &mut nodes);
-        }
+        let (nodes, order) = tri_tree::build(&corners);
         Self {
             nodes,
             triangles: order.iter().map(|&i| corners[i as usize]).collect(),
@@ -74,108 +59,25 @@ impl NearTest {
             return false;
         }
         let r2 = r * r;
-        let mut stack = [0u32; 64];
-        let mut depth = 1;
-        while depth > 0 {
-            depth -= 1;
-            let node = &self.nodes[stack[depth] as usize];
-            if box_distance2(node, p) > r2 {
+        let mut stack = Stack::new();
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n as usize];
+            if node.distance2(p) > r2 {
                 continue;
             }
             if node.count > 0 {
-                let first = node.first as usize;
-                for [a, b, c] in &self.triangles[first..first + node.count as usize] {
-                    if distance_point_triangle(p, *a, *b, *c) <= r {
-                        return true;
-                    }
+                if self.triangles[node.triangles()]
+                    .iter()
+                    .any(|[a, b, c]| distance_point_triangle(p, *a, *b, *c) <= r)
+                {
+                    return true;
                 }
                 continue;
             }
-            let left = stack[depth] + 1;
-            let right = node.first;
-            // The nearer child is walked first (pushed last).
-            let (near, far) = if box_distance2(&self.nodes[left as usize], p)
-                <= box_distance2(&self.nodes[right as usize], p)
-            {
-                (left, right)
-            } else {
-                (right, left)
-            };
-            if depth + 2 > stack.len() {
-                // Deeper than a balanced tree of 2^62 leaves can be; never reached.
-                return self.within_linear(p, r);
-            }
-            stack[depth] = far;
-            stack[depth + 1] = near;
-            depth += 2;
+            stack.push_children_nearer_first(&self.nodes, n, p);
         }
         false
     }
-
-    fn within_linear(&self, p: [f64; 3], r: f64) -> bool {
-        self.triangles
-            .iter()
-            .any(|[a, b, c]| distance_point_triangle(p, *a, *b, *c) <= r)
-    }
-}
-
-/// The squared distance from `p` to a node's box (0 inside it).
-fn box_distance2(node: &Node, p: [f64; 3]) -> f64 {
-    (0..3)
-        .map(|k| {
-            let d = (node.min[k] - p[k]).max(p[k] - node.max[k]).max(0.0);
-            d * d
-        })
-        .sum()
-}
-
-/// Builds the subtree of `order` (indices into `corners`) at the end of `nodes`, median split
-/// of the centroids along their longest side; returns nothing, the subtree's root is the node
-/// at the length `nodes` had on entry. `offset` is where `order` starts in the full list.
-fn build(corners: &[[[f64; 3]; 3]], order: &mut [u32], offset: usize, nodes: &mut Vec<Node>) {
-    let mut min = [f64::INFINITY; 3];
-    let mut max = [f64::NEG_INFINITY; 3];
-    let mut cmin = [f64::INFINITY; 3];
-    let mut cmax = [f64::NEG_INFINITY; 3];
-    for &t in order.iter() {
-        let tri = &corners[t as usize];
-        for k in 0..3 {
-            for p in tri {
-                min[k] = min[k].min(p[k]);
-                max[k] = max[k].max(p[k]);
-            }
-            let c = (tri[0][k] + tri[1][k] + tri[2][k]) / 3.0;
-            cmin[k] = cmin[k].min(c);
-            cmax[k] = cmax[k].max(c);
-        }
-    }
-    let at = nodes.len();
-    nodes.push(Node {
-        min,
-        max,
-        first: offset as u32,
-        count: order.len() as u32,
-    });
-    if order.len() <= LEAF {
-        return;
-    }
-    let axis = (0..3)
-        .max_by(|a, b| (cmax[*a] - cmin[*a]).total_cmp(&(cmax[*b] - cmin[*b])))
-        .unwrap_or(0);
-    let centroid = |t: u32| {
-        let tri = &corners[t as usize];
-        tri[0][axis] + tri[1][axis] + tri[2][axis]
-    };
-    let half = order.len() / 2;
-    order.select_nth_unstable_by(half, |a, b| {
-        centroid(*a).total_cmp(&centroid(*b)).then(a.cmp(b))
-    });
-    let (low, high) = order.split_at_mut(half);
-    build(corners, low, offset, nodes);
-    let right = nodes.len() as u32;
-    build(corners, high, offset + half, nodes);
-    nodes[at].first = right;
-    nodes[at].count = 0;
 }
 
 #[cfg(test)]

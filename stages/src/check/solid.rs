@@ -25,9 +25,7 @@
 use super::geometry::Bounds;
 use crate::assets::reach::closest_point_triangle;
 use crate::mesh::quat_to_matrix;
-
-/// Triangles per leaf, at most.
-const LEAF: usize = 4;
+use crate::tri_tree::{self, Node, Stack};
 
 /// Surface samples taken on a mesh besides its vertices (area-uniform, deterministic).
 pub const SURFACE_SAMPLES: usize = 4000;
@@ -65,11 +63,7 @@ impl AssetMesh {
             .iter()
             .map(|t| t.map(|i| positions_m[i as usize]))
             .collect();
-        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
-        let mut nodes = Vec::with_capacity(2 * triangles.len() / LEAF + 1);
-        if !triangles.is_empty() {
-            build(&corners, &mut order, 0, &mut nodes);
-        }
+        let (nodes, order) = tri_tree::build(&corners);
         Self {
             triangles: order.iter().map(|&i| triangles[i as usize]).collect(),
             positions_m,
@@ -101,7 +95,7 @@ impl AssetMesh {
             .collect();
         let points: Vec<[f64; 3]> = self.points_m.iter().map(map).collect();
         let mut nodes = self.nodes.clone();
-        refit(&mut nodes, &corners);
+        tri_tree::refit(&mut nodes, &corners);
         let bounds = nodes.first().map_or(Bounds::empty(), |root| Bounds {
             min: root.min,
             max: root.max,
@@ -112,33 +106,6 @@ impl AssetMesh {
             points,
             bounds,
         }
-    }
-}
-
-/// Sets every node's box to what its placed triangles span: children come after their parent
-/// (the left one right after it, the right one at `first`), so a backward pass meets every
-/// child before its parent.
-fn refit(nodes: &mut [Node], triangles: &[[[f64; 3]; 3]]) {
-    for n in (0..nodes.len()).rev() {
-        let (mut min, mut max) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        let node = &nodes[n];
-        if node.count > 0 {
-            let range = node.first as usize..(node.first + node.count) as usize;
-            for p in triangles[range].iter().flatten() {
-                for k in 0..3 {
-                    min[k] = min[k].min(p[k]);
-                    max[k] = max[k].max(p[k]);
-                }
-            }
-        } else {
-            let (left, right) = (&nodes[n + 1], &nodes[node.first as usize]);
-            for k in 0..3 {
-                min[k] = left.min[k].min(right.min[k]);
-                max[k] = left.max[k].max(right.max[k]);
-            }
-        }
-        nodes[n].min = min;
-        nodes[n].max = max;
     }
 }
 
@@ -178,42 +145,6 @@ fn surface_samples(positions: &[[f64; 3]], triangles: &[[u32; 3]], count: usize)
     out
 }
 
-/// A node: its box, and either its children (`count == 0`: `first` is the right child, the
-/// left one follows the node) or its triangles (`first..first + count`).
-#[derive(Debug, Clone, PartialEq)]
-struct Node {
-    min: [f64; 3],
-    max: [f64; 3],
-    first: u32,
-    count: u32,
-}
-
-/// A walk's nodes to visit: a fixed array (the tree is balanced: its depth is about
-/// log2(triangles / LEAF), and each level leaves one node waiting), no allocation per query.
-struct Stack {
-    nodes: [u32; 96],
-    len: usize,
-}
-
-impl Stack {
-    fn new() -> Self {
-        Self {
-            nodes: [0; 96],
-            len: 1,
-        }
-    }
-
-    fn push(&mut self, n: u32) {
-        self.nodes[self.len] = n;
-        self.len += 1;
-    }
-
-    fn pop(&mut self) -> Option<u32> {
-        self.len = self.len.checked_sub(1)?;
-        Some(self.nodes[self.len])
-    }
-}
-
 /// A placed mesh: its triangles in a bounding-volume tree, its points, its box (table frame,
 /// metres).
 #[derive(Debug, Clone)]
@@ -242,7 +173,7 @@ impl Solid {
                 continue;
             }
             if node.count > 0 {
-                let range = node.first as usize..(node.first + node.count) as usize;
+                let range = node.triangles();
                 self.triangles[range].iter().for_each(&mut visit);
             } else {
                 stack.push(node.first);
@@ -265,7 +196,7 @@ impl Solid {
                 continue;
             }
             if node.count > 0 {
-                let range = node.first as usize..(node.first + node.count) as usize;
+                let range = node.triangles();
                 self.triangles[range].iter().for_each(&mut visit);
             } else {
                 stack.push(node.first);
@@ -314,11 +245,11 @@ impl Solid {
         let mut stack = Stack::new();
         while let Some(n) = stack.pop() {
             let node = &self.nodes[n as usize];
-            if box_distance2(node, p) >= best2 {
+            if node.distance2(p) >= best2 {
                 continue;
             }
             if node.count > 0 {
-                let range = node.first as usize..(node.first + node.count) as usize;
+                let range = node.triangles();
                 for t in &self.triangles[range] {
                     let q = closest_point_triangle(p, t[0], t[1], t[2]);
                     let d = sub(p, q);
@@ -329,19 +260,7 @@ impl Solid {
                     }
                 }
             } else {
-                // The nearer child last, so it is searched first.
-                let (right, left) = (node.first, n + 1);
-                let (dl, dr) = (
-                    box_distance2(&self.nodes[left as usize], p),
-                    box_distance2(&self.nodes[right as usize], p),
-                );
-                if dl <= dr {
-                    stack.push(right);
-                    stack.push(left);
-                } else {
-                    stack.push(left);
-                    stack.push(right);
-                }
+                stack.push_children_nearer_first(&self.nodes, n, p);
             }
         }
         (best2.sqrt(), best)
@@ -384,7 +303,7 @@ impl Solid {
                 stack.push(n + 1);
                 continue;
             }
-            let range = node.first as usize..(node.first + node.count) as usize;
+            let range = node.triangles();
             for t in &self.triangles[range] {
                 let Some((sign, z)) = cover(t, 0, 1, 2, p, true) else {
                     continue;
@@ -681,64 +600,6 @@ fn cover(
     let total = area.abs();
     let at = (w[0] * a3[axis] + w[1] * b3[axis] + w[2] * c3[axis]) / total;
     Some((sign, at))
-}
-
-fn build(
-    triangles: &[[[f64; 3]; 3]],
-    order: &mut [u32],
-    offset: u32,
-    nodes: &mut Vec<Node>,
-) -> u32 {
-    let mut min = [f64::INFINITY; 3];
-    let mut max = [f64::NEG_INFINITY; 3];
-    let mut cmin = [f64::INFINITY; 3];
-    let mut cmax = [f64::NEG_INFINITY; 3];
-    for &i in order.iter() {
-        let t = &triangles[i as usize];
-        for k in 0..3 {
-            let lo = t[0][k].min(t[1][k]).min(t[2][k]);
-            let hi = t[0][k].max(t[1][k]).max(t[2][k]);
-            min[k] = min[k].min(lo);
-            max[k] = max[k].max(hi);
-            let c = lo + hi;
-            cmin[k] = cmin[k].min(c);
-            cmax[k] = cmax[k].max(c);
-        }
-    }
-    let id = nodes.len() as u32;
-    nodes.push(Node {
-        min,
-        max,
-        first: offset,
-        count: order.len() as u32,
-    });
-    if order.len() <= LEAF {
-        return id;
-    }
-    let axis = (0..3)
-        .max_by(|&a, &b| (cmax[a] - cmin[a]).total_cmp(&(cmax[b] - cmin[b])))
-        .unwrap_or(0);
-    let mid = order.len() / 2;
-    let key = |i: &u32| {
-        let t = &triangles[*i as usize];
-        t[0][axis].min(t[1][axis]).min(t[2][axis]) + t[0][axis].max(t[1][axis]).max(t[2][axis])
-    };
-    order.select_nth_unstable_by(mid, |a, b| key(a).total_cmp(&key(b)).then(a.cmp(b)));
-    let (left, right) = order.split_at_mut(mid);
-    build(triangles, left, offset, nodes);
-    let r = build(triangles, right, offset + mid as u32, nodes);
-    nodes[id as usize].first = r;
-    nodes[id as usize].count = 0;
-    id
-}
-
-fn box_distance2(node: &Node, p: [f64; 3]) -> f64 {
-    (0..3)
-        .map(|k| {
-            let d = (node.min[k] - p[k]).max(p[k] - node.max[k]).max(0.0);
-            d * d
-        })
-        .sum()
 }
 
 fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
