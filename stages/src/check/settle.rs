@@ -74,7 +74,7 @@ impl Default for SettleConfig {
             max_rounds: 40,
             clearance_mm: 0.5,
             max_displacement_cm: 30.0,
-            simulate: false,
+            simulate: true,
             simulated_s: 2.0,
             max_simulated_s: 6.0,
             steps_per_second: 240,
