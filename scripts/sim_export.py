@@ -15,7 +15,8 @@ more than 5 cm below the table top (z = 0).
 
 PyBullet: sim/urdf/table.urdf is loaded with a fixed base, every object's URDF at its pose from
 sim/urdf/scene.json with URDF_USE_INERTIA_FROM_FILE; the collision shapes of each base link are
-counted; 2 s at 240 Hz; the same displacement measure (on the base frame PyBullet reports).
+counted; SECONDS at the step sim/urdf/scene.json gives ("timestep_s", the MJCF's; 1/240 s,
+PyBullet's default, for a file without it); the same displacement measure (on the base frame PyBullet reports).
 
 USD (no simulation): sim/usd/scene.usda is opened with usd-core; per rigid body its instance,
 mass, diagonal inertia and the count of its CollisionAPI meshes, the static colliders, and a
@@ -117,7 +118,9 @@ def run_pybullet(scene_dir, seconds):
     client = p.connect(p.DIRECT)
     try:
         p.setGravity(0, 0, -9.81, physicsClientId=client)
-        p.setTimeStep(1.0 / 240.0, physicsClientId=client)
+        # The step the scene was exported for (PyBullet's default is 1/240 s).
+        dt = float(scene.get("timestep_s") or 1.0 / 240.0)
+        p.setTimeStep(dt, physicsClientId=client)
         t = scene.get("table")
         if t:
             p.loadURDF(
@@ -152,7 +155,7 @@ def run_pybullet(scene_dir, seconds):
             r0 = quat_matrix(orn)
             in_base = (world - np.asarray(pos)) @ r0
             start[o["instance"]] = (body, in_base, np.asarray(pos), r0)
-        for _ in range(int(round(seconds * 240))):
+        for _ in range(int(round(seconds / dt))):
             p.stepSimulation(physicsClientId=client)
         objects, final_z, final_xy = {}, {}, {}
         for name, (body, local, p0, r0) in start.items():

@@ -1484,4 +1484,9 @@ pub struct UrdfSceneArtifact {
     pub table: Option<UrdfPlacement>,
     /// The objects, in layout order.
     pub objects: Vec<UrdfPlacement>,
+    /// The simulation step the scene was exported for, seconds (`[export] timestep_s`, the
+    /// MJCF's `option timestep`): pass it to `p.setTimeStep` (PyBullet's own default, 1/240 s,
+    /// lets a light pen lying on a narrow face roll off it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timestep_s: Option<f64>,
 }

@@ -258,6 +258,88 @@ fn corner_motion(lo: [f64; 3], hi: [f64; 3], from: &Isometry<Real>, to: &Isometr
     worst
 }
 
+/// The state of a simulation.
+struct World {
+    parameters: IntegrationParameters,
+    pipeline: PhysicsPipeline,
+    islands: IslandManager,
+    broad_phase: DefaultBroadPhase,
+    narrow_phase: NarrowPhase,
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    ccd: CCDSolver,
+}
+
+impl World {
+    fn step(&mut self) {
+        self.pipeline.step(
+            &vector![0.0, 0.0, -9.81],
+            &self.parameters,
+            &mut self.islands,
+            &mut self.broad_phase,
+            &mut self.narrow_phase,
+            &mut self.bodies,
+            &mut self.colliders,
+            &mut self.impulse_joints,
+            &mut self.multibody_joints,
+            &mut self.ccd,
+            None,
+            &(),
+            &(),
+        );
+    }
+
+    /// The pose of each object's body.
+    fn poses(&self, handles: &[Option<SimBody>]) -> Vec<Option<Isometry<Real>>> {
+        handles
+            .iter()
+            .map(|h| h.map(|(body, _, _)| *self.bodies[body].position()))
+            .collect()
+    }
+
+    /// Steps `config.simulated_s` seconds, then one rest window more at a time while something
+    /// still moves (fruit rolling to the bottom of a bowl), up to `config.max_simulated_s`;
+    /// returns the poses at the start of the last rest window. `steps` counts the steps run.
+    fn run_to_rest(
+        &mut self,
+        handles: &[Option<SimBody>],
+        config: &SimulationConfig,
+        steps: &mut u32,
+    ) -> Vec<Option<Isometry<Real>>> {
+        let hz = f64::from(config.steps_per_second);
+        let window = ((config.rest_window_s * hz).round() as u32).max(1);
+        let first = ((config.simulated_s * hz).round() as u32).max(window);
+        let most = ((config.max_simulated_s * hz).round() as u32).max(first);
+        let mut run = 0;
+        loop {
+            let target = if run == 0 { first } else { run + window };
+            let mut window_start = Vec::new();
+            while run < target {
+                if run == target - window {
+                    window_start = self.poses(handles);
+                }
+                self.step();
+                run += 1;
+                *steps += 1;
+            }
+            let end = self.poses(handles);
+            let moving = handles.iter().enumerate().any(|(i, h)| {
+                let (Some((_, lo, hi)), Some(from), Some(to)) = (h, &window_start[i], &end[i])
+                else {
+                    return false;
+                };
+                // What falls off the table keeps falling: it is not waited for.
+                to.translation.z > -1.0 && corner_motion(*lo, *hi, from, to) > config.rest_motion_m
+            });
+            if !moving || run + window > most {
+                return window_start;
+            }
+        }
+    }
+}
+
 /// A simulated object: its body, and the box of its points relative to the body's origin.
 type SimBody = (RigidBodyHandle, [f64; 3], [f64; 3]);
 
@@ -373,76 +455,29 @@ fn simulate_with(
         handles.push(Some((body, lo, hi)));
     }
 
-    let parameters = IntegrationParameters {
-        dt: 1.0 / config.steps_per_second.max(1) as Real,
-        // Small objects (a pen is 1 cm thick): rapier's default 1 mm of tolerated overlap
-        // would be a tenth of one; 0.2 mm keeps resting contacts well under the check's
-        // tolerance.
-        normalized_allowed_linear_error: 0.0002,
-        ..IntegrationParameters::default()
+    let mut world = World {
+        parameters: IntegrationParameters {
+            dt: 1.0 / config.steps_per_second.max(1) as Real,
+            // Small objects (a pen is 1 cm thick): rapier's default 1 mm of tolerated overlap
+            // would be a tenth of one; 0.2 mm keeps resting contacts well under the check's
+            // tolerance.
+            normalized_allowed_linear_error: 0.0002,
+            ..IntegrationParameters::default()
+        },
+        pipeline: PhysicsPipeline::new(),
+        islands: IslandManager::new(),
+        broad_phase: DefaultBroadPhase::new(),
+        narrow_phase: NarrowPhase::new(),
+        bodies,
+        colliders,
+        impulse_joints: ImpulseJointSet::new(),
+        multibody_joints: MultibodyJointSet::new(),
+        ccd: CCDSolver::new(),
     };
-    let gravity = vector![0.0, 0.0, -9.81];
-    let mut pipeline = PhysicsPipeline::new();
-    let mut islands = IslandManager::new();
-    let mut broad_phase = DefaultBroadPhase::new();
-    let mut narrow_phase = NarrowPhase::new();
-    let mut impulse_joints = ImpulseJointSet::new();
-    let mut multibody_joints = MultibodyJointSet::new();
-    let mut ccd = CCDSolver::new();
-
-    let start: Vec<Option<Isometry<Real>>> = handles
-        .iter()
-        .map(|h| h.map(|(body, _, _)| *bodies[body].position()))
-        .collect();
-    let poses = |bodies: &RigidBodySet| -> Vec<Option<Isometry<Real>>> {
-        handles
-            .iter()
-            .map(|h| h.map(|(body, _, _)| *bodies[body].position()))
-            .collect()
-    };
-    let hz = f64::from(config.steps_per_second);
-    let window = ((config.rest_window_s * hz).round() as u32).max(1);
-    let first = ((config.simulated_s * hz).round() as u32).max(window);
-    let most = ((config.max_simulated_s * hz).round() as u32).max(first);
-    // At least `simulated_s`; then one rest window more at a time while something still
-    // moves (fruit rolling to the bottom of a bowl), up to `max_simulated_s`.
-    let mut window_start = start.clone();
+    let start = world.poses(&handles);
     let mut steps = 0;
-    loop {
-        let target = if steps == 0 { first } else { steps + window };
-        while steps < target {
-            if steps == target - window {
-                window_start = poses(&bodies);
-            }
-            pipeline.step(
-                &gravity,
-                &parameters,
-                &mut islands,
-                &mut broad_phase,
-                &mut narrow_phase,
-                &mut bodies,
-                &mut colliders,
-                &mut impulse_joints,
-                &mut multibody_joints,
-                &mut ccd,
-                None,
-                &(),
-                &(),
-            );
-            steps += 1;
-        }
-        let end = poses(&bodies);
-        let moving = handles.iter().enumerate().any(|(i, h)| {
-            let (Some((_, lo, hi)), Some(from), Some(to)) = (h, &window_start[i], &end[i]) else {
-                return false;
-            };
-            // What falls off the table keeps falling: it is not waited for.
-            to.translation.z > -1.0 && corner_motion(*lo, *hi, from, to) > config.rest_motion_m
-        });
-        if !moving || steps + window > most {
-            break;
-        }
-    }
+    let window_start = world.run_to_rest(&handles, config, &mut steps);
+    let bodies = &world.bodies;
     let motions = handles
         .iter()
         .zip(start.iter().zip(&window_start))

@@ -131,6 +131,7 @@ pub fn write_urdf(
             fixed_base: true,
         }),
         objects,
+        timestep_s: Some(config.timestep_s),
     };
     files.push((
         "scene.json".to_owned(),
