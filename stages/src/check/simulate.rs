@@ -422,7 +422,6 @@ fn simulate_with(
         let body = bodies.insert(
             RigidBodyBuilder::dynamic()
                 .translation(vector![t[0] as Real, t[1] as Real, t[2] as Real])
-                // Thin parts (a sheet, a pen) must not pass through the table in one step.
                 // A thin part (a sheet, a pen) falling fast must not pass through what is under
                 // it in one step: contacts are predicted this far ahead. Full CCD would be
                 // exact but made the simulation of a scene 7 times slower on compound bodies,
