@@ -151,6 +151,11 @@ fn coarse_layouts_are_checked_and_settled() {
     let settle = summary.settle.expect("settle summary");
     assert_eq!(settle.moved_objects, moved.len() as u64);
     assert_eq!(settle.objects, distances.len() as u64);
+    assert!(
+        settle.simulation.is_none(),
+        "simulate = false, yet a simulation summary: {:?}",
+        settle.simulation
+    );
     mesa()
         .arg("validate")
         .arg(dir.join("scenes"))

@@ -528,8 +528,24 @@ fn exported_scenes_load_and_stay_still_in_mujoco() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(4);
     let dir = demo(tmp.path(), scenes, 7);
-    ok(&["check", "--settle", "--progress", "off", "-q"], &dir);
+    let out = ok(&["check", "--settle", "--progress", "off"], &dir);
     let all = scene_dirs(&dir);
+    // The dataset summary counts what the simulation did, scene by scene.
+    assert!(out.contains("simulation (rapier3d): "), "{out}");
+    let summary: Value = read_json(&dir.join("qa/summary.json"));
+    let sim = &summary["settle"]["simulation"];
+    let reports: Vec<Value> = all
+        .iter()
+        .map(|s| read_json::<Value>(&s.join("qa/check.json"))["settle"]["simulation"].clone())
+        .filter(|r| !r.is_null())
+        .collect();
+    assert!(reports.len() >= 2, "{} scenes simulated", reports.len());
+    assert_eq!(sim["scenes"].as_u64(), Some(reports.len() as u64), "{sim}");
+    let moved: u64 = reports
+        .iter()
+        .map(|r| r["objects_moved"].as_u64().expect("objects_moved"))
+        .sum();
+    assert_eq!(sim["objects_moved"].as_u64(), Some(moved), "{sim}");
     let pybullet = python_with("pybullet, numpy", "the PyBullet half of the export test");
     let mut kinds = BTreeMap::new();
     let mut bullet_kinds = BTreeMap::new();

@@ -884,6 +884,28 @@ pub struct SettleSummary {
     pub moved_objects: u64,
     /// Median displacement over the moved objects only, cm (0 when none moved).
     pub median_moved_displacement_cm: f64,
+    /// What the rigid-body simulation did, over the scenes it ran on (absent when it ran on
+    /// none: `[check.settling] simulate = false`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulation: Option<SimulationSummary>,
+}
+
+/// What settling's rigid-body simulation did over a dataset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationSummary {
+    /// Scenes simulated.
+    pub scenes: u64,
+    /// Objects the simulation moved (they took its pose), over those scenes.
+    pub objects_moved: u64,
+    /// The largest motion of an object in a simulation, cm.
+    pub max_motion_cm: f64,
+    /// Objects still moving at the end (their scenes are unsettled).
+    pub still_moving: u64,
+    /// Objects that ended under the table top (their scenes are unsettled).
+    pub fell: u64,
+    /// The longest simulated time of a scene, seconds.
+    pub max_simulated_s: f64,
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -14,7 +14,8 @@ use anyhow::Context as _;
 use clap::{Args as ClapArgs, ValueEnum};
 use mesa_schemas::artifacts::{
     AssetIndexArtifact, AssetRecord, CheckArtifact, CheckFindings, CheckSummaryArtifact,
-    RateSummary, SettleStatus, SettleSummary, ShapesArtifact, CHECK_SUMMARY_SCHEMA,
+    RateSummary, SettleReport, SettleStatus, SettleSummary, ShapesArtifact, SimulationReport,
+    SimulationSummary, CHECK_SUMMARY_SCHEMA,
 };
 use mesa_schemas::LayoutObject;
 use mesa_stages::annotations::Annotations;
@@ -450,6 +451,7 @@ pub fn summarize(dataset: &Path) -> anyhow::Result<CheckSummaryArtifact> {
             max_displacement_cm: distances.last().copied().unwrap_or(0.0),
             moved_objects: moved.len() as u64,
             median_moved_displacement_cm: median_of(&moved),
+            simulation: simulation_summary(checks.iter().filter_map(|c| c.settle.as_ref())),
         }
     });
     Ok(CheckSummaryArtifact {
@@ -513,6 +515,33 @@ pub fn format_summary(summary: &CheckSummaryArtifact, path: &Path) -> String {
             s.moved_objects,
             s.median_moved_displacement_cm
         ));
+        if let Some(sim) = &s.simulation {
+            out.push_str(&format!(
+                "  simulation (rapier3d): {} scenes, {} objects moved by it (up to {:.2} cm), {} \
+                 still moving, {} fell; up to {:.1} s simulated\n",
+                sim.scenes,
+                sim.objects_moved,
+                sim.max_motion_cm,
+                sim.still_moving,
+                sim.fell,
+                sim.max_simulated_s
+            ));
+        }
     }
     out
+}
+
+/// The simulation's figures over the settle reports that ran it (`None` when none did).
+fn simulation_summary<'a>(
+    reports: impl Iterator<Item = &'a SettleReport>,
+) -> Option<SimulationSummary> {
+    let runs: Vec<&SimulationReport> = reports.filter_map(|r| r.simulation.as_ref()).collect();
+    (!runs.is_empty()).then(|| SimulationSummary {
+        scenes: runs.len() as u64,
+        objects_moved: runs.iter().map(|r| r.objects_moved).sum(),
+        max_motion_cm: runs.iter().map(|r| r.max_motion_cm).fold(0.0, f64::max),
+        still_moving: runs.iter().map(|r| r.still_moving.len() as u64).sum(),
+        fell: runs.iter().map(|r| r.fell.len() as u64).sum(),
+        max_simulated_s: runs.iter().map(|r| r.simulated_s).fold(0.0, f64::max),
+    })
 }
