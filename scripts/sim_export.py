@@ -16,7 +16,8 @@ more than 5 cm below the table top (z = 0).
 PyBullet: sim/urdf/table.urdf is loaded with a fixed base, every object's URDF at its pose from
 sim/urdf/scene.json with URDF_USE_INERTIA_FROM_FILE; the collision shapes of each base link are
 counted; SECONDS at the step sim/urdf/scene.json gives ("timestep_s", the MJCF's; 1/240 s,
-PyBullet's default, for a file without it); the same displacement measure (on the base frame PyBullet reports).
+PyBullet's default, for a file without it); the same displacement measure (on the base frame
+PyBullet reports).
 
 USD (no simulation): sim/usd/scene.usda is opened with usd-core; per rigid body its instance,
 mass, diagonal inertia and the count of its CollisionAPI meshes, the static colliders, and a

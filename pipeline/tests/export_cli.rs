@@ -19,7 +19,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use common::{mesa, read_json, scene_dirs};
-use mesa_schemas::artifacts::{AssetIndexArtifact, ExportArtifact};
+use mesa_schemas::artifacts::{
+    AssetIndexArtifact, CheckArtifact, CheckSummaryArtifact, ExportArtifact, SimulationReport,
+};
 use serde_json::{json, Value};
 
 fn ok(args: &[&str], dir: &Path) -> String {
@@ -532,20 +534,20 @@ fn exported_scenes_load_and_stay_still_in_mujoco() {
     let all = scene_dirs(&dir);
     // The dataset summary counts what the simulation did, scene by scene.
     assert!(out.contains("simulation (rapier3d): "), "{out}");
-    let summary: Value = read_json(&dir.join("qa/summary.json"));
-    let sim = &summary["settle"]["simulation"];
-    let reports: Vec<Value> = all
+    let summary: CheckSummaryArtifact = read_json(&dir.join("qa/summary.json"));
+    let sim = summary
+        .settle
+        .and_then(|s| s.simulation)
+        .expect("a simulation summary");
+    let reports: Vec<SimulationReport> = all
         .iter()
-        .map(|s| read_json::<Value>(&s.join("qa/check.json"))["settle"]["simulation"].clone())
-        .filter(|r| !r.is_null())
+        .filter_map(|s| read_json::<CheckArtifact>(&s.join("qa/check.json")).settle)
+        .filter_map(|s| s.simulation)
         .collect();
     assert!(reports.len() >= 2, "{} scenes simulated", reports.len());
-    assert_eq!(sim["scenes"].as_u64(), Some(reports.len() as u64), "{sim}");
-    let moved: u64 = reports
-        .iter()
-        .map(|r| r["objects_moved"].as_u64().expect("objects_moved"))
-        .sum();
-    assert_eq!(sim["objects_moved"].as_u64(), Some(moved), "{sim}");
+    assert_eq!(sim.scenes, reports.len() as u64, "{sim:?}");
+    let moved: u64 = reports.iter().map(|r| r.objects_moved).sum();
+    assert_eq!(sim.objects_moved, moved, "{sim:?}");
     let pybullet = python_with("pybullet, numpy", "the PyBullet half of the export test");
     let mut kinds = BTreeMap::new();
     let mut bullet_kinds = BTreeMap::new();

@@ -301,13 +301,12 @@ impl World {
 
     /// Steps `config.simulated_s` seconds, then one rest window more at a time while something
     /// still moves (fruit rolling to the bottom of a bowl), up to `config.max_simulated_s`;
-    /// returns the poses at the start of the last rest window. `steps` counts the steps run.
+    /// returns the poses at the start of the last rest window and the steps run.
     fn run_to_rest(
         &mut self,
         handles: &[Option<SimBody>],
         config: &SimulationConfig,
-        steps: &mut u32,
-    ) -> Vec<Option<Isometry<Real>>> {
+    ) -> (Vec<Option<Isometry<Real>>>, u32) {
         let hz = f64::from(config.steps_per_second);
         let window = ((config.rest_window_s * hz).round() as u32).max(1);
         let first = ((config.simulated_s * hz).round() as u32).max(window);
@@ -322,7 +321,6 @@ impl World {
                 }
                 self.step();
                 run += 1;
-                *steps += 1;
             }
             let end = self.poses(handles);
             let moving = handles.iter().enumerate().any(|(i, h)| {
@@ -334,7 +332,7 @@ impl World {
                 to.translation.z > -1.0 && corner_motion(*lo, *hi, from, to) > config.rest_motion_m
             });
             if !moving || run + window > most {
-                return window_start;
+                return (window_start, run);
             }
         }
     }
@@ -474,8 +472,7 @@ fn simulate_with(
         ccd: CCDSolver::new(),
     };
     let start = world.poses(&handles);
-    let mut steps = 0;
-    let window_start = world.run_to_rest(&handles, config, &mut steps);
+    let (window_start, steps) = world.run_to_rest(&handles, config);
     let bodies = &world.bodies;
     let motions = handles
         .iter()
