@@ -589,6 +589,54 @@ mod tests {
         assert!(b.turn_deg > 1.0, "{b:?}");
     }
 
+    /// A small box on a 30° slope (tan 30° = 0.58): friction 0.8 holds it, 0.4 lets it slide
+    /// down; settling at the lower one leaves no rest that needs more grip than it has.
+    #[test]
+    fn a_box_on_a_30_degree_slope_holds_at_friction_0_8_and_slides_at_0_4() {
+        let slope = 30f64.to_radians();
+        let (half, h) = (0.1, 0.2 * slope.tan());
+        let wedge: Vec<[f64; 3]> = [-half, half]
+            .into_iter()
+            .flat_map(|y| {
+                [
+                    [-half, y, 0.0],
+                    [half, y, 0.0],
+                    [half, y, h],
+                ]
+            })
+            .collect();
+        // The box's bottom face on the slope, halfway up: its axes turned -30° about y.
+        let (s, c) = ((-slope).sin(), (-slope).cos());
+        let b = 0.02;
+        let normal = [-slope.sin(), 0.0, slope.cos()];
+        let on_slope = cube([b, b, b])
+            .into_iter()
+            .map(|p| [p[0] * c + p[2] * s, p[1], -p[0] * s + p[2] * c])
+            .collect();
+        let objects = [
+            SimObject {
+                position_m: [0.5, 0.5, 0.0],
+                parts: vec![wedge],
+            },
+            SimObject {
+                position_m: [
+                    0.5 + b * normal[0],
+                    0.5,
+                    0.5 * h + b * normal[2] + 0.0002,
+                ],
+                parts: vec![on_slope],
+            },
+        ];
+        let grip = |friction| {
+            let sim = simulate(&objects, &table(), &SimulationConfig { friction, ..config() });
+            (sim.motions[0].expect("wedge"), sim.motions[1].expect("box"))
+        };
+        let (wedge_held, held) = grip(0.8);
+        assert!(held.moved_m < 0.002 && wedge_held.moved_m < 0.001, "{held:?}");
+        let (_, slid) = grip(0.4);
+        assert!(slid.moved_m > 0.03, "{slid:?}");
+    }
+
     #[test]
     fn a_stick_balanced_on_its_end_topples_and_one_off_the_table_falls() {
         // A 30 cm stick, 1 cm thick, standing on its end, tilted 3° by its points.
