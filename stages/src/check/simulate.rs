@@ -597,13 +597,7 @@ mod tests {
         let (half, h) = (0.1, 0.2 * slope.tan());
         let wedge: Vec<[f64; 3]> = [-half, half]
             .into_iter()
-            .flat_map(|y| {
-                [
-                    [-half, y, 0.0],
-                    [half, y, 0.0],
-                    [half, y, h],
-                ]
-            })
+            .flat_map(|y| [[-half, y, 0.0], [half, y, 0.0], [half, y, h]])
             .collect();
         // The box's bottom face on the slope, halfway up: its axes turned -30° about y.
         let (s, c) = ((-slope).sin(), (-slope).cos());
@@ -619,20 +613,26 @@ mod tests {
                 parts: vec![wedge],
             },
             SimObject {
-                position_m: [
-                    0.5 + b * normal[0],
-                    0.5,
-                    0.5 * h + b * normal[2] + 0.0002,
-                ],
+                position_m: [0.5 + b * normal[0], 0.5, 0.5 * h + b * normal[2] + 0.0002],
                 parts: vec![on_slope],
             },
         ];
         let grip = |friction| {
-            let sim = simulate(&objects, &table(), &SimulationConfig { friction, ..config() });
+            let sim = simulate(
+                &objects,
+                &table(),
+                &SimulationConfig {
+                    friction,
+                    ..config()
+                },
+            );
             (sim.motions[0].expect("wedge"), sim.motions[1].expect("box"))
         };
         let (wedge_held, held) = grip(0.8);
-        assert!(held.moved_m < 0.002 && wedge_held.moved_m < 0.001, "{held:?}");
+        assert!(
+            held.moved_m < 0.002 && wedge_held.moved_m < 0.001,
+            "{held:?}"
+        );
         let (_, slid) = grip(0.4);
         assert!(slid.moved_m > 0.03, "{slid:?}");
     }

@@ -543,6 +543,51 @@ fn a_stick_leaning_on_its_end_lies_down_when_settled_and_stands_without_the_simu
     );
 }
 
+/// A book overlapping the end of a remote control, both on the table (MesaTask's coarse
+/// layouts have such pairs). Lifted onto the remote, it would lie on it at one side and on the
+/// table at the other, tilted; so it is slid apart from it and stays flat. Over the remote's
+/// middle (the control), it is lifted onto it as before.
+#[test]
+fn a_book_over_the_end_of_a_remote_slides_off_it_and_one_over_its_middle_is_lifted() {
+    let layout = |book_y: f64| {
+        format!(
+            r#"{{"item_placement_zone": [0, 100, 0, 100], "objects": [
+            {{"instance": "remote_control_0", "retrieved_uid": "remote", "position": [50, 40, 1.4],
+             "rotation": [0, 0, 0, 1], "size": [7, 27, 2.8], "scale_factor": [1, 1, 1]}},
+            {{"instance": "book_0", "retrieved_uid": "book", "position": [50, {book_y}, 1.75],
+             "rotation": [0, 0, 0, 1], "size": [25, 33, 3.5], "scale_factor": [1, 1, 1]}}]}}"#
+        )
+    };
+    let shapes = [
+        ("remote", cuboid([0.07, 0.27, 0.028])),
+        ("book", cuboid([0.25, 0.33, 0.035])),
+    ];
+    let settled_z = |text: &str, simulate: bool| {
+        let (checked, _) = settle_text(text, &shapes, &[false, false], simulate);
+        let report = checked.artifact.settle.clone().expect("settle report");
+        let settled = checked
+            .settled
+            .unwrap_or_else(|| panic!("not settled: {report:?}"));
+        assert!(report.after.clean, "{:?}", report.after);
+        (settled.objects[1].position_cm.0, report)
+    };
+    // Over the remote's end (its centre 6.5 cm past the remote's): slid, not lifted.
+    let (book, _) = settled_z(&layout(60.0), false);
+    assert!((book[2] - 1.75).abs() < 0.05, "lifted: {book:?}");
+    // With the simulation it stays flat on the table.
+    let (book, report) = settled_z(&layout(60.0), true);
+    assert!((book[2] - 1.75).abs() < 0.05, "{book:?}");
+    let moved = report
+        .displacements
+        .iter()
+        .find(|d| d.instance == "book_0")
+        .expect("book_0");
+    assert!(moved.turned_deg.unwrap_or(0.0) < 0.5, "{moved:?}");
+    // Control: over the remote's middle, lifted onto it.
+    let (book, _) = settled_z(&layout(45.0), false);
+    assert!(book[2] > 1.75 + 2.7, "not lifted: {book:?}");
+}
+
 #[test]
 fn a_scene_over_the_part_budget_is_not_simulated_and_says_so() {
     let text = r#"{"item_placement_zone": [0, 100, 0, 100], "objects": [
