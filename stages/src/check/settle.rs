@@ -10,7 +10,9 @@
 //!    clearance: an object held by the other moves out along the contact normal (an apple
 //!    sunk into its bowl's wall moves inward, one sunk into the floor moves up); two trees
 //!    standing on the table slide apart in the plane, each by half (or, overlapping one above
-//!    the other, the upper one is lifted onto the lower); two objects held by the same
+//!    the other with its centre over the lower's footprint, the upper one is lifted onto the
+//!    lower, where it lies flat; lifted onto the lower's end it would lie tilted, held by
+//!    friction alone, so such a pair slides apart); two objects held by the same
 //!    object move apart by half each;
 //! 2. **zones**: a tree reaching beyond the placement zone, or over the restricted zone,
 //!    slides back in (out) by the shortest way;
