@@ -134,7 +134,8 @@ fn visual(out: &mut String, body: &BodyModel, looks: &[String]) {
 
 /// Whether a material is the grey one of meshes without a glTF material.
 fn is_grey(m: &VisualMaterial) -> bool {
-    *m == VisualMaterial::grey(m.triangles.clone())
+    let grey = VisualMaterial::grey(Vec::new());
+    m.texture.is_none() && m.name == grey.name && m.rgba_linear == grey.rgba_linear
 }
 
 /// A `UsdPreviewSurface` material of a glTF base colour: `diffuseColor` (linear) and
