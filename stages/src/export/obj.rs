@@ -3,6 +3,7 @@
 
 use std::fmt::Write as _;
 
+use super::visual::MaterialMesh;
 use super::VisualMesh;
 
 /// A length or coordinate in metres: fixed, 6 decimals (a micrometre), no negative zero.
@@ -75,7 +76,8 @@ pub fn material_obj_text(
     mtl_file: &str,
     mtl_name: &str,
 ) -> String {
-    let part = mesh.material_mesh(k);
+    let mut part = mesh.material_mesh(k);
+    pad_to_four_vertices(&mut part);
     let textured = !part.uvs.is_empty();
     let mut out =
         String::with_capacity(64 * part.positions_m.len() + 32 * part.triangles.len() + 128);
@@ -100,6 +102,38 @@ pub fn material_obj_text(
         }
     }
     out
+}
+
+/// MuJoCo refuses a mesh of fewer than 4 vertices ("at least 4 vertices required"), and with
+/// it the whole model: a material drawing a single triangle gets unreferenced vertices at its
+/// first triangle's centroid and edge midpoints (texture coordinates interpolated alike), which
+/// draw nothing in any reader.
+fn pad_to_four_vertices(part: &mut MaterialMesh) {
+    let Some(&[a, b, c]) = part.triangles.first() else {
+        return;
+    };
+    let corners = [a, b, c].map(|i| i as usize);
+    let weights = [
+        [1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0],
+        [0.5, 0.5, 0.0],
+        [0.0, 0.5, 0.5],
+        [0.5, 0.0, 0.5],
+    ];
+    let textured = !part.uvs.is_empty();
+    for w in weights {
+        if part.positions_m.len() >= 4 {
+            break;
+        }
+        let p =
+            std::array::from_fn(|d| (0..3).map(|j| w[j] * part.positions_m[corners[j]][d]).sum());
+        part.positions_m.push(p);
+        if textured {
+            let uv = std::array::from_fn(|d| {
+                (0..3).map(|j| w[j] as f32 * part.uvs[corners[j]][d]).sum()
+            });
+            part.uvs.push(uv);
+        }
+    }
 }
 
 /// One material of an MTL file.

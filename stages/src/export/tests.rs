@@ -295,6 +295,26 @@ fn a_plain_material_obj_has_no_texture_coordinates_and_renumbers_its_vertices() 
 }
 
 #[test]
+fn a_material_of_one_triangle_gets_a_fourth_vertex_that_draws_nothing() {
+    // MuJoCo refuses meshes of fewer than 4 vertices.
+    let mut mesh = two_material_mesh();
+    mesh.materials[0].triangles = vec![0];
+    mesh.materials[1].triangles = vec![1, 2, 3];
+    let text = obj::material_obj_text("one", &mesh, 0, "a.visual.mtl", "visual_000");
+    let lines: Vec<&str> = text.lines().collect();
+    let count = |prefix: &str| lines.iter().filter(|l| l.starts_with(prefix)).count();
+    assert_eq!(
+        (count("v "), count("vt "), count("f ")),
+        (4, 4, 1),
+        "{text}"
+    );
+    // The centroid of vertices 0, 2, 3 and of their texture coordinates (v flipped).
+    assert_eq!(lines[6], "v 0.666667 0.333333 0.000000", "{text}");
+    assert_eq!(lines[10], "vt 0.166667 0.300000", "{text}");
+    assert!(text.ends_with("f 1/1 2/2 3/3\n"), "{text}");
+}
+
+#[test]
 fn the_mtl_gives_the_srgb_colour_the_alpha_and_the_image() {
     let mesh = two_material_mesh();
     let materials: Vec<obj::MtlMaterial> = mesh
