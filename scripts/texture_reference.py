@@ -82,9 +82,13 @@ def glb_colours(path, geometry):
         uv = getattr(mesh.visual, "uv", None)
         image = getattr(material, "baseColorTexture", None) if material is not None else None
         factor = getattr(material, "baseColorFactor", None) if material is not None else None
-        if factor is None:
-            factor = np.array([255, 255, 255, 255])
-        rgb = 255.0 * srgb(np.asarray(factor, dtype=float)[:3] / 255.0)
+        if material is None:
+            # No glTF material (glTF's default is white): the export draws it grey, 0.8 sRGB.
+            rgb = np.array([204.0, 204.0, 204.0])
+        else:
+            if factor is None:
+                factor = np.array([255, 255, 255, 255])
+            rgb = 255.0 * srgb(np.asarray(factor, dtype=float)[:3] / 255.0)
         out.append(samples(v, mesh.faces, uv, image, rgb))
     return [np.vstack([o[0] for o in out]), np.vstack([o[1] for o in out])]
 

@@ -14,6 +14,10 @@
 //!   trimesh, reading both the exported OBJ + MTL + PNG and the source GLBs, gives the same
 //!   colour at every vertex and triangle centroid, and the control (the `vt` unflipped) does
 //!   not.
+//! - The same on real GLBs of ../shared/realdata (Duck, BoxTextured, CesiumMilkTruck with 4
+//!   materials, AlphaBlendModeTest's JPEG textures re-encoded as PNG, ShapeCollection without
+//!   materials), exported with `--assets`: MuJoCo and PyBullet load each with the manifest's
+//!   materials and textures, and trimesh's colours agree (and not with v unflipped).
 //! - With MuJoCo (`MESA_PYTHON`, else the repository's `.venv-tools`; SKIPPED without it, a
 //!   failure under `MESA_REQUIRE_TOOLS`): every exported MJCF loads with one body per object,
 //!   named its instance, and one collision geom per convex part; 2 s of simulation keep the
@@ -26,7 +30,7 @@ mod common;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use common::{mesa, read_json, scene_dirs};
+use common::{mesa, read_json, scene_dirs, shared};
 use mesa_schemas::artifacts::{
     AssetIndexArtifact, CheckArtifact, CheckSummaryArtifact, ExportArtifact, SimulationReport,
 };
@@ -938,22 +942,7 @@ fn exported_materials_and_textures_reach_mujoco_pybullet_and_usd_and_match_the_g
     // trimesh's colours of the exported OBJ + MTL + PNG and of the source GLBs agree; with
     // the v axis left unflipped (the control), they do not.
     ok(&["export", "--assets", "--progress", "off", "-q"], &dir);
-    let reference = |control: bool| -> Value {
-        let script =
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scripts/texture_reference.py");
-        let mut command = std::process::Command::new(&python);
-        command.arg(script).arg(&dir);
-        if control {
-            command.arg("--flip-v");
-        }
-        let out = command.output().expect("python runs");
-        assert!(
-            out.status.success(),
-            "texture_reference.py: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        serde_json::from_slice::<Value>(&out.stdout).expect("JSON")["all"].clone()
-    };
+    let reference = |control: bool| texture_reference(&python, &dir, control)["all"].clone();
     let share = |r: &Value, part: &str, whole: &str| {
         r[part].as_f64().expect("a count") / r[whole].as_f64().expect("a count").max(1.0)
     };
@@ -979,4 +968,140 @@ fn exported_materials_and_textures_reach_mujoco_pybullet_and_usd_and_match_the_g
         share(&flipped, "textured_agree", "textured") < 0.95,
         "the colour reference missed an unflipped v: {flipped}"
     );
+}
+
+/// Runs scripts/texture_reference.py on a dataset's single-asset export: its JSON.
+fn texture_reference(python: &Path, dir: &Path, control: bool) -> Value {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scripts/texture_reference.py");
+    let mut command = std::process::Command::new(python);
+    command.arg(script).arg(dir);
+    if control {
+        command.arg("--flip-v");
+    }
+    let out = command.output().expect("python runs");
+    assert!(
+        out.status.success(),
+        "texture_reference.py: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("JSON")
+}
+
+#[test]
+fn real_textured_glbs_export_load_and_keep_their_colours() {
+    let Some(python) = python_with(
+        "mujoco, pybullet, trimesh, PIL, scipy",
+        "the real-GLB texture test",
+    ) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let library = tmp.path().join("assets/library");
+    std::fs::create_dir_all(&library).expect("mkdir");
+    // (file, uid, visual materials, images): linked, not copied.
+    let glbs = [
+        ("Duck.glb", "duck", 1, 1usize),
+        ("BoxTextured.glb", "boxtextured", 1, 1),
+        ("CesiumMilkTruck.glb", "cesiummilktruck", 4, 1),
+        ("AlphaBlendModeTest.glb", "alphablendmodetest", 6, 6),
+        ("ShapeCollection.glb", "shapecollection", 1, 0),
+    ];
+    for (file, uid, _, _) in glbs {
+        let source = shared().join("realdata/glb").join(file);
+        assert!(
+            source.is_file(),
+            "{} (../shared/realdata)",
+            source.display()
+        );
+        std::os::unix::fs::symlink(&source, library.join(format!("{uid}.glb"))).expect("links");
+    }
+    ok(&["assets", "--progress", "off", "-q"], tmp.path());
+    ok(
+        &["export", "--assets", "--progress", "off", "-q"],
+        tmp.path(),
+    );
+    for (file, uid, materials, images) in glbs {
+        let manifest: ExportArtifact =
+            read_json(&tmp.path().join(format!("assets/sim/{uid}/export.json")));
+        let o = &manifest.objects[0];
+        assert_eq!(
+            (o.visual_materials, o.textures.len()),
+            (materials, images),
+            "{file}: {:?}",
+            manifest.warnings
+        );
+        assert!(
+            manifest.warnings.is_empty(),
+            "{file}: {:?}",
+            manifest.warnings
+        );
+    }
+    // Every image is a PNG on disk, AlphaBlendModeTest's JPEGs included.
+    for entry in std::fs::read_dir(tmp.path().join("assets/sim/alphablendmodetest/textures"))
+        .expect("textures")
+    {
+        let bytes = std::fs::read(entry.expect("an entry").path()).expect("an image");
+        assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"));
+    }
+    let script = "import mujoco, json, os, sys, pybullet as p\n\
+        p.connect(p.DIRECT)\n\
+        root = sys.argv[1]\n\
+        out = {}\n\
+        for uid in sorted(os.listdir(root)):\n\
+        \x20   m = mujoco.MjModel.from_xml_path(f'{root}/{uid}/mjcf/scene.xml')\n\
+        \x20   b = p.loadURDF(f'{root}/{uid}/urdf/{uid}.urdf', flags=p.URDF_USE_INERTIA_FROM_FILE)\n\
+        \x20   v = p.getVisualShapeData(b, flags=p.VISUAL_SHAPE_DATA_TEXTURE_UNIQUE_IDS)\n\
+        \x20   out[uid] = [m.ntex, m.nmat, int((m.mesh_texcoordnum > 0).sum()), len(v), sum(s[8] >= 0 for s in v)]\n\
+        print(json.dumps(out))\n";
+    let out = std::process::Command::new(&python)
+        .args(["-c", script])
+        .arg(tmp.path().join("assets/sim"))
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let loaded: Value = serde_json::from_str(text.lines().last().expect("JSON")).expect("JSON");
+    for (file, uid, materials, images) in glbs {
+        let [ntex, nmat, texcoords, shapes, textured] =
+            std::array::from_fn(|k| loaded[uid][k].as_u64().expect("a count"));
+        println!(
+            "real | {file} | MuJoCo: {ntex} textures, {nmat} materials, {texcoords} meshes with \
+             texcoords | PyBullet: {shapes} visual shapes, {textured} textured"
+        );
+        assert_eq!(
+            (ntex, nmat, shapes),
+            (images as u64, materials, materials),
+            "{file}"
+        );
+        assert_eq!(texcoords >= 1, images >= 1, "{file}");
+        assert_eq!(textured >= 1, images >= 1, "{file}");
+    }
+    let right = texture_reference(&python, tmp.path(), false);
+    let flipped = texture_reference(&python, tmp.path(), true);
+    for (file, uid, _, images) in glbs {
+        let (r, f) = (&right[uid], &flipped[uid]);
+        let count = |v: &Value, k: &str| v[k].as_u64().expect("a count");
+        println!(
+            "real | {file} | trimesh: {} of {} samples agree ({} of {} textured); v unflipped: \
+             {} of the textured",
+            count(r, "agree"),
+            count(r, "samples"),
+            count(r, "textured_agree"),
+            count(r, "textured"),
+            count(f, "textured_agree")
+        );
+        assert_eq!(count(r, "unmatched"), 0, "{file}: {r}");
+        assert_eq!(count(r, "agree"), count(r, "samples"), "{file}: {r}");
+        if images > 0 {
+            assert!(count(r, "textured") > 0, "{file}: {r}");
+            assert!(
+                (count(f, "textured_agree") as f64) < 0.95 * count(f, "textured") as f64,
+                "{file}: the control passed: {f}"
+            );
+        }
+    }
 }
