@@ -15,7 +15,7 @@
 //!   colour at every vertex and triangle centroid, and the control (the `vt` unflipped) does
 //!   not.
 //! - The same on real GLBs of ../shared/realdata (Duck, BoxTextured, CesiumMilkTruck with 4
-//!   materials, AlphaBlendModeTest's JPEG textures re-encoded as PNG, ShapeCollection without
+//!   materials, AlphaBlendModeTest's JPEG texture re-encoded as PNG, ShapeCollection without
 //!   materials), exported with `--assets`: MuJoCo and PyBullet load each with the manifest's
 //!   materials and textures, and trimesh's colours agree (and not with v unflipped).
 //! - With MuJoCo (`MESA_PYTHON`, else the repository's `.venv-tools`; SKIPPED without it, a
@@ -1036,7 +1036,7 @@ fn real_textured_glbs_export_load_and_keep_their_colours() {
             manifest.warnings
         );
     }
-    // Every image is a PNG on disk, AlphaBlendModeTest's JPEGs included.
+    // Every image is a PNG on disk, AlphaBlendModeTest's JPEG (images[2]) included.
     for entry in std::fs::read_dir(tmp.path().join("assets/sim/alphablendmodetest/textures"))
         .expect("textures")
     {

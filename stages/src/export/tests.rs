@@ -431,7 +431,7 @@ fn real_glbs_split_by_material_with_their_png_and_jpeg_textures() {
         "{:?}",
         duck.texture_warnings
     );
-    // AlphaBlendModeTest: JPEG textures, re-encoded as PNG; PNG ones kept.
+    // AlphaBlendModeTest: its JPEG texture (images[2]) re-encoded as PNG, PNG ones kept.
     let alpha = visual_of("AlphaBlendModeTest.glb");
     assert!(alpha.materials.len() > 1);
     assert!(alpha.textures.len() >= 2, "{:?}", alpha.texture_warnings);
