@@ -5,7 +5,14 @@ Usage: sim_export.py mujoco|pybullet|usd SECONDS SCENE_DIR...   (each SCENE_DIR 
 Output: JSON on standard output,
     {scene_dir: {"loaded": bool, "error": str|null, "bodies": [names],
                  "colliders": {instance: count}, "objects": {instance: {"moved_cm": float,
-                 "fell": bool}}}}
+                 "fell": bool}}, "visuals": {instance: {...}}}}
+
+"visuals" says what of each object's visual materials reached the simulator: MuJoCo the
+model's texture and material counts ("ntex", "nmat") and per object its visual geoms (group
+1, not colliding), those with a material, and those whose material has a texture and whose
+mesh has texture coordinates; PyBullet per object its visual shapes and those PyBullet gave a
+texture; USD per object its visual meshes, those with `primvars:st`, and the PNG files their
+bound materials' shader graphs read (each must exist).
 
 MuJoCo: sim/mjcf/scene.xml is loaded with `MjModel.from_xml_path`; every body's collision geoms
 (group 3) are counted; the scene is stepped for SECONDS of simulated time at the file's
@@ -22,7 +29,8 @@ PyBullet reports).
 USD (no simulation): sim/usd/scene.usda is opened with usd-core; per rigid body its instance,
 mass, diagonal inertia and the count of its CollisionAPI meshes, the static colliders, and a
 list of problems (up axis, metres per unit, PhysicsScene, MassAPI, MeshCollisionAPI with
-convexHull, a visual mesh bound to a material). Also per object: the final height of its centre of
+convexHull, visual meshes each bound to a material, a textured material's graph reaching an
+existing file through a UsdUVTexture read at the mesh's `st`). Also per object: the final height of its centre of
 mass ("final_z_cm") and how far its origin drifted in the plane ("final_xy_offset_cm").
 """
 
@@ -70,6 +78,7 @@ def run_mujoco(scene_dir, seconds):
         if model.geom_group[g] == 3 and model.geom_contype[g] != 0:
             name = model.body(model.geom_bodyid[g]).name
             colliders[name] = colliders.get(name, 0) + 1
+    visuals = mujoco_visuals(model)
     mesh_dir = os.path.join(scene_dir, "sim", "mjcf", "meshes")
     start = {}
     for o in manifest["objects"]:
@@ -96,7 +105,31 @@ def run_mujoco(scene_dir, seconds):
         "objects": objects,
         "final_z_cm": final_z,
         "final_xy_offset_cm": final_xy,
+        "visuals": visuals,
     }
+
+
+def mujoco_visuals(model):
+    """What of the visual materials MuJoCo compiled: counts per body of its visual geoms."""
+    import mujoco
+
+    rgb = int(mujoco.mjtTextureRole.mjTEXROLE_RGB)
+    per_body = {}
+    for g in range(model.ngeom):
+        if model.geom_group[g] != 1 or model.geom_contype[g] != 0:
+            continue
+        name = model.body(model.geom_bodyid[g]).name
+        v = per_body.setdefault(name, {"geoms": 0, "with_material": 0, "textured": 0})
+        v["geoms"] += 1
+        mat = int(model.geom_matid[g])
+        if mat < 0:
+            continue
+        v["with_material"] += 1
+        mesh = int(model.geom_dataid[g])
+        texture = int(model.mat_texid[mat][rgb])
+        if texture >= 0 and mesh >= 0 and model.mesh_texcoordnum[mesh] > 0:
+            v["textured"] += 1
+    return {"ntex": int(model.ntex), "nmat": int(model.nmat), "bodies": per_body}
 
 
 def quat_matrix(q):
@@ -133,7 +166,7 @@ def run_pybullet(scene_dir, seconds):
             )
         mesh_dir = os.path.join(scene_dir, "sim", "mjcf", "meshes")
         parts = {o["instance"]: o["collision_parts"] for o in manifest["objects"]}
-        bodies, colliders, start = [], {}, {}
+        bodies, colliders, start, visuals = [], {}, {}, {}
         for o in scene["objects"]:
             try:
                 body = p.loadURDF(
@@ -147,6 +180,13 @@ def run_pybullet(scene_dir, seconds):
                 return {"loaded": False, "error": f"{o['urdf']}: {e}"}
             name = p.getBodyInfo(body, physicsClientId=client)[1].decode()
             bodies.append(name)
+            shapes = p.getVisualShapeData(
+                body, flags=p.VISUAL_SHAPE_DATA_TEXTURE_UNIQUE_IDS, physicsClientId=client
+            )
+            visuals[name] = {
+                "shapes": len(shapes),
+                "textured": sum(1 for s in shapes if len(s) > 8 and s[8] >= 0),
+            }
             colliders[name] = len(p.getCollisionShapeData(body, -1, physicsClientId=client))
             # The parts' points in the world, then in the base (inertial) frame PyBullet
             # reports, so the comparison does not depend on where that frame sits.
@@ -173,6 +213,7 @@ def run_pybullet(scene_dir, seconds):
             "objects": objects,
             "final_z_cm": final_z,
             "final_xy_offset_cm": final_xy,
+            "visuals": visuals,
         }
     finally:
         p.disconnect(physicsClientId=client)
@@ -194,7 +235,7 @@ def run_usd(scene_dir, seconds):
         problems.append("metersPerUnit is not 1")
     if not any(p.IsA(UsdPhysics.Scene) for p in stage.Traverse()):
         problems.append("no PhysicsScene")
-    bodies, colliders, masses, inertias, statics = [], {}, {}, {}, 0
+    bodies, colliders, masses, inertias, statics, visuals = [], {}, {}, {}, 0, {}
     for prim in stage.Traverse():
         if prim.HasAPI(UsdPhysics.RigidBodyAPI):
             instance = prim.GetAttribute("mesa:instance").Get()
@@ -214,9 +255,7 @@ def run_usd(scene_dir, seconds):
                         problems.append(f"{child.GetPath()}: approximation {approx}")
                     n += 1
             colliders[instance] = n
-            visual = prim.GetChild("visual")
-            if not (visual and visual.HasAPI("MaterialBindingAPI")):
-                problems.append(f"{instance}: no visual mesh bound to a material")
+            visuals[instance] = usd_visual(prim.GetChild("visual"), instance, problems)
         elif prim.HasAPI(UsdPhysics.CollisionAPI) and not any(
             a.HasAPI(UsdPhysics.RigidBodyAPI) for a in [prim.GetParent()]
         ):
@@ -230,7 +269,68 @@ def run_usd(scene_dir, seconds):
         "inertias": inertias,
         "static_colliders": statics,
         "problems": problems,
+        "visuals": visuals,
     }
+
+
+def usd_visual(visual, instance, problems):
+    """An object's visual meshes: each bound to a UsdPreviewSurface; a textured one's
+    diffuseColor fed by a UsdUVTexture whose file exists and whose st is read from the mesh's
+    `st` primvar by a UsdPrimvarReader_float2."""
+    from pxr import UsdGeom, UsdShade
+
+    out = {"meshes": 0, "with_st": 0, "textured": 0, "files": []}
+    meshes = [c for c in visual.GetChildren() if c.IsA(UsdGeom.Mesh)] if visual else []
+    if not meshes:
+        problems.append(f"{instance}: no visual mesh")
+    for mesh in meshes:
+        out["meshes"] += 1
+        where = str(mesh.GetPath())
+        st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
+        points = len(UsdGeom.Mesh(mesh).GetPointsAttr().Get() or [])
+        if st and st.HasValue():
+            values = st.Get()
+            expected = points if st.GetInterpolation() == "vertex" else None
+            if expected is not None and len(values) != expected:
+                problems.append(f"{where}: {len(values)} st values for {points} points")
+            out["with_st"] += 1
+        material, _ = UsdShade.MaterialBindingAPI(mesh).ComputeBoundMaterial()
+        if not material:
+            problems.append(f"{where}: no bound material")
+            continue
+        surface = material.ComputeSurfaceSource()[0]
+        if not surface or surface.GetIdAttr().Get() != "UsdPreviewSurface":
+            problems.append(f"{where}: its material has no UsdPreviewSurface")
+            continue
+        diffuse = surface.GetInput("diffuseColor")
+        if not (diffuse and diffuse.HasConnectedSource()):
+            continue
+        texture = UsdShade.Shader(diffuse.GetConnectedSources()[0][0].source.GetPrim())
+        if texture.GetIdAttr().Get() != "UsdUVTexture":
+            problems.append(f"{where}: diffuseColor fed by {texture.GetIdAttr().Get()}")
+            continue
+        file = texture.GetInput("file").Get()
+        path = file.resolvedPath if file is not None else ""
+        if not path or not os.path.isfile(path):
+            problems.append(f"{where}: texture file {file} does not resolve to a file")
+            continue
+        st_input = texture.GetInput("st")
+        reader = (
+            UsdShade.Shader(st_input.GetConnectedSources()[0][0].source.GetPrim())
+            if st_input and st_input.HasConnectedSource()
+            else None
+        )
+        if not reader or reader.GetIdAttr().Get() != "UsdPrimvarReader_float2":
+            problems.append(f"{where}: the texture's st is not read by a UsdPrimvarReader_float2")
+            continue
+        varname = reader.GetInput("varname").Get()
+        if varname != "st" or not (st and st.HasValue()):
+            problems.append(f"{where}: the texture reads primvar {varname!r}, which the mesh lacks")
+            continue
+        out["textured"] += 1
+        out["files"].append(os.path.relpath(path, os.path.dirname(os.path.dirname(os.path.dirname(path)))))
+    out["files"] = sorted(set(out["files"]))
+    return out
 
 
 def main():

@@ -17,7 +17,7 @@ if [ ! -d ../shared/realdata ] && [ -z "${MESA_SHARED:-}" ]; then
 fi
 
 venv="$root/.venv-tools"
-if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import trimesh, numpy, datasets, fcl, rtree, scipy, mujoco, compress_pickle, pybullet, pxr" 2>/dev/null; then
+if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import trimesh, numpy, datasets, fcl, rtree, scipy, mujoco, compress_pickle, pybullet, pxr, PIL" 2>/dev/null; then
   echo "test.sh: installing trimesh and datasets into $venv" >&2
   python3 -m venv "$venv"
   "$venv/bin/pip" install --quiet --disable-pip-version-check -r scripts/requirements-tools.txt

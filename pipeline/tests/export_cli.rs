@@ -6,6 +6,18 @@
 //!   rerun skips, and a bad `[export]` setting is a usage error naming its key.
 //! - With PyBullet as well: every URDF set loads (bodies named after the instances, one
 //!   collision shape per part) and the same stillness test and control hold.
+//! - Textures (issue #17), with MuJoCo, PyBullet, usd-core and trimesh: every visual material
+//!   and texture the manifest lists reaches MuJoCo (`ntex`, `nmat`, per geom its material,
+//!   its texture and its mesh's texture coordinates), PyBullet (visual shapes and their
+//!   textures) and usd-core (each visual mesh's `st` and bound material whose shader graph
+//!   reaches the PNG on disk); a deleted PNG is caught by usd-core and MuJoCo (the control).
+//!   trimesh, reading both the exported OBJ + MTL + PNG and the source GLBs, gives the same
+//!   colour at every vertex and triangle centroid, and the control (the `vt` unflipped) does
+//!   not.
+//! - The same on real GLBs of ../shared/realdata (Duck, BoxTextured, CesiumMilkTruck with 4
+//!   materials, AlphaBlendModeTest's JPEG texture re-encoded as PNG, ShapeCollection without
+//!   materials), exported with `--assets`: MuJoCo and PyBullet load each with the manifest's
+//!   materials and textures, and trimesh's colours agree (and not with v unflipped).
 //! - With MuJoCo (`MESA_PYTHON`, else the repository's `.venv-tools`; SKIPPED without it, a
 //!   failure under `MESA_REQUIRE_TOOLS`): every exported MJCF loads with one body per object,
 //!   named its instance, and one collision geom per convex part; 2 s of simulation keep the
@@ -18,7 +30,7 @@ mod common;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use common::{mesa, read_json, scene_dirs};
+use common::{mesa, read_json, scene_dirs, shared};
 use mesa_schemas::artifacts::{
     AssetIndexArtifact, CheckArtifact, CheckSummaryArtifact, ExportArtifact, SimulationReport,
 };
@@ -374,10 +386,20 @@ fn python_with(modules: &str, what: &str) -> Option<PathBuf> {
 
 /// Runs scripts/sim_export.py on the scenes: its JSON by scene folder.
 fn simulate(python: &Path, sim: &str, scenes: &[PathBuf]) -> BTreeMap<String, Value> {
+    simulate_for(python, sim, "2.0", scenes)
+}
+
+/// Runs scripts/sim_export.py on the scenes for `seconds` of simulated time.
+fn simulate_for(
+    python: &Path,
+    sim: &str,
+    seconds: &str,
+    scenes: &[PathBuf],
+) -> BTreeMap<String, Value> {
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scripts/sim_export.py");
     let out = std::process::Command::new(python)
         .arg(script)
-        .args([sim, "2.0"])
+        .args([sim, seconds])
         .args(scenes)
         .output()
         .expect("python runs");
@@ -751,4 +773,335 @@ fn an_apple_dropped_into_an_exported_bowl_stays_inside() {
         hull_z > bowl_height_cm,
         "with one hull per object the apple still sank into the bowl ({hull_z:.2} cm)"
     );
+}
+
+/// Per scene object of the manifest: (instance, visual materials, texture files).
+fn visual_records(scene: &Path) -> Vec<(String, u64, Vec<String>)> {
+    let manifest: ExportArtifact = read_json(&scene.join("sim/export.json"));
+    manifest
+        .objects
+        .into_iter()
+        .map(|o| (o.instance, o.visual_materials, o.textures))
+        .collect()
+}
+
+#[test]
+fn exported_materials_and_textures_reach_mujoco_pybullet_and_usd_and_match_the_glb_colours() {
+    let Some(python) = python_with(
+        "mujoco, pybullet, pxr, trimesh, PIL, scipy",
+        "the textured export test",
+    ) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("seed3");
+    mesa()
+        .args(["demo", "--scenes", "2", "--seed", "3", "-q"])
+        .arg(&dir)
+        .assert()
+        .success();
+    for stage in ["assets", "lift", "retrieve", "place"] {
+        ok(&[stage, "--progress", "off", "-q"], &dir);
+    }
+    ok(
+        &["export", "--layout", "coarse", "--progress", "off", "-q"],
+        &dir,
+    );
+    let scenes = scene_dirs(&dir);
+    let mujoco = simulate_for(&python, "mujoco", "0", &scenes);
+    let bullet = simulate_for(&python, "pybullet", "0", &scenes);
+    let usd = simulate_for(&python, "usd", "0", &scenes);
+    let (mut objects, mut textured_objects, mut materials) = (0, 0, 0);
+    for scene in &scenes {
+        let key = scene.to_string_lossy().into_owned();
+        let records = visual_records(scene);
+        let (m, b, u) = (&mujoco[&key], &bullet[&key], &usd[&key]);
+        for r in [m, b, u] {
+            assert_eq!(r["loaded"], true, "{key}: {}", r["error"]);
+        }
+        assert_eq!(u["problems"], json!([]), "{key}");
+        let images: BTreeSet<&String> = records.iter().flat_map(|r| &r.2).collect();
+        let all_materials: u64 = records.iter().map(|r| r.1).sum();
+        // MuJoCo compiled a texture per image and a material per (object, material).
+        assert_eq!(
+            m["visuals"]["ntex"].as_u64(),
+            Some(images.len() as u64),
+            "{key}"
+        );
+        assert_eq!(m["visuals"]["nmat"].as_u64(), Some(all_materials), "{key}");
+        for (instance, count, textures) in &records {
+            let textured = !textures.is_empty();
+            let mv = &m["visuals"]["bodies"][instance];
+            assert_eq!(mv["geoms"].as_u64(), Some(*count), "{key}: {instance}");
+            assert_eq!(
+                mv["with_material"].as_u64(),
+                Some(*count),
+                "{key}: {instance}"
+            );
+            assert_eq!(
+                mv["textured"].as_u64() >= Some(1),
+                textured,
+                "{key}: {instance}: {mv}"
+            );
+            let bv = &b["visuals"][instance];
+            assert_eq!(bv["shapes"].as_u64(), Some(*count), "{key}: {instance}");
+            assert_eq!(
+                bv["textured"].as_u64() >= Some(1),
+                textured,
+                "{key}: {instance}: {bv}"
+            );
+            let uv = &u["visuals"][instance];
+            assert_eq!(uv["meshes"].as_u64(), Some(*count), "{key}: {instance}");
+            assert_eq!(uv["textured"], uv["with_st"], "{key}: {instance}");
+            assert_eq!(uv["files"], json!(textures), "{key}: {instance}");
+            objects += 1;
+            textured_objects += usize::from(textured);
+            materials += count;
+        }
+        println!(
+            "textures | {} | {} objects, {all_materials} visual materials, {} images",
+            scene.file_name().expect("a scene").to_string_lossy(),
+            records.len(),
+            images.len()
+        );
+    }
+    assert!(
+        textured_objects >= 2 && materials > objects as u64,
+        "the demo scenes should hold textured, multi-material objects: {textured_objects} \
+         textured, {materials} materials for {objects} objects"
+    );
+
+    // The control: a missing PNG is caught by usd-core and refused by MuJoCo.
+    let (scene, image) = scenes
+        .iter()
+        .find_map(|s| {
+            let records = visual_records(s);
+            let first = records.iter().find_map(|r| r.2.first().cloned());
+            first.map(|f| (s.clone(), f))
+        })
+        .expect("a textured scene");
+    let png = scene.join(&image);
+    let bytes = std::fs::read(&png).expect("the PNG");
+    std::fs::remove_file(&png).expect("removes the PNG");
+    let key = scene.to_string_lossy().into_owned();
+    let usd = simulate_for(&python, "usd", "0", std::slice::from_ref(&scene));
+    let problems = usd[&key]["problems"].to_string();
+    assert!(
+        problems.contains("does not resolve to a file"),
+        "usd-core missed a missing texture: {problems}"
+    );
+    let mujoco = simulate_for(&python, "mujoco", "0", std::slice::from_ref(&scene));
+    assert_eq!(
+        mujoco[&key]["loaded"], false,
+        "MuJoCo loaded without {image}"
+    );
+    std::fs::write(&png, bytes).expect("restores the PNG");
+    // The control of texture coordinates: an object's OBJs stripped of `vt` leave MuJoCo
+    // none, and its geoms untextured.
+    let instance = visual_records(&scene)
+        .into_iter()
+        .find(|r| !r.2.is_empty())
+        .map(|r| r.0)
+        .expect("a textured object");
+    for entry in std::fs::read_dir(scene.join("sim/mjcf/meshes")).expect("meshes") {
+        let path = entry.expect("an entry").path();
+        let name = path
+            .file_name()
+            .expect("a name")
+            .to_string_lossy()
+            .into_owned();
+        if !(name.starts_with(&format!("{instance}.visual_")) && name.ends_with(".obj")) {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).expect("an OBJ");
+        let stripped: String = text
+            .lines()
+            .filter(|l| !l.starts_with("vt "))
+            .map(|l| match l.strip_prefix("f ") {
+                Some(face) => {
+                    let corners: Vec<&str> = face
+                        .split(' ')
+                        .map(|c| c.split('/').next().expect("a vertex"))
+                        .collect();
+                    format!("f {}\n", corners.join(" "))
+                }
+                None => format!("{l}\n"),
+            })
+            .collect();
+        std::fs::write(&path, stripped).expect("writes");
+    }
+    let mujoco = simulate_for(&python, "mujoco", "0", std::slice::from_ref(&scene));
+    let r = &mujoco[&key];
+    assert_eq!(r["loaded"], true, "{}", r["error"]);
+    assert_eq!(
+        r["visuals"]["bodies"][&instance]["textured"].as_u64(),
+        Some(0),
+        "{instance}: textured in MuJoCo without texture coordinates"
+    );
+
+    // trimesh's colours of the exported OBJ + MTL + PNG and of the source GLBs agree; with
+    // the v axis left unflipped (the control), they do not.
+    ok(&["export", "--assets", "--progress", "off", "-q"], &dir);
+    let reference = |control: bool| texture_reference(&python, &dir, control)["all"].clone();
+    let share = |r: &Value, part: &str, whole: &str| {
+        r[part].as_f64().expect("a count") / r[whole].as_f64().expect("a count").max(1.0)
+    };
+    let right = reference(false);
+    let flipped = reference(true);
+    println!(
+        "trimesh colour reference: {} samples ({} textured): {:.2} % agree ({:.2} % of the \
+         textured); v left unflipped (control): {:.2} % of the textured",
+        right["samples"],
+        right["textured"],
+        100.0 * share(&right, "agree", "samples"),
+        100.0 * share(&right, "textured_agree", "textured"),
+        100.0 * share(&flipped, "textured_agree", "textured")
+    );
+    assert_eq!(right["unmatched"], 0, "{right}");
+    assert!(right["textured"].as_u64() >= Some(1000), "{right}");
+    assert!(share(&right, "agree", "samples") >= 0.99, "{right}");
+    assert!(
+        share(&right, "textured_agree", "textured") >= 0.99,
+        "{right}"
+    );
+    assert!(
+        share(&flipped, "textured_agree", "textured") < 0.95,
+        "the colour reference missed an unflipped v: {flipped}"
+    );
+}
+
+/// Runs scripts/texture_reference.py on a dataset's single-asset export: its JSON.
+fn texture_reference(python: &Path, dir: &Path, control: bool) -> Value {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scripts/texture_reference.py");
+    let mut command = std::process::Command::new(python);
+    command.arg(script).arg(dir);
+    if control {
+        command.arg("--flip-v");
+    }
+    let out = command.output().expect("python runs");
+    assert!(
+        out.status.success(),
+        "texture_reference.py: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("JSON")
+}
+
+#[test]
+fn real_textured_glbs_export_load_and_keep_their_colours() {
+    let Some(python) = python_with(
+        "mujoco, pybullet, trimesh, PIL, scipy",
+        "the real-GLB texture test",
+    ) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let library = tmp.path().join("assets/library");
+    std::fs::create_dir_all(&library).expect("mkdir");
+    // (file, uid, visual materials, images): linked, not copied.
+    let glbs = [
+        ("Duck.glb", "duck", 1, 1usize),
+        ("BoxTextured.glb", "boxtextured", 1, 1),
+        ("CesiumMilkTruck.glb", "cesiummilktruck", 4, 1),
+        ("AlphaBlendModeTest.glb", "alphablendmodetest", 6, 6),
+        ("ShapeCollection.glb", "shapecollection", 1, 0),
+    ];
+    for (file, uid, _, _) in glbs {
+        let source = shared().join("realdata/glb").join(file);
+        assert!(
+            source.is_file(),
+            "{} (../shared/realdata)",
+            source.display()
+        );
+        std::os::unix::fs::symlink(&source, library.join(format!("{uid}.glb"))).expect("links");
+    }
+    ok(&["assets", "--progress", "off", "-q"], tmp.path());
+    ok(
+        &["export", "--assets", "--progress", "off", "-q"],
+        tmp.path(),
+    );
+    for (file, uid, materials, images) in glbs {
+        let manifest: ExportArtifact =
+            read_json(&tmp.path().join(format!("assets/sim/{uid}/export.json")));
+        let o = &manifest.objects[0];
+        assert_eq!(
+            (o.visual_materials, o.textures.len()),
+            (materials, images),
+            "{file}: {:?}",
+            manifest.warnings
+        );
+        assert!(
+            manifest.warnings.is_empty(),
+            "{file}: {:?}",
+            manifest.warnings
+        );
+    }
+    // Every image is a PNG on disk, AlphaBlendModeTest's JPEG (images[2]) included.
+    for entry in std::fs::read_dir(tmp.path().join("assets/sim/alphablendmodetest/textures"))
+        .expect("textures")
+    {
+        let bytes = std::fs::read(entry.expect("an entry").path()).expect("an image");
+        assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"));
+    }
+    let script = "import mujoco, json, os, sys, pybullet as p\n\
+        p.connect(p.DIRECT)\n\
+        root = sys.argv[1]\n\
+        out = {}\n\
+        for uid in sorted(os.listdir(root)):\n\
+        \x20   m = mujoco.MjModel.from_xml_path(f'{root}/{uid}/mjcf/scene.xml')\n\
+        \x20   b = p.loadURDF(f'{root}/{uid}/urdf/{uid}.urdf', flags=p.URDF_USE_INERTIA_FROM_FILE)\n\
+        \x20   v = p.getVisualShapeData(b, flags=p.VISUAL_SHAPE_DATA_TEXTURE_UNIQUE_IDS)\n\
+        \x20   out[uid] = [m.ntex, m.nmat, int((m.mesh_texcoordnum > 0).sum()), len(v), sum(s[8] >= 0 for s in v)]\n\
+        print(json.dumps(out))\n";
+    let out = std::process::Command::new(&python)
+        .args(["-c", script])
+        .arg(tmp.path().join("assets/sim"))
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let loaded: Value = serde_json::from_str(text.lines().last().expect("JSON")).expect("JSON");
+    for (file, uid, materials, images) in glbs {
+        let [ntex, nmat, texcoords, shapes, textured] =
+            std::array::from_fn(|k| loaded[uid][k].as_u64().expect("a count"));
+        println!(
+            "real | {file} | MuJoCo: {ntex} textures, {nmat} materials, {texcoords} meshes with \
+             texcoords | PyBullet: {shapes} visual shapes, {textured} textured"
+        );
+        assert_eq!(
+            (ntex, nmat, shapes),
+            (images as u64, materials, materials),
+            "{file}"
+        );
+        assert_eq!(texcoords >= 1, images >= 1, "{file}");
+        assert_eq!(textured >= 1, images >= 1, "{file}");
+    }
+    let right = texture_reference(&python, tmp.path(), false);
+    let flipped = texture_reference(&python, tmp.path(), true);
+    for (file, uid, _, images) in glbs {
+        let (r, f) = (&right[uid], &flipped[uid]);
+        let count = |v: &Value, k: &str| v[k].as_u64().expect("a count");
+        println!(
+            "real | {file} | trimesh: {} of {} samples agree ({} of {} textured); v unflipped: \
+             {} of the textured",
+            count(r, "agree"),
+            count(r, "samples"),
+            count(r, "textured_agree"),
+            count(r, "textured"),
+            count(f, "textured_agree")
+        );
+        assert_eq!(count(r, "unmatched"), 0, "{file}: {r}");
+        assert_eq!(count(r, "agree"), count(r, "samples"), "{file}: {r}");
+        if images > 0 {
+            assert!(count(r, "textured") > 0, "{file}: {r}");
+            assert!(
+                (count(f, "textured_agree") as f64) < 0.95 * count(f, "textured") as f64,
+                "{file}: the control passed: {f}"
+            );
+        }
+    }
 }

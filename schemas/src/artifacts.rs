@@ -1440,6 +1440,14 @@ pub struct ExportedObject {
     pub collision_parts: u64,
     /// Triangles of the visual mesh.
     pub visual_triangles: u64,
+    /// Visual meshes: one per glTF material the asset draws with (one grey one when it has
+    /// none), each with its MJCF material, URDF visual and USD material.
+    #[serde(default)]
+    pub visual_materials: u64,
+    /// The base-colour images its materials use, relative to the scene folder (under
+    /// `sim/textures/`), sorted; none when it is untextured.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub textures: Vec<String>,
 }
 
 /// `sim/export.json`: what `mesa export` wrote for a scene.

@@ -125,6 +125,8 @@ pub mod scene {
     pub const URDF_DIR: &str = "sim/urdf";
     /// The USD export, one text file.
     pub const USD_SCENE: &str = "sim/usd/scene.usda";
+    /// The export's base-colour images (PNG), one per asset image, shared by the three formats.
+    pub const TEXTURES_DIR: &str = "sim/textures";
     /// The demo's true layout.
     pub const TRUTH_LAYOUT: &str = "truth/layout.json";
     /// The demo's true instances.

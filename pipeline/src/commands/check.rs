@@ -192,6 +192,25 @@ pub fn read_asset_mesh(
     uid: &str,
     record: &AssetRecord,
 ) -> Result<VisualMesh, String> {
+    let (path, bytes, geometry) = read_indexed_glb(dataset, uid, record)?;
+    let mesh = read_glb(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(VisualMesh::from_glb(&mesh, geometry))
+}
+
+/// An asset's GLB (its path and bytes, which must still be those indexed) and the geometry its
+/// index record measured.
+pub fn read_indexed_glb<'r>(
+    dataset: &Path,
+    uid: &str,
+    record: &'r AssetRecord,
+) -> Result<
+    (
+        std::path::PathBuf,
+        Vec<u8>,
+        &'r mesa_schemas::artifacts::AssetGeometry,
+    ),
+    String,
+> {
     let geometry = record.geometry.as_ref().ok_or_else(|| {
         format!("asset {uid} has no geometry in {INDEX} (run `mesa assets --force`)")
     })?;
@@ -204,8 +223,7 @@ pub fn read_asset_mesh(
             path.display()
         ));
     }
-    let mesh = read_glb(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
-    Ok(VisualMesh::from_glb(&mesh, geometry))
+    Ok((path, bytes, geometry))
 }
 
 /// The `check` stage.

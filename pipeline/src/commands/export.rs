@@ -1,7 +1,8 @@
 //! `mesa export`: the runner adapter of [`mesa_stages::export`]: a scene's layout (the one the
 //! later stages read: settled, else refined; or `--layout`), the assets' convex parts
-//! (`assets/index/`, the shapes `mesa check` uses) and their GLBs → `sim/mjcf/scene.xml`,
-//! `sim/mjcf/meshes/*.obj` and the manifest `sim/export.json`. After the scenes, one summary
+//! (`assets/index/`, the shapes `mesa check` uses) and their GLBs (triangles, materials and
+//! base-colour images) → `sim/mjcf/scene.xml`, `sim/mjcf/meshes/`, `sim/urdf/`,
+//! `sim/usd/scene.usda`, `sim/textures/` and the manifest `sim/export.json`. After the scenes, one summary
 //! line over every exported scene.
 
 use std::collections::BTreeMap;
@@ -20,7 +21,7 @@ use mesa_stages::paths::scene::{
 };
 use serde::Serialize;
 
-use super::check::{read_asset_mesh, ShapeLibrary};
+use super::check::{read_indexed_glb, ShapeLibrary};
 use crate::cli::{Global, SceneArgs};
 use crate::dataset_cache::DatasetCache;
 use crate::exit::UsageError;
@@ -129,7 +130,7 @@ impl ExportLibrary {
         })
     }
 
-    /// The visual mesh of an asset, or why there is none.
+    /// The visual mesh of an asset with its materials and textures, or why there is none.
     fn visual(&self, dataset: &Path, uid: &str) -> Arc<Result<VisualMesh, String>> {
         let cached = self.visuals.lock().ok().and_then(|c| c.get(uid).cloned());
         if let Some(hit) = cached {
@@ -147,7 +148,10 @@ impl ExportLibrary {
             .shapes
             .record(uid)
             .ok_or_else(|| format!("asset {uid} is not in {INDEX} (run `mesa assets`)"))?;
-        read_asset_mesh(dataset, uid, record)
+        let (path, bytes, geometry) = read_indexed_glb(dataset, uid, record)?;
+        let (mesh, surface) = mesa_stages::glb_read::read_glb_surface(&bytes)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(VisualMesh::from_glb_surface(&mesh, &surface, geometry))
     }
 }
 
@@ -186,6 +190,7 @@ struct Fingerprint<'a> {
     export: &'a mesa_stages::export::ExportConfig,
     layout: ExportLayoutArg,
     version: &'a str,
+    writer_revision: u32,
 }
 
 fn no_layout(scene: &Scene, layout: ExportLayoutArg) -> anyhow::Error {
@@ -230,6 +235,7 @@ impl SceneStage for ExportStage {
             export: &ctx.config.export,
             layout: self.layout,
             version: env!("CARGO_PKG_VERSION"),
+            writer_revision: mesa_stages::export::WRITER_REVISION,
         })
     }
 
@@ -451,6 +457,7 @@ fn export_asset(
         mass_kg,
         &ctx.config.export,
         env!("CARGO_PKG_VERSION"),
+        mesa_stages::export::WRITER_REVISION,
     ));
     let folder = ctx.dataset.join(ASSET_SIM).join(uid);
     let manifest_path = folder.join("export.json");
@@ -507,6 +514,13 @@ fn export_asset(
         })
         .collect();
     manifest.files = files.iter().map(|(rel, _)| rel.clone()).collect();
+    for object in &mut manifest.objects {
+        for texture in &mut object.textures {
+            if let Some(rel) = texture.strip_prefix("sim/") {
+                *texture = rel.to_owned();
+            }
+        }
+    }
     manifest.files.push("export.json".to_owned());
     manifest.files.sort();
     // The manifest last: its digest marks the files complete.

@@ -15,15 +15,17 @@
 //! - its mass: the asset annotation's `mass` when present, else `density_kg_m3` × the parts'
 //!   volume; its centre of mass and inertia are those of the parts, solid and uniform, scaled
 //!   to that mass;
-//! - its visual mesh: every triangle of the asset's GLB, untextured (see `docs/export.md`).
+//! - its visual mesh: every triangle of the asset's GLB, one mesh per glTF material with its
+//!   base colour and base-colour texture ([`visual`]; see `docs/export.md`).
 
 pub mod mass;
 pub mod mjcf;
 pub mod obj;
 pub mod urdf;
 pub mod usd;
+pub mod visual;
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use mesa_schemas::artifacts::{
     AssetGeometry, ExportArtifact, ExportedObject, MassSource, UncheckedObject, EXPORT_SCHEMA,
@@ -37,9 +39,10 @@ use crate::check::{AssetShape, HullMesh, Pose};
 use crate::glb_read::GlbMesh;
 
 pub use self::mass::MassProperties;
+pub use self::visual::{VisualMaterial, VisualTexture};
 
 /// The MJCF folder, relative to the scene folder.
-pub use crate::paths::scene::{EXPORT_MANIFEST, MJCF_DIR, URDF_DIR, USD_SCENE};
+pub use crate::paths::scene::{EXPORT_MANIFEST, MJCF_DIR, TEXTURES_DIR, URDF_DIR, USD_SCENE};
 
 /// What an object collides with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
@@ -197,18 +200,28 @@ impl ExportConfig {
 }
 
 /// An asset's visual mesh in the asset's table-aligned frame, relative to the centre of its
-/// bounding box (the frame of [`AssetShape`]'s parts), metres.
+/// bounding box (the frame of [`AssetShape`]'s parts), metres; split by material.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VisualMesh {
     /// Vertices.
     pub positions_m: Vec<[f64; 3]>,
     /// Triangles (counter-clockwise seen from outside).
     pub triangles: Vec<[u32; 3]>,
+    /// glTF texture coordinates (v pointing down the image), one per vertex; empty when no
+    /// material is textured.
+    pub uvs: Vec<[f32; 2]>,
+    /// The materials: each triangle is in exactly one (one grey material when the asset has
+    /// none).
+    pub materials: Vec<VisualMaterial>,
+    /// The base-colour images the materials use.
+    pub textures: Vec<VisualTexture>,
+    /// Why an image or a material's texture was not carried over, each naming it.
+    pub texture_warnings: Vec<String>,
 }
 
 impl VisualMesh {
     /// The visual mesh of a GLB read by [`crate::glb_read::read_glb`], in the frame the asset
-    /// index measured (`geometry`: its front yaw and bounds).
+    /// index measured (`geometry`: its front yaw and bounds), in one grey material.
     pub fn from_glb(mesh: &GlbMesh, geometry: &AssetGeometry) -> Self {
         let c: [f64; 3] =
             std::array::from_fn(|k| 0.5 * (geometry.bounds_min_m[k] + geometry.bounds_max_m[k]));
@@ -220,9 +233,19 @@ impl VisualMesh {
                 [q[0] - c[0], q[1] - c[1], q[2] - c[2]]
             })
             .collect();
+        Self::untextured(positions_m, mesh.triangles.clone())
+    }
+
+    /// A mesh in one grey material.
+    pub fn untextured(positions_m: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Self {
+        let all = (0..triangles.len() as u32).collect();
         Self {
             positions_m,
-            triangles: mesh.triangles.clone(),
+            triangles,
+            uvs: Vec::new(),
+            materials: vec![VisualMaterial::grey(all)],
+            textures: Vec::new(),
+            texture_warnings: Vec::new(),
         }
     }
 }
@@ -420,10 +443,13 @@ pub fn body_model(object: &ExportObject<'_>, config: &ExportConfig) -> (BodyMode
     let visual = match object.visual {
         Some(v) => {
             let (positions_m, triangles) = scaled(&v.positions_m, &v.triangles, s);
-
             VisualMesh {
                 positions_m,
                 triangles,
+                uvs: v.uvs.clone(),
+                materials: v.materials.clone(),
+                textures: v.textures.clone(),
+                texture_warnings: Vec::new(),
             }
         }
         None => {
@@ -432,17 +458,13 @@ pub fn body_model(object: &ExportObject<'_>, config: &ExportConfig) -> (BodyMode
                  drawn instead",
                 object.instance
             ));
-            let mut mesh = VisualMesh {
-                positions_m: Vec::new(),
-                triangles: Vec::new(),
-            };
-            for (points, triangles) in &parts {
-                let base = mesh.positions_m.len() as u32;
-                mesh.positions_m.extend_from_slice(points);
-                mesh.triangles
-                    .extend(triangles.iter().map(|t| t.map(|i| i + base)));
+            let (mut positions_m, mut triangles) = (Vec::new(), Vec::new());
+            for (points, part_triangles) in &parts {
+                let base = positions_m.len() as u32;
+                positions_m.extend_from_slice(points);
+                triangles.extend(part_triangles.iter().map(|t| t.map(|i| i + base)));
             }
-            mesh
+            VisualMesh::untextured(positions_m, triangles)
         }
     };
     let unit = mass::unit_density(&parts);
@@ -467,6 +489,23 @@ pub fn body_model(object: &ExportObject<'_>, config: &ExportConfig) -> (BodyMode
         inertia_kg_m2: mass.inertia_kg_m2,
         collision_parts: parts.len() as u64,
         visual_triangles: visual.triangles.len() as u64,
+        visual_materials: visual.materials.len() as u64,
+        textures: {
+            let mut files: Vec<String> = visual
+                .materials
+                .iter()
+                .filter_map(|m| m.texture)
+                .map(|t| {
+                    format!(
+                        "{TEXTURES_DIR}/{}",
+                        visual::texture_file(object.uid, visual.textures[t].image)
+                    )
+                })
+                .collect();
+            files.sort();
+            files.dedup();
+            files
+        },
     };
     (
         BodyModel {
@@ -480,6 +519,11 @@ pub fn body_model(object: &ExportObject<'_>, config: &ExportConfig) -> (BodyMode
         warnings,
     )
 }
+
+/// The revision of what the writers make of the same inputs, for the runner's fingerprints: a
+/// new revision redoes exports made by an older one (2: visual meshes split by material, with
+/// textures).
+pub const WRITER_REVISION: u32 = 2;
 
 /// What a scene's export gives: files relative to the scene folder, and the manifest.
 #[derive(Debug, Clone)]
@@ -497,6 +541,19 @@ pub fn export_scene(
     config: &ExportConfig,
 ) -> Result<SceneExport, serde_json::Error> {
     let mut warnings = Vec::new();
+    // What could not be carried of an asset's materials, once per asset.
+    let mut assets_warned = BTreeSet::new();
+    for o in &request.objects {
+        if let Some(v) = o.visual {
+            if assets_warned.insert(o.uid) {
+                warnings.extend(
+                    v.texture_warnings
+                        .iter()
+                        .map(|w| format!("asset {}: {w}", o.uid)),
+                );
+            }
+        }
+    }
     let bodies: Vec<BodyModel> = request
         .objects
         .iter()
@@ -512,6 +569,17 @@ pub fn export_scene(
         Vec::new()
     };
     let mut files = BTreeMap::new();
+    // Each asset image once, whichever objects use it: every format reads it.
+    for body in &bodies {
+        for t in &body.visual.textures {
+            files
+                .entry(format!(
+                    "{TEXTURES_DIR}/{}",
+                    visual::texture_file(&body.record.uid, t.image)
+                ))
+                .or_insert_with(|| t.png.as_ref().clone());
+        }
+    }
     let mut formats = config.formats.clone();
     formats.sort();
     formats.dedup();

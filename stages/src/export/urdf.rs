@@ -6,8 +6,9 @@ use std::fmt::Write as _;
 
 use mesa_schemas::artifacts::{UrdfPlacement, UrdfSceneArtifact, URDF_SCENE_SCHEMA};
 
-use super::mjcf::{part_file, visual_file};
-use super::obj::{fixed, fixed3, sci};
+use super::mjcf::{part_file, visual_file, visual_name};
+use super::obj::{fixed, fixed3, rgba_text, sci};
+use super::visual::texture_file;
 use super::{BodyModel, ExportConfig, TableBox};
 
 /// The table's URDF file name.
@@ -40,8 +41,7 @@ pub fn object_urdf(body: &BodyModel, config: &ExportConfig) -> String {
          object's bounding-box centre, placed by scene.json -->\n<robot name=\"{name}\">\n  \
          <link name=\"{name}\">\n{}    <inertial>\n      <origin xyz=\"{}\" rpy=\"0 0 \
          0\"/>\n      <mass value=\"{}\"/>\n      <inertia ixx=\"{}\" iyy=\"{}\" izz=\"{}\" \
-         ixy=\"{}\" ixz=\"{}\" iyz=\"{}\"/>\n    </inertial>\n    <visual>\n      <geometry>\
-         <mesh filename=\"../mjcf/meshes/{}\"/></geometry>\n    </visual>\n",
+         ixy=\"{}\" ixz=\"{}\" iyz=\"{}\"/>\n    </inertial>\n",
         contact(config),
         fixed3(m.center_m),
         sci(m.mass_kg),
@@ -51,8 +51,26 @@ pub fn object_urdf(body: &BodyModel, config: &ExportConfig) -> String {
         sci(i[3]),
         sci(i[4]),
         sci(i[5]),
-        visual_file(name)
     );
+    let v = &body.visual;
+    for (k, m) in v.materials.iter().enumerate() {
+        // The texture also reaches PyBullet through the OBJ's MTL (`map_Kd`).
+        let texture = m.texture.map_or(String::new(), |t| {
+            format!(
+                "<texture filename=\"../textures/{}\"/>",
+                texture_file(&body.record.uid, v.textures[t].image)
+            )
+        });
+        let _ = writeln!(
+            out,
+            "    <visual name=\"{0}\">\n      <geometry><mesh \
+             filename=\"../mjcf/meshes/{1}\"/></geometry>\n      <material \
+             name=\"{name}/{0}\"><color rgba=\"{2}\"/>{texture}</material>\n    </visual>",
+            visual_name(k),
+            visual_file(name, k),
+            rgba_text(m.rgba_srgb())
+        );
+    }
     for k in 0..body.parts.len() {
         let _ = writeln!(
             out,
