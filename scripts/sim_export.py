@@ -30,8 +30,9 @@ USD (no simulation): sim/usd/scene.usda is opened with usd-core; per rigid body 
 mass, diagonal inertia and the count of its CollisionAPI meshes, the static colliders, and a
 list of problems (up axis, metres per unit, PhysicsScene, MassAPI, MeshCollisionAPI with
 convexHull, visual meshes each bound to a material, a textured material's graph reaching an
-existing file through a UsdUVTexture read at the mesh's `st`). Also per object: the final height of its centre of
-mass ("final_z_cm") and how far its origin drifted in the plane ("final_xy_offset_cm").
+existing file through a UsdUVTexture read at the mesh's `st`). Also per object: the final
+height of its centre of mass ("final_z_cm") and how far its origin drifted in the plane
+("final_xy_offset_cm").
 """
 
 import json

@@ -2,8 +2,8 @@
 //! later stages read: settled, else refined; or `--layout`), the assets' convex parts
 //! (`assets/index/`, the shapes `mesa check` uses) and their GLBs (triangles, materials and
 //! base-colour images) → `sim/mjcf/scene.xml`, `sim/mjcf/meshes/`, `sim/urdf/`,
-//! `sim/usd/scene.usda`, `sim/textures/` and the manifest `sim/export.json`. After the scenes, one summary
-//! line over every exported scene.
+//! `sim/usd/scene.usda`, `sim/textures/` and the manifest `sim/export.json`. After the scenes,
+//! one summary line over every exported scene.
 
 use std::collections::BTreeMap;
 use std::path::Path;
