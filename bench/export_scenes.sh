@@ -21,7 +21,7 @@ echo "exporting $n scenes ($objects objects) with $jobs threads:"
 du -sh "$work"/d/scenes/*/*/sim | sort -h | tail -1 | sed 's/^/largest scene: /'
 du -cb "$work"/d/scenes/*/*/sim | tail -1 | awk -v n="$n" \
   '{printf "sim/ on disk: %.1f MB in all, %.2f MB per scene\n", $1/1e6, $1/1e6/n}'
-for f in mjcf urdf usd; do
+for f in mjcf urdf usd textures; do
   du -cb "$work"/d/scenes/*/*/sim/$f | tail -1 | awk -v f="$f" '{printf "  %s: %.1f MB\n", f, $1/1e6}'
 done
 echo "rerun (nothing changed):"
