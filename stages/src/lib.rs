@@ -71,3 +71,20 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     use sha2::{Digest, Sha256};
     hex(&Sha256::digest(bytes))
 }
+
+/// Tests' access to a real GLB of `../shared/realdata/glb` (or of `$MESA_SHARED/realdata/glb`).
+#[cfg(test)]
+pub(crate) fn shared_glb(name: &str) -> Vec<u8> {
+    let shared = std::env::var_os("MESA_SHARED")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
+        });
+    let path = shared.join("realdata/glb").join(name);
+    std::fs::read(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e} (../shared beside the repository, or MESA_SHARED)",
+            path.display()
+        )
+    })
+}

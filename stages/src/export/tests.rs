@@ -3,6 +3,7 @@ use approx::assert_abs_diff_eq;
 use super::mass::unit_density;
 use super::*;
 use crate::check::geometry::convex_hull;
+use crate::shared_glb;
 
 fn cube_parts(half: f64, offset: [f64; 3]) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
     let mut points = Vec::new();
@@ -375,21 +376,6 @@ fn a_png_is_kept_a_jpeg_becomes_png_and_the_rest_are_refused_with_why() {
     let why = visual::texture_png(&wide).expect_err("too wide");
     assert!(why.contains("8193 × 1 pixels"), "{why}");
     assert!(visual::texture_png(&png_of(visual::MAX_TEXTURE_SIDE_PX, 1)).is_ok());
-}
-
-fn shared_glb(name: &str) -> Vec<u8> {
-    let shared = std::env::var_os("MESA_SHARED")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| {
-            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
-        });
-    let path = shared.join("realdata/glb").join(name);
-    std::fs::read(&path).unwrap_or_else(|e| {
-        panic!(
-            "{}: {e} (../shared beside the repository, or MESA_SHARED)",
-            path.display()
-        )
-    })
 }
 
 fn unit_geometry() -> AssetGeometry {

@@ -243,20 +243,7 @@ mod tests {
     use super::*;
     use sha2::{Digest, Sha256};
 
-    fn glb(name: &str) -> Vec<u8> {
-        let shared = std::env::var_os("MESA_SHARED")
-            .map(std::path::PathBuf::from)
-            .unwrap_or_else(|| {
-                std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared")
-            });
-        let path = shared.join("realdata/glb").join(name);
-        std::fs::read(&path).unwrap_or_else(|e| {
-            panic!(
-                "{}: {e} (../shared beside the repository, or MESA_SHARED)",
-                path.display()
-            )
-        })
-    }
+    use crate::shared_glb as glb;
 
     /// The Draco primitives of a GLB, decoded in file order.
     fn decode_all(bytes: &[u8]) -> Vec<DracoPrimitive> {
