@@ -30,7 +30,7 @@ mod common;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use common::{mesa, read_json, scene_dirs, shared};
+use common::{mesa, python_with, read_json, scene_dirs, shared};
 use mesa_schemas::artifacts::{
     AssetIndexArtifact, CheckArtifact, CheckSummaryArtifact, ExportArtifact, SimulationReport,
 };
@@ -359,29 +359,6 @@ fn assets_check(dir: &Path) {
         "{text}{}",
         String::from_utf8_lossy(&out.stderr)
     );
-}
-
-/// A Python with the modules, or None (SKIPPED; a failure under MESA_REQUIRE_TOOLS).
-fn python_with(modules: &str, what: &str) -> Option<PathBuf> {
-    let candidates = [
-        std::env::var_os("MESA_PYTHON").map(PathBuf::from),
-        Some(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.venv-tools/bin/python")),
-    ];
-    let found = candidates.into_iter().flatten().find(|p| {
-        std::process::Command::new(p)
-            .args(["-c", &format!("import {modules}")])
-            .output()
-            .is_ok_and(|o| o.status.success())
-    });
-    if found.is_none() {
-        assert!(
-            std::env::var_os("MESA_REQUIRE_TOOLS").is_none(),
-            "{what} needs MESA_PYTHON with {modules} (scripts/test.sh installs it) and \
-             MESA_REQUIRE_TOOLS is set"
-        );
-        eprintln!("SKIPPED: {what} (set MESA_PYTHON to a Python with {modules})");
-    }
-    found
 }
 
 /// Runs scripts/sim_export.py on the scenes: its JSON by scene folder.
