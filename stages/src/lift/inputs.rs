@@ -64,10 +64,26 @@ pub struct Camera {
 pub struct Masks {
     /// Pixel indices by mask id, sorted.
     pub pixels: BTreeMap<u32, Vec<u32>>,
-    /// Pixels covered by no mask (background), sorted.
-    pub background: Vec<u32>,
+    /// The image's pixel count.
+    pub len: usize,
     /// Which file the masks came from (for messages).
     pub source: String,
+}
+
+impl Masks {
+    /// Pixels covered by no mask (background), sorted. Made on demand: only a scene without a
+    /// support mask fits its table on them.
+    pub fn background(&self) -> Vec<u32> {
+        let mut covered = vec![false; self.len];
+        for list in self.pixels.values() {
+            for &p in list {
+                covered[p as usize] = true;
+            }
+        }
+        (0..self.len as u32)
+            .filter(|&p| !covered[p as usize])
+            .collect()
+    }
 }
 
 fn image_error(path: &Path, e: impl std::fmt::Display) -> LiftError {
@@ -585,10 +601,10 @@ pub fn read_masks(
             width,
             height,
         )?;
-        let labels: Vec<u32> =
+        pixels =
             match image {
-                DynamicImage::ImageLuma8(b) => b.into_raw().into_iter().map(u32::from).collect(),
-                DynamicImage::ImageLuma16(b) => b.into_raw().into_iter().map(u32::from).collect(),
+                DynamicImage::ImageLuma8(b) => label_lists(b.as_raw()),
+                DynamicImage::ImageLuma16(b) => label_lists(b.as_raw()),
                 other => return Err(LiftError::input(
                     &label,
                     "$",
@@ -596,11 +612,6 @@ pub fn read_masks(
                     "an 8- or 16-bit single-channel label image (0 = background, k = instance k)",
                 )),
             };
-        for (i, id) in labels.into_iter().enumerate() {
-            if id != 0 {
-                pixels.entry(id).or_default().push(i as u32);
-            }
-        }
         let known: std::collections::BTreeSet<u32> = instances.iter().map(|i| i.id).collect();
         if let Some(unknown) = pixels.keys().find(|id| !known.contains(id)) {
             return Err(LiftError::input(
@@ -720,23 +731,55 @@ pub fn read_masks(
             Some(_) => {}
         }
     }
-    let mut covered = vec![false; width * height];
-    for list in pixels.values() {
-        for &p in list {
-            covered[p as usize] = true;
-        }
-    }
-    let background = covered
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| !**c)
-        .map(|(i, _)| i as u32)
-        .collect();
     Ok(Masks {
         pixels,
-        background,
+        len: width * height,
         source,
     })
+}
+
+/// The pixels of each non-zero label of a label image, in row-major order. Labels come in runs
+/// along rows, so the image is walked run by run: a count per label, then each list filled at
+/// its exact size by whole runs (a map lookup, or even a counter's increment, per pixel cost
+/// more than the rest of the masks' reading together).
+fn label_lists<T: Copy + PartialEq + Into<u32>>(labels: &[T]) -> BTreeMap<u32, Vec<u32>> {
+    fn for_each_run<T: Copy + PartialEq + Into<u32>>(
+        labels: &[T],
+        mut f: impl FnMut(usize, usize, usize),
+    ) {
+        let mut start = 0;
+        while start < labels.len() {
+            let label = labels[start];
+            let end = labels[start..]
+                .iter()
+                .position(|&l| l != label)
+                .map_or(labels.len(), |n| start + n);
+            f(label.into() as usize, start, end);
+            start = end;
+        }
+    }
+    let mut counts: Vec<usize> = Vec::new();
+    for_each_run(labels, |id, start, end| {
+        if id >= counts.len() {
+            counts.resize(id + 1, 0);
+        }
+        counts[id] += end - start;
+    });
+    if let Some(background) = counts.first_mut() {
+        *background = 0;
+    }
+    let mut lists: Vec<Vec<u32>> = counts.iter().map(|&n| Vec::with_capacity(n)).collect();
+    for_each_run(labels, |id, start, end| {
+        if id != 0 {
+            lists[id].extend(start as u32..end as u32);
+        }
+    });
+    lists
+        .into_iter()
+        .enumerate()
+        .filter(|(id, list)| *id != 0 && !list.is_empty())
+        .map(|(id, list)| (id as u32, list))
+        .collect()
 }
 
 fn check_size(
@@ -758,11 +801,7 @@ fn check_size(
 }
 
 /// Reads the photo as RGB8 at the depth size; `None` when there is no `image.png`.
-pub fn read_photo(
-    input: &Path,
-    width: usize,
-    height: usize,
-) -> Result<Option<Vec<[u8; 3]>>, LiftError> {
+pub fn read_photo(input: &Path, width: usize, height: usize) -> Result<Option<Photo>, LiftError> {
     let path = input.join("image.png");
     if !path.exists() {
         return Ok(None);
@@ -775,8 +814,20 @@ pub fn read_photo(
         width,
         height,
     )?;
-    let rgb = image.into_rgb8();
-    Ok(Some(rgb.pixels().map(|p| p.0).collect()))
+    // An RGB8 image is moved, not copied, into its raw bytes.
+    Ok(Some(Photo(image.into_rgb8().into_raw())))
+}
+
+/// The photo's RGB8 bytes, row-major.
+#[derive(Debug, Clone)]
+pub struct Photo(Vec<u8>);
+
+impl Photo {
+    /// The colour of pixel index `p`.
+    pub fn rgb(&self, p: u32) -> [u8; 3] {
+        let i = p as usize * 3;
+        [self.0[i], self.0[i + 1], self.0[i + 2]]
+    }
 }
 
 #[cfg(test)]

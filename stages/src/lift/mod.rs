@@ -253,7 +253,7 @@ pub fn lift_scene(
         .flat_map(|i| masks.pixels[&i.id].iter().copied())
         .collect();
     let (plane_pixels, source) = if support.is_empty() {
-        (masks.background.clone(), "background")
+        (masks.background(), "background")
     } else {
         let mut s = support;
         s.sort_unstable();
@@ -262,11 +262,14 @@ pub fn lift_scene(
     };
     // The plane and the zone's percentiles need a few hundred thousand points at most.
     const PLANE_PIXELS: usize = 200_000;
-    let plane_points: Vec<Vector3<f64>> = plane_pixels
-        .iter()
-        .step_by(plane_pixels.len().div_ceil(PLANE_PIXELS).max(1))
-        .filter_map(|&p| back_project(&depth, &k, p))
-        .collect();
+    let step = plane_pixels.len().div_ceil(PLANE_PIXELS).max(1);
+    let mut plane_points: Vec<Vector3<f64>> = Vec::with_capacity(plane_pixels.len() / step + 1);
+    plane_points.extend(
+        plane_pixels
+            .iter()
+            .step_by(step)
+            .filter_map(|&p| back_project(&depth, &k, p)),
+    );
     let object_pixels: Vec<u32> = instances
         .iter()
         .filter(|i| !i.support)
@@ -358,33 +361,34 @@ pub fn lift_scene(
         for &(pixel, point) in &points {
             let t = frame.to_table(point);
             table_points.push((t, point));
-            let rgb = photo
-                .as_ref()
-                .map_or([128, 128, 128], |p| p[pixel as usize]);
+            let rgb = photo.as_ref().map_or([128, 128, 128], |p| p.rgb(pixel));
             ply_points.push(([t[0] as f32, t[1] as f32, t[2] as f32], rgb));
         }
         // Each side of the box at the extreme of its axis (the top at a quantile), with the
         // camera-frame point there.
         let top_trim = ((table_points.len() as f64 * config.top_trim).floor() as usize)
             .min((table_points.len() - 1) / 2);
-        let mut min = [0.0; 3];
-        let mut max = [0.0; 3];
-        let mut edges = [Vector3::zeros(); 3];
-        for axis in 0..3 {
-            table_points.sort_unstable_by(|a, b| a.0[axis].total_cmp(&b.0[axis]));
-            let top = if axis == 2 { top_trim } else { 0 };
-            let (lo, hi) = (
-                &table_points[0],
-                &table_points[table_points.len() - 1 - top],
-            );
-            min[axis] = lo.0[axis];
-            max[axis] = hi.0[axis];
-            match axis {
-                0 => edges[..2].copy_from_slice(&[lo.1, hi.1]),
-                1 => edges[2] = hi.1,
-                _ => {}
+        // Linear scans for the extremes and one selection for the trimmed top, not a sort
+        // per axis (the sorts were a sixth of the stage).
+        let by_axis = |axis: usize| {
+            move |a: &&(Vector3<f64>, Vector3<f64>), b: &&(Vector3<f64>, Vector3<f64>)| {
+                a.0[axis].total_cmp(&b.0[axis])
             }
-        }
+        };
+        let first = &table_points[0];
+        let (lo_x, hi_x, hi_y) = (
+            table_points.iter().min_by(by_axis(0)).unwrap_or(first),
+            table_points.iter().max_by(by_axis(0)).unwrap_or(first),
+            table_points.iter().max_by(by_axis(1)).unwrap_or(first),
+        );
+        let lo_y = table_points.iter().min_by(by_axis(1)).unwrap_or(first);
+        let lo_z = table_points.iter().min_by(by_axis(2)).unwrap_or(first).0.z;
+        let mut min = [lo_x.0.x, lo_y.0.y, lo_z];
+        let mut max = [hi_x.0.x, hi_y.0.y, 0.0];
+        let edges = [lo_x.1, hi_x.1, hi_y.1];
+        let rank = table_points.len() - 1 - top_trim;
+        let (_, top, _) = table_points.select_nth_unstable_by(rank, |a, b| a.0.z.total_cmp(&b.0.z));
+        max[2] = top.0.z;
         if eroded_px < valid.len() {
             // The image's x is the table's x: a pixel there is depth / fx wide.
             min[0] -= config.restore_px * edges[0].z / k.fx;
@@ -608,29 +612,36 @@ fn remove_outliers(
         grid[v * bw + u] = i as u32;
     }
     let (points, grid, bled) = keep_main_components(points, grid, bw, config);
-    let r = config.outlier_window_px as isize;
+    // The points laid out on their pixels, with a margin of the window's radius all round, so
+    // a window is a few contiguous runs of a row, without bounds tests or an index lookup (the
+    // distances of a run are computed together, then added in the window's row-major order).
+    let r = config.outlier_window_px as usize;
+    let side = 2 * r + 1;
+    let (pw, ph) = (bw + 2 * r, bh + 2 * r);
+    let mut laid = vec![[f64::NAN; 3]; pw * ph];
+    for (cell, &i) in grid.iter().enumerate() {
+        if i != u32::MAX {
+            let x = points[i as usize].1;
+            laid[(cell / bw + r) * pw + cell % bw + r] = [x.x, x.y, x.z];
+        }
+    }
+    let mut distances = vec![0.0; side];
     let mut scores = Vec::with_capacity(points.len());
     for &(p, x) in &points {
-        let (u, v) = (
-            (p as usize % w - u0) as isize,
-            (p as usize / w - v0) as isize,
-        );
+        let (u, v) = (p as usize % w - u0, p as usize / w - v0);
         let footprint = (x.z / k.fx).max(1e-9);
         let mut sum = 0.0;
         let mut count = 0usize;
-        for dv in -r..=r {
-            let nv = v + dv;
-            if nv < 0 || nv >= bh as isize {
-                continue;
+        for dv in 0..side {
+            let row = &laid[(v + dv) * pw + u..(v + dv) * pw + u + side];
+            for (d, q) in distances.iter_mut().zip(row) {
+                let (dx, dy, dz) = (q[0] - x.x, q[1] - x.y, q[2] - x.z);
+                *d = (dx * dx + dy * dy + dz * dz).sqrt();
             }
-            for du in -r..=r {
-                let nu = u + du;
-                if (du == 0 && dv == 0) || nu < 0 || nu >= bw as isize {
-                    continue;
-                }
-                let j = grid[nv as usize * bw + nu as usize];
-                if j != u32::MAX {
-                    sum += (points[j as usize].1 - x).norm();
+            for (du, &d) in distances.iter().enumerate() {
+                // A missing neighbour is NaN; the centre is the point itself.
+                if !d.is_nan() && (du, dv) != (r, r) {
+                    sum += d;
                     count += 1;
                 }
             }
@@ -702,19 +713,21 @@ fn keep_main_components(
         }
     }
     let roots: Vec<u32> = (0..n as u32).map(|i| find(&mut parent, i)).collect();
-    let mut sizes = std::collections::HashMap::<u32, usize>::new();
+    // Component sizes by root (a root is a point's index): a count per point, zero for
+    // non-roots.
+    let mut sizes = vec![0usize; n];
     for &r in &roots {
-        *sizes.entry(r).or_default() += 1;
+        sizes[r as usize] += 1;
     }
-    let largest = sizes.values().copied().max().unwrap_or(0);
+    let largest = sizes.iter().copied().max().unwrap_or(0);
     let minimum = (config.component_min_fraction * largest as f64).ceil() as usize;
-    if sizes.values().all(|&s| s >= minimum) {
+    if sizes.iter().all(|&s| s == 0 || s >= minimum) {
         return (points, grid, 0);
     }
     let mut remap = vec![u32::MAX; n];
     let mut kept = Vec::with_capacity(n);
     for (i, point) in points.into_iter().enumerate() {
-        if sizes[&roots[i]] >= minimum {
+        if sizes[roots[i] as usize] >= minimum {
             remap[i] = kept.len() as u32;
             kept.push(point);
         }
@@ -980,8 +993,8 @@ impl TableFrame {
         // depth (z² for the distance, z / |n·p| for the slant, and |n·p| is the same for every
         // point of the plane): weighting by it makes the points a uniform sample of the visible
         // top, whose marginals along x and y are flat near the edges of a rectangle.
-        let mut us = Vec::new();
-        let mut vs = Vec::new();
+        let mut us = Vec::with_capacity(points.len());
+        let mut vs = Vec::with_capacity(points.len());
         for p in points {
             if (z.dot(p) + plane.offset_m).abs() < threshold {
                 let weight = p.z.abs().powi(3);
@@ -990,8 +1003,8 @@ impl TableFrame {
             }
         }
         let q = config.zone_percentile.clamp(0.0, 16.0) / 100.0;
-        let (u0, u1) = sharp_extent(&mut us, q);
-        let (v0, v1) = sharp_extent(&mut vs, q);
+        let (u0, u1) = sharp_extent(&us, q);
+        let (v0, v1) = sharp_extent(&vs, q);
         let origin = x * u0 + y * v0 - z * plane.offset_m;
         Ok(Self {
             rotation: Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]),
@@ -1023,28 +1036,99 @@ impl TableFrame {
 /// the edge is where that density, carried outward, leaves the `q` share behind. Symmetric
 /// noise blurs an edge without moving it, and what happens further in (objects hiding part of
 /// the table) does not matter.
-fn sharp_extent(samples: &mut [(f64, f64)], q: f64) -> (f64, f64) {
+fn sharp_extent(samples: &[(f64, f64)], q: f64) -> (f64, f64) {
     if samples.is_empty() {
         return (0.0, 0.0);
     }
-    samples.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-    let total: f64 = samples.iter().map(|s| s.1).sum();
-    let quantile = |target: f64| {
+    let quantiles = WeightedQuantiles::new(samples);
+    let quantile = |share: f64| quantiles.at(share * quantiles.total);
+    let (lo_a, lo_b) = (quantile(q), quantile(3.0 * q));
+    let (hi_a, hi_b) = (quantile(1.0 - q), quantile(1.0 - 3.0 * q));
+    (lo_a - (lo_b - lo_a) / 2.0, hi_a + (hi_a - hi_b) / 2.0)
+}
+
+/// Weighted quantiles of a few hundred thousand samples without sorting them: the samples are
+/// bucketed by value (a counting sort into value-ordered buckets), a quantile walks the
+/// buckets' weights and sorts only the bucket it falls in. The answer is the sorted walk's:
+/// the first value at which the weight accumulated in value order reaches the target.
+struct WeightedQuantiles {
+    /// The samples, bucket after bucket (unsorted inside a bucket).
+    samples: Vec<(f64, f64)>,
+    /// `starts[b]..starts[b + 1]` is bucket `b` in `samples`.
+    starts: Vec<usize>,
+    /// The weight of each bucket.
+    weights: Vec<f64>,
+    total: f64,
+    max: f64,
+}
+
+impl WeightedQuantiles {
+    fn new(samples: &[(f64, f64)]) -> Self {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for &(value, _) in samples {
+            lo = lo.min(value);
+            hi = hi.max(value);
+        }
+        let buckets = (samples.len() / 32).clamp(1, 1 << 14);
+        let scale = if hi > lo {
+            buckets as f64 / (hi - lo)
+        } else {
+            0.0
+        };
+        // Rounding is monotone, so the bucket of a larger value is never an earlier one.
+        let bucket = |value: f64| (((value - lo) * scale) as usize).min(buckets - 1);
+        let mut starts = vec![0usize; buckets + 1];
+        let mut weights = vec![0.0; buckets];
+        let indices: Vec<u32> = samples
+            .iter()
+            .map(|&(value, weight)| {
+                let b = bucket(value);
+                starts[b + 1] += 1;
+                weights[b] += weight;
+                b as u32
+            })
+            .collect();
+        for b in 0..buckets {
+            starts[b + 1] += starts[b];
+        }
+        let mut next = starts.clone();
+        let mut sorted = vec![(0.0, 0.0); samples.len()];
+        for (&sample, &b) in samples.iter().zip(&indices) {
+            sorted[next[b as usize]] = sample;
+            next[b as usize] += 1;
+        }
+        Self {
+            samples: sorted,
+            starts,
+            total: weights.iter().sum(),
+            weights,
+            max: hi,
+        }
+    }
+
+    /// The first value, in value order, at which the accumulated weight reaches `target`.
+    fn at(&self, target: f64) -> f64 {
         let mut acc = 0.0;
-        for &(value, weight) in samples.iter() {
-            acc += weight;
-            if acc >= target {
-                return value;
+        for (b, &weight) in self.weights.iter().enumerate() {
+            let range = self.starts[b]..self.starts[b + 1];
+            if range.is_empty() {
+                continue;
+            }
+            if acc + weight < target {
+                acc += weight;
+                continue;
+            }
+            let mut bucket = self.samples[range].to_vec();
+            bucket.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+            for (value, weight) in bucket {
+                acc += weight;
+                if acc >= target {
+                    return value;
+                }
             }
         }
-        samples[samples.len() - 1].0
-    };
-    let (lo_a, lo_b) = (quantile(q * total), quantile(3.0 * q * total));
-    let (hi_a, hi_b) = (
-        quantile((1.0 - q) * total),
-        quantile((1.0 - 3.0 * q) * total),
-    );
-    (lo_a - (lo_b - lo_a) / 2.0, hi_a + (hi_a - hi_b) / 2.0)
+        self.max
+    }
 }
 
 #[cfg(test)]
