@@ -46,19 +46,14 @@ pub fn parse_lenient(text: &str) -> Result<Value, serde_json::Error> {
     if starts_with_bom(text) {
         return Err(<serde_json::Error as serde::de::Error>::custom(BOM_PROBLEM));
     }
-    match serde_json::from_str(text) {
-        Ok(value) => {
-            check_unique_keys(text)?;
-            Ok(value)
-        }
+    match parse_unique(text) {
+        Ok(value) => Ok(value),
         Err(strict_error) => {
             let Some(rewritten) = rewrite_nonfinite(text) else {
                 return Err(strict_error);
             };
-            let value = serde_json::from_str(&rewritten)?;
             // The sentinels change columns, not lines: the line of a duplicate stays right.
-            check_unique_keys(&rewritten)?;
-            Ok(value)
+            parse_unique(&rewritten)
         }
     }
 }
@@ -70,10 +65,38 @@ pub fn parse_lenient(text: &str) -> Result<Value, serde_json::Error> {
 /// [`parse_lenient`] or directly). Bounded like a parse: one pass, serde_json's nesting limit,
 /// memory for the keys of the objects open along one path.
 pub fn check_unique_keys(text: &str) -> Result<(), serde_json::Error> {
+    parse_unique(text).map(drop)
+}
+
+/// Parses JSON text into a [`Value`] in one pass, refusing an object with a key twice as
+/// [`check_unique_keys`] says (serde_json's own `Value` keeps the last of them). The JSON path
+/// of each value is a chain of borrowed segments, written out only into an error.
+pub fn parse_unique(text: &str) -> Result<Value, serde_json::Error> {
     use serde::de::DeserializeSeed as _;
     let mut deserializer = serde_json::Deserializer::from_str(text);
-    UniqueKeys { path: "$" }.deserialize(&mut deserializer)?;
-    deserializer.end()
+    let value = UniqueValue {
+        path: &PathSeg::Root,
+    }
+    .deserialize(&mut deserializer)?;
+    deserializer.end()?;
+    Ok(value)
+}
+
+/// Where a value is in the document, from the root: rendered `$.objects[1].size`.
+enum PathSeg<'p> {
+    Root,
+    Key(&'p PathSeg<'p>, &'p str),
+    Index(&'p PathSeg<'p>, usize),
+}
+
+impl PathSeg<'_> {
+    fn render(&self) -> String {
+        match self {
+            PathSeg::Root => "$".to_owned(),
+            PathSeg::Key(parent, key) => key_path(&parent.render(), key),
+            PathSeg::Index(parent, i) => format!("{}[{i}]", parent.render()),
+        }
+    }
 }
 
 /// `path.key`, or `path["key"]` for a key that is not an identifier (as
@@ -89,77 +112,86 @@ fn key_path(path: &str, key: &str) -> String {
     }
 }
 
-/// A visitor that walks any JSON value and fails on a repeated key.
-struct UniqueKeys<'p> {
-    path: &'p str,
+/// A visitor that builds any JSON value as serde_json's `Value` does, and fails on a repeated
+/// key.
+struct UniqueValue<'p> {
+    path: &'p PathSeg<'p>,
 }
 
-impl<'de> serde::de::DeserializeSeed<'de> for UniqueKeys<'_> {
-    type Value = ();
+impl<'de> serde::de::DeserializeSeed<'de> for UniqueValue<'_> {
+    type Value = Value;
 
-    fn deserialize<D: serde::Deserializer<'de>>(self, deserializer: D) -> Result<(), D::Error> {
+    fn deserialize<D: serde::Deserializer<'de>>(self, deserializer: D) -> Result<Value, D::Error> {
         deserializer.deserialize_any(self)
     }
 }
 
-impl<'de> serde::de::Visitor<'de> for UniqueKeys<'_> {
-    type Value = ();
+impl<'de> serde::de::Visitor<'de> for UniqueValue<'_> {
+    type Value = Value;
 
     fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str("a JSON value")
     }
 
-    fn visit_bool<E>(self, _: bool) -> Result<(), E> {
-        Ok(())
+    fn visit_bool<E>(self, v: bool) -> Result<Value, E> {
+        Ok(Value::Bool(v))
     }
 
-    fn visit_i64<E>(self, _: i64) -> Result<(), E> {
-        Ok(())
+    fn visit_i64<E>(self, v: i64) -> Result<Value, E> {
+        Ok(Value::Number(v.into()))
     }
 
-    fn visit_u64<E>(self, _: u64) -> Result<(), E> {
-        Ok(())
+    fn visit_u64<E>(self, v: u64) -> Result<Value, E> {
+        Ok(Value::Number(v.into()))
     }
 
-    fn visit_f64<E>(self, _: f64) -> Result<(), E> {
-        Ok(())
+    fn visit_f64<E>(self, v: f64) -> Result<Value, E> {
+        Ok(serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number))
     }
 
-    fn visit_str<E>(self, _: &str) -> Result<(), E> {
-        Ok(())
+    fn visit_str<E>(self, v: &str) -> Result<Value, E> {
+        Ok(Value::String(v.to_owned()))
     }
 
-    fn visit_unit<E>(self) -> Result<(), E> {
-        Ok(())
+    fn visit_string<E>(self, v: String) -> Result<Value, E> {
+        Ok(Value::String(v))
     }
 
-    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
-        let mut index = 0usize;
+    fn visit_unit<E>(self) -> Result<Value, E> {
+        Ok(Value::Null)
+    }
+
+    fn visit_none<E>(self) -> Result<Value, E> {
+        Ok(Value::Null)
+    }
+
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Value, A::Error> {
+        let mut items = Vec::with_capacity(seq.size_hint().unwrap_or(0));
         loop {
-            let path = format!("{}[{index}]", self.path);
-            if seq.next_element_seed(UniqueKeys { path: &path })?.is_none() {
-                return Ok(());
+            let path = PathSeg::Index(self.path, items.len());
+            match seq.next_element_seed(UniqueValue { path: &path })? {
+                Some(item) => items.push(item),
+                None => return Ok(Value::Array(items)),
             }
-            index += 1;
         }
     }
 
-    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
-        let mut seen = std::collections::BTreeSet::new();
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Value, A::Error> {
+        let mut object = serde_json::Map::new();
         while let Some(key) = map.next_key::<String>()? {
-            if seen.contains(&key) {
+            if object.contains_key(&key) {
                 return Err(serde::de::Error::custom(format!(
                     "duplicate key {} in {} (a JSON object holds each key once; keep one of \
                      them)",
                     Value::String(key),
-                    self.path
+                    self.path.render()
                 )));
             }
-            let path = key_path(self.path, &key);
-            seen.insert(key);
-            map.next_value_seed(UniqueKeys { path: &path })?;
+            let path = PathSeg::Key(self.path, &key);
+            let value = map.next_value_seed(UniqueValue { path: &path })?;
+            object.insert(key, value);
         }
-        Ok(())
+        Ok(Value::Object(object))
     }
 }
 

@@ -157,7 +157,8 @@ fn validate_kind(kind: &str, value: &Value) -> Vec<Problem> {
 }
 
 fn typed<T: serde::de::DeserializeOwned>(value: &Value) -> Result<T, Vec<Problem>> {
-    serde_json::from_value(value.clone()).map_err(|e| {
+    // Read from the borrowed value: no copy of the document.
+    T::deserialize(value).map_err(|e| {
         vec![Problem::new(
             "$",
             format!("does not parse: {e}"),

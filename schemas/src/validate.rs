@@ -154,40 +154,73 @@ pub fn duplicate_instances<'a>(names: impl Iterator<Item = &'a str>) -> Vec<Prob
 
 /// Appends a key to a JSON path, quoting keys that are not identifiers.
 pub fn path_key(path: &str, key: &str) -> String {
+    let mut out = path.to_owned();
+    push_key(&mut out, key);
+    out
+}
+
+/// Appends `.key` (or `["key"]`) to the path being walked; returns the length to truncate back
+/// to. The walks build one path in place and copy it only into a problem: formatting a path
+/// for every value took more time than the checks.
+fn push_key(path: &mut String, key: &str) -> usize {
+    let len = path.len();
     let plain = !key.is_empty()
         && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
         && !key.starts_with(|c: char| c.is_ascii_digit());
     if plain {
-        format!("{path}.{key}")
+        path.push('.');
+        path.push_str(key);
     } else {
-        format!("{path}[{}]", Value::String(key.to_owned()))
+        path.push('[');
+        path.push_str(&Value::String(key.to_owned()).to_string());
+        path.push(']');
     }
+    len
+}
+
+/// Appends `[i]` to the path being walked; returns the length to truncate back to.
+fn push_index(path: &mut String, i: usize) -> usize {
+    use std::fmt::Write as _;
+    let len = path.len();
+    let _ = write!(path, "[{i}]");
+    len
 }
 
 /// Reports every non-finite number (read by [`crate::json::parse_lenient`]) in `value`.
 pub fn nonfinite_problems(value: &Value, path: &str, out: &mut Vec<Problem>) {
-    match value {
-        Value::Array(items) => {
-            for (i, item) in items.iter().enumerate() {
-                nonfinite_problems(item, &format!("{path}[{i}]"), out);
+    fn walk(value: &Value, path: &mut String, out: &mut Vec<Problem>) {
+        match value {
+            Value::Array(items) => {
+                for (i, item) in items.iter().enumerate() {
+                    let len = push_index(path, i);
+                    walk(item, path, out);
+                    path.truncate(len);
+                }
             }
-        }
-        Value::Object(map) => {
-            for (key, item) in map {
-                nonfinite_problems(item, &path_key(path, key), out);
+            Value::Object(map) => {
+                for (key, item) in map {
+                    let len = push_key(path, key);
+                    walk(item, path, out);
+                    path.truncate(len);
+                }
             }
-        }
-        _ => {
-            if let Some(token) = nonfinite_token(value) {
-                out.push(Problem::new(path, format!("is {token}"), "a finite number"));
+            _ => {
+                if let Some(token) = nonfinite_token(value) {
+                    out.push(Problem::new(
+                        path.as_str(),
+                        format!("is {token}"),
+                        "a finite number",
+                    ));
+                }
             }
         }
     }
+    walk(value, &mut path.to_owned(), out);
 }
 
 /// Validates `value` against a generated JSON Schema (`root`), appending problems to `out`.
 pub fn validate_against(root: &Value, value: &Value, path: &str, out: &mut Vec<Problem>) {
-    Walker { root }.walk(root, value, path, out);
+    Walker { root }.walk(root, value, &mut path.to_owned(), out);
 }
 
 struct Walker<'a> {
@@ -214,7 +247,7 @@ impl<'a> Walker<'a> {
         schema
     }
 
-    fn walk(&self, schema: &'a Value, value: &Value, path: &str, out: &mut Vec<Problem>) {
+    fn walk(&self, schema: &'a Value, value: &Value, path: &mut String, out: &mut Vec<Problem>) {
         // Non-finite numbers are reported once, by `nonfinite_problems`.
         if nonfinite_token(value).is_some() {
             return;
@@ -224,13 +257,18 @@ impl<'a> Walker<'a> {
         let schema = match schema {
             Value::Bool(true) => return,
             Value::Bool(false) => {
-                out.push(Problem::new(path, "is not allowed here", "nothing"));
+                out.push(Problem::new(
+                    path.as_str(),
+                    "is not allowed here",
+                    "nothing",
+                ));
                 return;
             }
             Value::Object(map) => map,
             _ => return,
         };
-        let expected = expectation(schema, own_description);
+        // Made only for a problem (it formats the schema's words).
+        let expected = || expectation(schema, own_description);
 
         if let Some(branches) = schema
             .get("anyOf")
@@ -246,13 +284,17 @@ impl<'a> Walker<'a> {
         }
         if let Some(types) = schema.get("type") {
             if !type_matches(types, value) {
-                out.push(Problem::new(path, describe(value), expected));
+                out.push(Problem::new(path.as_str(), describe(value), expected()));
                 return;
             }
         }
         if let Some(constant) = schema.get("const") {
             if constant != value {
-                out.push(Problem::new(path, describe(value), constant.to_string()));
+                out.push(Problem::new(
+                    path.as_str(),
+                    describe(value),
+                    constant.to_string(),
+                ));
                 return;
             }
         }
@@ -260,7 +302,7 @@ impl<'a> Walker<'a> {
             if !options.contains(value) {
                 let list: Vec<String> = options.iter().map(Value::to_string).collect();
                 out.push(Problem::new(
-                    path,
+                    path.as_str(),
                     describe(value),
                     format!("one of {}", list.join(", ")),
                 ));
@@ -272,16 +314,16 @@ impl<'a> Walker<'a> {
             Value::Array(items) => self.walk_array(schema, items, path, own_description, out),
             Value::Number(number) => {
                 if let Some(x) = number.as_f64() {
-                    check_bounds(schema, own_description, x, path, out);
+                    check_bounds(schema, own_description, x, path.as_str(), out);
                 }
             }
             Value::String(text) => {
                 if let Some(min) = schema.get("minLength").and_then(Value::as_u64) {
                     if (text.chars().count() as u64) < min {
                         out.push(Problem::new(
-                            path,
+                            path.as_str(),
                             format!("is {} characters long", text.chars().count()),
-                            format!("at least {min} characters: {expected}"),
+                            format!("at least {min} characters: {}", expected()),
                         ));
                     }
                 }
@@ -294,8 +336,8 @@ impl<'a> Walker<'a> {
         &self,
         branches: &'a [Value],
         value: &Value,
-        path: &str,
-        expected: &str,
+        path: &mut String,
+        expected: &dyn Fn() -> String,
         out: &mut Vec<Problem>,
     ) {
         let mut attempts = Vec::with_capacity(branches.len());
@@ -330,12 +372,12 @@ impl<'a> Walker<'a> {
                 })
                 .collect();
             let expected = if forms.iter().all(String::is_empty) {
-                expected.to_owned()
+                expected()
             } else {
                 format!("one of: {}", forms.join("; or "))
             };
             out.push(Problem::new(
-                path,
+                path.as_str(),
                 format!("{} matching none of the allowed forms", describe(value)),
                 expected,
             ));
@@ -346,7 +388,7 @@ impl<'a> Walker<'a> {
         &self,
         schema: &'a Map<String, Value>,
         map: &Map<String, Value>,
-        path: &str,
+        path: &mut String,
         out: &mut Vec<Problem>,
     ) {
         let properties = schema.get("properties").and_then(Value::as_object);
@@ -375,9 +417,9 @@ impl<'a> Walker<'a> {
             }
         }
         for (key, item) in map {
-            let item_path = path_key(path, key);
+            let len = push_key(path, key);
             if let Some(property) = properties.and_then(|p| p.get(key)) {
-                self.walk(property, item, &item_path, out);
+                self.walk(property, item, path, out);
             } else {
                 match schema.get("additionalProperties") {
                     Some(Value::Bool(false)) => {
@@ -385,15 +427,16 @@ impl<'a> Walker<'a> {
                             .map(|p| p.keys().map(String::as_str).collect())
                             .unwrap_or_default();
                         out.push(Problem::new(
-                            item_path,
+                            path.as_str(),
                             format!("unknown key \"{key}\""),
                             format!("only the keys {}", known.join(", ")),
                         ));
                     }
-                    Some(extra @ Value::Object(_)) => self.walk(extra, item, &item_path, out),
+                    Some(extra @ Value::Object(_)) => self.walk(extra, item, path, out),
                     _ => {}
                 }
             }
+            path.truncate(len);
         }
     }
 
@@ -401,7 +444,7 @@ impl<'a> Walker<'a> {
         &self,
         schema: &'a Map<String, Value>,
         items: &[Value],
-        path: &str,
+        path: &mut String,
         description: Option<&str>,
         out: &mut Vec<Problem>,
     ) {
@@ -421,7 +464,11 @@ impl<'a> Walker<'a> {
                 Some(description) => format!("{wanted}: {description}"),
                 None => wanted,
             };
-            out.push(Problem::new(path, format!("has {count} items"), wanted));
+            out.push(Problem::new(
+                path.as_str(),
+                format!("has {count} items"),
+                wanted,
+            ));
         }
         let prefix = schema.get("prefixItems").and_then(Value::as_array);
         for (i, item) in items.iter().enumerate() {
@@ -429,7 +476,9 @@ impl<'a> Walker<'a> {
                 .and_then(|p| p.get(i))
                 .or_else(|| schema.get("items"));
             if let Some(item_schema) = item_schema {
-                self.walk(item_schema, item, &format!("{path}[{i}]"), out);
+                let len = push_index(path, i);
+                self.walk(item_schema, item, path, out);
+                path.truncate(len);
             }
         }
     }

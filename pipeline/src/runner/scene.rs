@@ -17,7 +17,9 @@ use super::core::{
     RunOptions, Scene, StageContext, RUN_DIR,
 };
 use crate::exit::UsageError;
-use crate::fsio::{sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic, DigestCache};
+use crate::fsio::{
+    sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic, write_if_changed, DigestCache,
+};
 use crate::progress::Tick;
 
 /// The files a stage produced for one scene, written by the runner only if the scene succeeds.
@@ -492,11 +494,19 @@ fn write_outputs(
     previous: Option<&RunMarker>,
 ) -> anyhow::Result<(BTreeMap<String, String>, Vec<String>)> {
     let mut written = BTreeMap::new();
+    // Dead writers' temporary files are swept once per output folder (one listing), not once
+    // per file.
+    let mut swept = std::collections::BTreeSet::new();
     for (rel, bytes) in &output.files {
         check_output_path(rel)?;
         let path = scene.path(rel);
-        sweep_tmp_for(&path).with_context(|| format!("{}: sweeping", path.display()))?;
-        write_atomic(&path, bytes).with_context(|| format!("{}: cannot write", path.display()))?;
+        if let Some(dir) = path.parent() {
+            if swept.insert(dir.to_owned()) {
+                sweep_dead_tmp_in(dir).with_context(|| format!("{}: sweeping", dir.display()))?;
+            }
+        }
+        write_if_changed(&path, bytes)
+            .with_context(|| format!("{}: cannot write", path.display()))?;
         written.insert(scene.rel(rel), sha256_hex(bytes));
     }
     // Outputs of an earlier run that this run no longer writes would be stale: removed, and
@@ -598,7 +608,7 @@ fn fail(
 /// type (10,000 scenes: 2.6 ms a scene of runner cost, most of it listing).
 fn write_marker(path: &Path, marker: &RunMarker) -> std::io::Result<()> {
     let bytes = to_sorted_pretty(marker).map_err(std::io::Error::other)?;
-    write_atomic(path, &bytes)
+    write_if_changed(path, &bytes).map(drop)
 }
 
 /// Sweeps the marker folders of `scenes` (each once) of dead writers' temporary files.
