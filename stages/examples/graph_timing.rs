@@ -1,0 +1,123 @@
+//! Times scene-graph extraction in process over every scene of a dataset, the mesa side of
+//! `bench/compare_graph.py`: each scene's layout (the first present of `qa/layout.json`,
+//! `refined/layout.json`) is read and its container flags decided first, as the `graph` stage
+//! does (asset annotations, else the keyword rule); then `extract_graph` and `to_text` over all
+//! scenes are timed, one warm-up pass and `--repeat` timed passes, on one thread. Prints JSON:
+//! the seconds per scene of each pass, their min and median.
+//!
+//! `cargo run --release -p mesa-stages --example graph_timing -- DATASET [--repeat 5]`
+
+use std::error::Error;
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use mesa_stages::annotations::Annotations;
+use mesa_stages::graph::{
+    annotated_containers, extract_graph, read_layout_text, GraphError, GraphOptions, GraphScene,
+};
+use mesa_stages::paths::dataset::{ANNOTATIONS, SCENES};
+use mesa_stages::paths::scene::LAYOUT_CANDIDATES;
+
+const USAGE: &str = "usage: graph_timing DATASET [--repeat N]";
+
+/// The sub-folders of `path`, hidden ones left out, sorted (as mesa lists scenes).
+fn sorted_dirs(path: &Path) -> Result<Vec<PathBuf>, Box<dyn Error>> {
+    let mut dirs = Vec::new();
+    for entry in std::fs::read_dir(path).map_err(|e| format!("{}: {e}", path.display()))? {
+        let path = entry?.path();
+        let hidden = path
+            .file_name()
+            .is_some_and(|name| name.to_string_lossy().starts_with('.'));
+        if path.is_dir() && !hidden {
+            dirs.push(path);
+        }
+    }
+    dirs.sort();
+    Ok(dirs)
+}
+
+/// Every scene's graph input: the scene and its container flags.
+fn read_scenes(dataset: &Path) -> Result<Vec<(GraphScene, Vec<bool>)>, Box<dyn Error>> {
+    let annotations_path = dataset.join(ANNOTATIONS);
+    let annotations = if annotations_path.exists() {
+        Some(Annotations::read(&annotations_path)?)
+    } else {
+        None
+    };
+    let options = GraphOptions::default();
+    let mut scenes = Vec::new();
+    for table in sorted_dirs(&dataset.join(SCENES))? {
+        for scene in sorted_dirs(&table)? {
+            let Some(path) = LAYOUT_CANDIDATES
+                .iter()
+                .map(|rel| scene.join(rel))
+                .find(|p| p.is_file())
+            else {
+                continue;
+            };
+            let text =
+                std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+            let loaded = read_layout_text(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+            let containers = annotated_containers(
+                &loaded.scene,
+                &loaded.retrieved_uids,
+                annotations.as_ref(),
+                &options,
+            );
+            scenes.push((loaded.scene, containers.flags));
+        }
+    }
+    if scenes.is_empty() {
+        return Err(format!("{}: no scene with a layout", dataset.display()).into());
+    }
+    Ok(scenes)
+}
+
+/// One pass over every scene: the seconds per scene.
+fn pass(scenes: &[(GraphScene, Vec<bool>)], options: &GraphOptions) -> Result<f64, GraphError> {
+    let started = Instant::now();
+    for (scene, flags) in scenes {
+        let graph = extract_graph(black_box(scene), flags, options)?;
+        black_box(graph.to_text());
+    }
+    Ok(started.elapsed().as_secs_f64() / scenes.len() as f64)
+}
+
+fn main() -> Result<(), Box<dyn Error>> {
+    let mut args = std::env::args().skip(1);
+    let mut dataset: Option<PathBuf> = None;
+    let mut repeat = 5usize;
+    while let Some(arg) = args.next() {
+        if arg == "--repeat" {
+            repeat = args.next().and_then(|v| v.parse().ok()).ok_or(USAGE)?;
+        } else {
+            dataset = Some(PathBuf::from(arg));
+        }
+    }
+    let dataset = dataset.ok_or(USAGE)?;
+    let repeat = repeat.max(1);
+
+    let scenes = read_scenes(&dataset)?;
+    let options = GraphOptions::default();
+    pass(&scenes, &options)?; // warm-up
+    let runs = (0..repeat)
+        .map(|_| pass(&scenes, &options))
+        .collect::<Result<Vec<f64>, _>>()?;
+    let mut sorted = runs.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = if repeat % 2 == 1 {
+        sorted[repeat / 2]
+    } else {
+        (sorted[repeat / 2 - 1] + sorted[repeat / 2]) / 2.0
+    };
+    let report = serde_json::json!({
+        "scenes": scenes.len(),
+        "repeat": repeat,
+        "min_s_per_scene": sorted[0],
+        "median_s_per_scene": median,
+        "runs_s_per_scene": runs,
+    });
+    println!("{report}");
+    Ok(())
+}
