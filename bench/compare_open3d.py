@@ -9,8 +9,14 @@ RANSAC table plane (`segment_plane`), and per instance `select_by_index`,
 single-threaded (OMP_NUM_THREADS=1); mesa runs with --jobs 1 over copies of the scene, so its
 process start-up is amortised but counted.
 
+With `--m2t2 FRAME` (a folder of the M2T2 real-world sample data, e.g.
+../shared/realdata/rgbd/m2t2_real/00: depth.npy in metres, rgb.png, seg.png, meta.json), the
+input is that real 1280x720 frame instead: its label image with the robot's and unlisted labels
+set to background, the table labelled as the support, as `stages/tests/lift_real.rs` reads it.
+
     pip install open3d numpy pillow
-    python bench/compare_open3d.py [--copies 20] [--repeat 5] (both sides: best and median of the runs)
+    python bench/compare_open3d.py [--copies 20] [--repeat 5] [--m2t2 FRAME]
+    (both sides: best and median of the runs)
 """
 import argparse, json, os, shutil, statistics, subprocess, sys, tempfile, time
 from pathlib import Path
@@ -30,12 +36,17 @@ def cargo(*args):
 def open3d_lift(input_dir: Path):
     camera = json.loads((input_dir / "camera.json").read_text())
     instances = json.loads((input_dir / "instances.json").read_text())["instances"]
-    depth = o3d.io.read_image(str(input_dir / "depth.png"))
+    if (input_dir / "depth.npy").exists():
+        depth = o3d.geometry.Image(np.load(input_dir / "depth.npy").astype(np.float32))
+        scale = 1.0
+    else:
+        depth = o3d.io.read_image(str(input_dir / "depth.png"))
+        scale = 1000.0
     labels = np.asarray(Image.open(input_dir / "masks.png"))
     _photo = o3d.io.read_image(str(input_dir / "image.png"))
     intrinsic = o3d.camera.PinholeCameraIntrinsic(
         camera["width"], camera["height"], camera["fx"], camera["fy"], camera["cx"], camera["cy"])
-    cloud = o3d.geometry.PointCloud.create_from_depth_image(depth, intrinsic, depth_scale=1000.0, depth_trunc=100.0)
+    cloud = o3d.geometry.PointCloud.create_from_depth_image(depth, intrinsic, depth_scale=scale, depth_trunc=100.0)
     valid = np.asarray(depth).reshape(-1) > 0
     index_of_pixel = np.cumsum(valid) - 1
     flat = labels.reshape(-1)
@@ -51,17 +62,48 @@ def open3d_lift(input_dir: Path):
     return boxes
 
 
+def m2t2_input(frame: Path, out: Path):
+    """A mesa scene input from an M2T2 real frame (as stages/tests/lift_real.rs builds it)."""
+    out.mkdir(parents=True)
+    meta = json.loads((frame / "meta.json").read_text())
+    labels = np.asarray(Image.open(frame / "seg.png").convert("L"))
+    present = set(np.unique(labels).tolist())
+    instances = []
+    for name, label in meta["label_map"].items():
+        if label == 0 or label not in present or name == "robot":
+            continue
+        instances.append({"id": label, "label": "table" if name == "table" else "object",
+                          "support": name == "table"})
+    listed = [i["id"] for i in instances]
+    relabelled = np.where(np.isin(labels, listed), labels, 0).astype(np.uint8)
+    Image.fromarray(relabelled).save(out / "masks.png")
+    shutil.copy(frame / "depth.npy", out / "depth.npy")
+    shutil.copy(frame / "rgb.png", out / "image.png")
+    k = meta["intrinsics"]
+    height, width = labels.shape
+    (out / "camera.json").write_text(json.dumps(
+        {"width": width, "height": height, "fx": k[0][0], "fy": k[1][1], "cx": k[0][2], "cy": k[1][2]}))
+    (out / "instances.json").write_text(json.dumps({"instances": instances}))
+    return width, height, len(instances) - 1
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--copies", type=int, default=20, help="scenes in the mesa dataset")
     parser.add_argument("--repeat", type=int, default=5, help="Open3D repetitions")
     parser.add_argument("--mesa", default=str(ROOT / "target/release/mesa"))
+    parser.add_argument("--m2t2", help="an M2T2 real frame folder to use as the input")
     args = parser.parse_args()
     cargo("build", "--release", "-p", "mesa-pipeline")
     with tempfile.TemporaryDirectory() as tmp:
         dataset = Path(tmp) / "dataset"
         first = dataset / "scenes/office_table/office_table_0000/input"
-        cargo("run", "--release", "-q", "-p", "mesa-stages", "--example", "synthetic_scene", "--", str(first))
+        if args.m2t2:
+            width, height, objects = m2t2_input(Path(args.m2t2), first)
+            what = f"real M2T2 frame {args.m2t2}: {width}x{height} depth.npy, {objects} objects + table"
+        else:
+            cargo("run", "--release", "-q", "-p", "mesa-stages", "--example", "synthetic_scene", "--", str(first))
+            what = "1024x1024 depth, 15 instances + table"
         for k in range(1, args.copies):
             shutil.copytree(first, dataset / f"scenes/office_table/office_table_{k:04d}/input")
 
@@ -85,7 +127,9 @@ def main():
         mesa_ms = 1000 * min(runs)
         mesa_median = 1000 * statistics.median(runs)
 
-    print(f"input: 1024x1024 depth, 15 instances + table; Open3D {o3d.__version__}, single-threaded")
+    load = os.getloadavg()
+    print(f"input: {what}; Open3D {o3d.__version__}, single-threaded; load average "
+          f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     print(f"open3d: {open3d_ms:8.1f} ms per scene (best of {args.repeat}; median {open3d_median:.1f})")
     print(
         f"mesa:   {mesa_ms:8.1f} ms per scene (best of {args.repeat} runs of mesa lift --jobs 1 over "

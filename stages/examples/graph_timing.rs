@@ -37,8 +37,11 @@ fn sorted_dirs(path: &Path) -> Result<Vec<PathBuf>, Box<dyn Error>> {
     Ok(dirs)
 }
 
-/// Every scene's graph input: the scene and its container flags.
-fn read_scenes(dataset: &Path) -> Result<Vec<(GraphScene, Vec<bool>)>, Box<dyn Error>> {
+/// A scene's graph input: the scene and its container flags.
+type SceneInput = (GraphScene, Vec<bool>);
+
+/// Every scene's graph input.
+fn read_scenes(dataset: &Path) -> Result<Vec<SceneInput>, Box<dyn Error>> {
     let annotations_path = dataset.join(ANNOTATIONS);
     let annotations = if annotations_path.exists() {
         Some(Annotations::read(&annotations_path)?)
