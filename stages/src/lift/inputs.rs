@@ -834,6 +834,47 @@ impl Photo {
 mod tests {
     use super::*;
 
+    /// The pixel lists of a label image the plain way: a map entry per non-zero pixel.
+    fn lists_by_pixel(labels: &[u16]) -> BTreeMap<u32, Vec<u32>> {
+        let mut out: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+        for (i, &label) in labels.iter().enumerate() {
+            if label != 0 {
+                out.entry(u32::from(label)).or_default().push(i as u32);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn label_lists_by_runs_are_the_lists_by_pixel() {
+        // Runs of every length (1 included), labels up to 65535, a label that ends the image.
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut labels = Vec::new();
+        while labels.len() < 20_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let label = match state % 5 {
+                0 => 0,
+                1 => 65_535,
+                _ => (state >> 40) as u16 % 7,
+            };
+            let run = 1 + (state >> 20) as usize % 40;
+            labels.extend(std::iter::repeat_n(label, run));
+        }
+        labels.push(3);
+        assert_eq!(label_lists(&labels), lists_by_pixel(&labels));
+        let bytes: Vec<u8> = labels.iter().map(|&l| (l % 251) as u8).collect();
+        let wide: Vec<u16> = bytes.iter().map(|&b| u16::from(b)).collect();
+        assert_eq!(label_lists(&bytes), lists_by_pixel(&wide));
+        // Control: the comparison sees a pixel moved from one label to another.
+        let mut moved = labels.clone();
+        let at = moved.iter().position(|&l| l == 3).expect("a 3");
+        moved[at] = 4;
+        assert_ne!(label_lists(&moved), lists_by_pixel(&labels));
+        assert!(label_lists::<u8>(&[]).is_empty());
+    }
+
     /// A depth.npy of `shape` with the given data bytes after numpy's own header.
     fn npy(shape: &str, data: &[u8]) -> Vec<u8> {
         let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");

@@ -1135,6 +1135,61 @@ impl WeightedQuantiles {
 mod tests {
     use super::*;
 
+    /// The weighted quantile as a sorted walk: the first value at which the weight
+    /// accumulated in value order reaches `target`.
+    fn sorted_walk(samples: &[(f64, f64)], target: f64) -> f64 {
+        let mut sorted = samples.to_vec();
+        sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut acc = 0.0;
+        for (value, weight) in &sorted {
+            acc += weight;
+            if acc >= target {
+                return *value;
+            }
+        }
+        sorted[sorted.len() - 1].0
+    }
+
+    #[test]
+    fn bucketed_quantiles_are_the_sorted_walks() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        // A table's flat marginal with noisy edges, ties, and small weights (integer weights
+        // keep the sums exact, so any order of adding gives the sorted walk's answer).
+        let mut samples: Vec<(f64, f64)> = (0..50_000)
+            .map(|_| {
+                let value: f64 = rng.random_range(-0.4..0.6);
+                let weight = f64::from(rng.random_range(1u32..20));
+                ((value * 512.0).round() / 512.0, weight)
+            })
+            .collect();
+        samples.push((-3.0, 1.0));
+        let quantiles = WeightedQuantiles::new(&samples);
+        for share in [0.0, 0.01, 0.03, 0.5, 0.97, 0.99, 1.0] {
+            let target = share * quantiles.total;
+            assert_eq!(
+                quantiles.at(target),
+                sorted_walk(&samples, target),
+                "{share}"
+            );
+        }
+        // Control: the walk in the samples' own order (unsorted) gives other answers.
+        let unsorted = |target: f64| {
+            let mut acc = 0.0;
+            samples
+                .iter()
+                .find(|s| {
+                    acc += s.1;
+                    acc >= target
+                })
+                .map_or(f64::NAN, |s| s.0)
+        };
+        let target = 0.03 * quantiles.total;
+        assert_ne!(unsorted(target), sorted_walk(&samples, target));
+        // One value: every quantile is it.
+        let one = WeightedQuantiles::new(&[(2.5, 1.0), (2.5, 3.0)]);
+        assert_eq!((one.at(0.0), one.at(4.0), one.at(9.0)), (2.5, 2.5, 2.5));
+    }
+
     #[test]
     fn erosion_removes_a_border_of_radius_pixels() {
         let (w, h) = (20, 12);
