@@ -91,9 +91,7 @@ pub fn layout_json_text(text: &str) -> Result<&str, OutputError> {
 /// Parses a model output under the paper's success rule.
 pub fn parse_model_output(text: &str) -> Result<ParsedOutput, OutputError> {
     let json = layout_json_text(text)?;
-    let value: Value = serde_json::from_str(json)
-        .and_then(|value| crate::json::check_unique_keys(json).map(|()| value))
-        .map_err(|e| OutputError::NotJson(e.to_string()))?;
+    let value = crate::json::parse_unique(json).map_err(|e| OutputError::NotJson(e.to_string()))?;
     let layout = layout_from_value(&value)?;
     let start = text.find(FINAL_ANSWER_MARKER).unwrap_or(0);
     let (reasoning, graph_lines) = split_reasoning_and_graph(&text[..start]);

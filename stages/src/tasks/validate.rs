@@ -134,8 +134,7 @@ fn tasks_reply(
         return Err(problems);
     }
     let text = strip_fence(reply.content.trim());
-    let value: Value = serde_json::from_str(text)
-        .and_then(|value| mesa_schemas::json::check_unique_keys(text).map(|()| value))
+    let value = mesa_schemas::json::parse_unique(text)
         .map_err(|e| vec![format!("the reply is not valid JSON: {e}")])?;
     let items = match &value {
         Value::Array(items) => items,
