@@ -322,8 +322,9 @@ fn clip_near(tri: [ClipVertex; 3], near: f64, out: &mut Vec<ClipVertex>) {
 trait Samples {
     /// The grid's width and height in pixels (the rasterizer clips to it).
     fn grid(&self) -> (i64, i64);
-    /// The buffer index of pixel `(x, y)`, `None` when it is not kept.
-    fn index(&self, x: i64, y: i64) -> Option<usize>;
+    /// Calls `visit(x, index)` for every kept pixel `(x, y)` with `x_lo <= x <= x_hi`, in
+    /// increasing `x`, with its buffer index.
+    fn visit_row(&self, y: i64, x_lo: i64, x_hi: i64, visit: impl FnMut(i64, usize));
     /// Whether any pixel of the box `x0..=x1 × y0..=y1` is kept (a triangle over none is
     /// skipped whole).
     fn any_in(&self, x0: i64, y0: i64, x1: i64, y1: i64) -> bool;
@@ -341,8 +342,11 @@ impl Samples for Every {
     }
 
     #[inline(always)]
-    fn index(&self, x: i64, y: i64) -> Option<usize> {
-        Some((y * self.width + x) as usize)
+    fn visit_row(&self, y: i64, x_lo: i64, x_hi: i64, mut visit: impl FnMut(i64, usize)) {
+        let row = y * self.width;
+        for x in x_lo..=x_hi {
+            visit(x, (row + x) as usize);
+        }
     }
 
     fn any_in(&self, _: i64, _: i64, _: i64, _: i64) -> bool {
@@ -362,6 +366,11 @@ pub struct SampleMask {
     height: i64,
     /// Per picture pixel, its rank among the selected pixels (`u32::MAX`: not selected).
     slot: Vec<u32>,
+    /// The runs of selected pixels of each picture row, left to right: row `y`'s are
+    /// `runs[row_runs[y]..row_runs[y + 1]]`, each `(first x, last x, rank of the first)` (the
+    /// ranks of a run are consecutive), so a triangle's span visits only selected samples.
+    runs: Vec<[u32; 3]>,
+    row_runs: Vec<u32>,
     /// Per tile of `TILE × TILE` picture pixels, whether any is selected, as a summed-area
     /// table of `(tiles_x + 1) × (tiles_y + 1)` counts (a triangle over no selected tile is
     /// skipped whole).
@@ -388,6 +397,25 @@ impl SampleMask {
             count += 1;
             marked[(p / w) / TILE as usize * tx + (p % w) / TILE as usize] = true;
         }
+        let mut runs: Vec<[u32; 3]> = Vec::new();
+        let mut row_runs = Vec::with_capacity(h + 1);
+        row_runs.push(0u32);
+        for row in slot.chunks(w.max(1)).take(h) {
+            let mut x = 0;
+            while x < w {
+                if row[x] == u32::MAX {
+                    x += 1;
+                    continue;
+                }
+                let start = x;
+                while x + 1 < w && row[x + 1] != u32::MAX {
+                    x += 1;
+                }
+                runs.push([start as u32, x as u32, row[start]]);
+                x += 1;
+            }
+            row_runs.push(runs.len() as u32);
+        }
         let mut tiles = vec![0u32; (tx + 1) * (ty + 1)];
         for y in 0..ty {
             let mut row = 0u32;
@@ -403,6 +431,8 @@ impl SampleMask {
             width: w as i64,
             height: h as i64,
             slot,
+            runs,
+            row_runs,
             tiles,
             tiles_x: tx as i64,
             selected: count as usize,
@@ -431,14 +461,30 @@ impl Samples for SampleMask {
     }
 
     #[inline(always)]
-    fn index(&self, x: i64, y: i64) -> Option<usize> {
+    fn visit_row(&self, y: i64, x_lo: i64, x_hi: i64, mut visit: impl FnMut(i64, usize)) {
         let f = self.factor;
-        let (px, py, dx, dy) = match self.shift {
-            Some(s) => (x >> s, y >> s, x & (f - 1), y & (f - 1)),
-            None => (x / f, y / f, x % f, y % f),
+        let (py, dy) = match self.shift {
+            Some(s) => (y >> s, y & (f - 1)),
+            None => (y / f, y % f),
         };
-        let k = self.slot[(py * self.width + px) as usize];
-        (k != u32::MAX).then(|| (k as i64 * f * f + dy * f + dx) as usize)
+        let row = &self.runs
+            [self.row_runs[py as usize] as usize..self.row_runs[py as usize + 1] as usize];
+        // The first run that ends at or after the span's first picture pixel.
+        let first = row.partition_point(|run| (run[1] as i64 + 1) * f <= x_lo);
+        for run in &row[first..] {
+            let (start, end) = (run[0] as i64 * f, (run[1] as i64 + 1) * f - 1);
+            if start > x_hi {
+                break;
+            }
+            let base = run[2] as i64 - run[0] as i64;
+            for x in x_lo.max(start)..=x_hi.min(end) {
+                let (px, dx) = match self.shift {
+                    Some(s) => (x >> s, x & (f - 1)),
+                    None => (x / f, x % f),
+                };
+                visit(x, ((base + px) * f * f + dy * f + dx) as usize);
+            }
+        }
     }
 
     fn any_in(&self, x0: i64, y0: i64, x1: i64, y1: i64) -> bool {
@@ -455,6 +501,54 @@ impl Samples for SampleMask {
     }
 }
 
+/// `x.floor() as i64` (saturating, NaN to 0) without a call into libm: the default x86-64
+/// target has no rounding instruction, and the rasterizer rounds a few times per row.
+#[inline(always)]
+fn floor_i64(x: f64) -> i64 {
+    let t = x as i64;
+    if (t as f64) > x {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
+}
+
+/// `x.ceil() as i64` (saturating, NaN to 0), as [`floor_i64`].
+#[inline(always)]
+fn ceil_i64(x: f64) -> i64 {
+    let t = x as i64;
+    if (t as f64) < x {
+        t.saturating_add(1)
+    } else {
+        t
+    }
+}
+
+impl Projection {
+    /// A frame point's picture coordinates and `1 / z`.
+    #[inline(always)]
+    fn project(&self, p: [f64; 3]) -> ([f64; 2], f64) {
+        let screen = match *self {
+            Projection::Perspective(cam) => {
+                [cam.fx * p[0] / p[2] + cam.cx, cam.fy * p[1] / p[2] + cam.cy]
+            }
+            Projection::Orthographic { x0, y0, texel } => {
+                [(p[0] - x0) / texel, (p[1] - y0) / texel]
+            }
+        };
+        (screen, 1.0 / p[2])
+    }
+}
+
+/// A triangle corner ready to draw: where it is (frame point and barycentrics in the mesh
+/// triangle), where it lands in the picture and `1 / z`.
+#[derive(Clone, Copy)]
+struct Corner {
+    v: ClipVertex,
+    screen: [f64; 2],
+    inv_z: f64,
+}
+
 fn rasterize_into<S: Samples>(
     buffer: &mut VisibilityBuffer,
     samples: &S,
@@ -464,51 +558,67 @@ fn rasterize_into<S: Samples>(
     only_shadow_casters: bool,
 ) {
     let (w, h) = samples.grid();
+    let perspective = matches!(projection, Projection::Perspective(_));
     let mut polygon = Vec::with_capacity(4);
+    let mut points: Vec<[f64; 3]> = Vec::new();
+    let mut projected: Vec<([f64; 2], f64)> = Vec::new();
+    const UNIT: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     for (item_index, item) in items.iter().enumerate() {
         if only_shadow_casters && !item.casts_shadow {
             continue;
         }
         let frame_from_mesh = frame_from_world.mul(&item.world_from_mesh);
-        let points: Vec<[f64; 3]> = item
-            .mesh
-            .positions
-            .iter()
-            .map(|p| frame_from_mesh.apply_point([p[0] as f64, p[1] as f64, p[2] as f64]))
-            .collect();
+        points.clear();
+        points.extend(
+            item.mesh
+                .positions
+                .iter()
+                .map(|p| frame_from_mesh.apply_point([p[0] as f64, p[1] as f64, p[2] as f64])),
+        );
+        // Each vertex projected once (a vertex is shared by about six triangles); a triangle
+        // that crosses the near plane is clipped and its new corners projected on their own.
+        projected.clear();
+        projected.extend(points.iter().map(|&p| projection.project(p)));
         for (t, tri) in item.mesh.triangles.iter().enumerate() {
-            let corners = [
-                ClipVertex {
-                    p: points[tri[0] as usize],
-                    bary: [1.0, 0.0, 0.0],
-                },
-                ClipVertex {
-                    p: points[tri[1] as usize],
-                    bary: [0.0, 1.0, 0.0],
-                },
-                ClipVertex {
-                    p: points[tri[2] as usize],
-                    bary: [0.0, 0.0, 1.0],
-                },
-            ];
-            match projection {
-                Projection::Perspective(_) => {
-                    if corners.iter().all(|c| c.p[2] < NEAR_M) {
-                        continue;
-                    }
-                    clip_near(corners, NEAR_M, &mut polygon);
+            let corner = |k: usize| {
+                let i = tri[k] as usize;
+                Corner {
+                    v: ClipVertex {
+                        p: points[i],
+                        bary: UNIT[k],
+                    },
+                    screen: projected[i].0,
+                    inv_z: projected[i].1,
                 }
-                Projection::Orthographic { .. } => {
-                    polygon.clear();
-                    polygon.extend_from_slice(&corners);
-                }
-            }
-            for k in 1..polygon.len().saturating_sub(1) {
-                let fan = [polygon[0], polygon[k], polygon[k + 1]];
+            };
+            let corners = [corner(0), corner(1), corner(2)];
+            let in_front = |c: &Corner| c.v.p[2] >= NEAR_M;
+            if !perspective || corners.iter().all(in_front) {
                 raster_triangle(
                     buffer,
                     samples,
-                    projection,
+                    perspective,
+                    &corners,
+                    item_index as u32,
+                    t as u32,
+                    w,
+                    h,
+                );
+                continue;
+            }
+            if !corners.iter().any(in_front) {
+                continue;
+            }
+            clip_near(corners.map(|c| c.v), NEAR_M, &mut polygon);
+            for k in 1..polygon.len().saturating_sub(1) {
+                let fan = [polygon[0], polygon[k], polygon[k + 1]].map(|v| {
+                    let (screen, inv_z) = projection.project(v.p);
+                    Corner { v, screen, inv_z }
+                });
+                raster_triangle(
+                    buffer,
+                    samples,
+                    perspective,
                     &fan,
                     item_index as u32,
                     t as u32,
@@ -524,22 +634,15 @@ fn rasterize_into<S: Samples>(
 fn raster_triangle<S: Samples>(
     buffer: &mut VisibilityBuffer,
     samples: &S,
-    projection: Projection,
-    v: &[ClipVertex; 3],
+    perspective: bool,
+    corners: &[Corner; 3],
     item: u32,
     triangle: u32,
     w: i64,
     h: i64,
 ) {
-    let screen: [[f64; 2]; 3] = std::array::from_fn(|i| match projection {
-        Projection::Perspective(cam) => [
-            cam.fx * v[i].p[0] / v[i].p[2] + cam.cx,
-            cam.fy * v[i].p[1] / v[i].p[2] + cam.cy,
-        ],
-        Projection::Orthographic { x0, y0, texel } => {
-            [(v[i].p[0] - x0) / texel, (v[i].p[1] - y0) / texel]
-        }
-    });
+    let screen: [[f64; 2]; 3] = corners.map(|c| c.screen);
+    let v: [ClipVertex; 3] = corners.map(|c| c.v);
     let area = (screen[1][0] - screen[0][0]) * (screen[2][1] - screen[0][1])
         - (screen[1][1] - screen[0][1]) * (screen[2][0] - screen[0][0]);
     if area.abs() < 1e-12 || !area.is_finite() {
@@ -555,16 +658,15 @@ fn raster_triangle<S: Samples>(
         .iter()
         .map(|s| s[1])
         .fold(f64::NEG_INFINITY, f64::max);
-    let x_start = (min_x.ceil() as i64).max(0);
-    let x_end = (max_x.floor() as i64).min(w - 1);
-    let y_start = (min_y.ceil() as i64).max(0);
-    let y_end = (max_y.floor() as i64).min(h - 1);
+    let x_start = ceil_i64(min_x).max(0);
+    let x_end = floor_i64(max_x).min(w - 1);
+    let y_start = ceil_i64(min_y).max(0);
+    let y_end = floor_i64(max_y).min(h - 1);
     if x_start > x_end || y_start > y_end || !samples.any_in(x_start, y_start, x_end, y_end) {
         return;
     }
     let inv_area = 1.0 / area;
-    let perspective = matches!(projection, Projection::Perspective(_));
-    let inv_z: [f64; 3] = std::array::from_fn(|i| 1.0 / v[i].p[2]);
+    let inv_z: [f64; 3] = corners.map(|c| c.inv_z);
     // Barycentric l_k(x, y) = (a_k x + b_k y + c_k) / area for the edge opposite corner k.
     let coefficients = |p: [f64; 2], q: [f64; 2]| {
         let a = -(q[1] - p[1]) * inv_area;
@@ -577,7 +679,17 @@ fn raster_triangle<S: Samples>(
         coefficients(screen[2], screen[0]),
         coefficients(screen[0], screen[1]),
     ];
+    // Per edge, -1 / a: each row's span bound is a product, not a division (the span is only
+    // a guess with a pixel of slack; the exact test decides).
+    let minus_inv_a = edges.map(|(a, _, _)| if a != 0.0 { -1.0 / a } else { 0.0 });
     let with_attributes = !buffer.item.is_empty();
+    let VisibilityBuffer {
+        depth_m,
+        item: items,
+        triangle: triangles,
+        barycentric: barycentrics,
+        ..
+    } = buffer;
     for y in y_start..=y_end {
         let py = y as f64;
         // The span of x where every barycentric is non-negative.
@@ -588,9 +700,9 @@ fn raster_triangle<S: Samples>(
             let offset = b * py + c;
             row[k] = (a, offset);
             if a > 0.0 {
-                lo = lo.max(-offset / a);
+                lo = lo.max(offset * minus_inv_a[k]);
             } else if a < 0.0 {
-                hi = hi.min(-offset / a);
+                hi = hi.min(offset * minus_inv_a[k]);
             } else if offset < 0.0 {
                 empty = true;
             }
@@ -599,45 +711,49 @@ fn raster_triangle<S: Samples>(
             continue;
         }
         // One pixel of slack each side; the exact test below decides.
-        let x_lo = ((lo.ceil() as i64) - 1).max(x_start);
-        let x_hi = ((hi.floor() as i64) + 1).min(x_end);
-        for x in x_lo..=x_hi {
-            let Some(o) = samples.index(x, y) else {
-                continue;
-            };
+        let x_lo = (ceil_i64(lo) - 1).max(x_start);
+        let x_hi = (floor_i64(hi) + 1).min(x_end);
+        samples.visit_row(y, x_lo, x_hi, |x, o| {
             let px = x as f64;
             let l0 = row[0].0 * px + row[0].1;
             let l1 = row[1].0 * px + row[1].1;
             let l2 = row[2].0 * px + row[2].1;
             if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
-                continue;
+                return;
             }
-            let (depth, mu) = if perspective {
+            // Perspective: the corners' weights over their depths, whose sum is 1 / depth.
+            let (depth, q, sum) = if perspective {
                 let q = [l0 * inv_z[0], l1 * inv_z[1], l2 * inv_z[2]];
                 let sum = q[0] + q[1] + q[2];
                 if sum <= 0.0 {
-                    continue;
+                    return;
                 }
-                (1.0 / sum, [q[0] / sum, q[1] / sum, q[2] / sum])
+                (1.0 / sum, q, sum)
             } else {
                 (
                     l0 * v[0].p[2] + l1 * v[1].p[2] + l2 * v[2].p[2],
                     [l0, l1, l2],
+                    1.0,
                 )
             };
             let depth32 = depth as f32;
-            if depth32 < buffer.depth_m[o] {
-                buffer.depth_m[o] = depth32;
+            if depth32 < depth_m[o] {
+                depth_m[o] = depth32;
                 if with_attributes {
-                    buffer.item[o] = item;
-                    buffer.triangle[o] = triangle;
+                    let mu = if perspective {
+                        [q[0] / sum, q[1] / sum, q[2] / sum]
+                    } else {
+                        q
+                    };
+                    items[o] = item;
+                    triangles[o] = triangle;
                     let b: [f64; 3] = std::array::from_fn(|k| {
                         mu[0] * v[0].bary[k] + mu[1] * v[1].bary[k] + mu[2] * v[2].bary[k]
                     });
-                    buffer.barycentric[o] = [b[1] as f32, b[2] as f32];
+                    barycentrics[o] = [b[1] as f32, b[2] as f32];
                 }
             }
-        }
+        });
     }
 }
 
@@ -776,7 +892,7 @@ impl ShadowMap {
         let sx = (q[0] - self.x0) / self.texel - 0.5;
         let sy = (q[1] - self.y0) / self.texel - 0.5;
         let size = self.buffer.width as i64;
-        let (x0, y0) = (sx.floor() as i64, sy.floor() as i64);
+        let (x0, y0) = (floor_i64(sx), floor_i64(sy));
         if x0 < 0 || y0 < 0 || x0 + 1 >= size || y0 + 1 >= size {
             return 1.0;
         }
@@ -857,6 +973,10 @@ pub struct Shader<'s, 'a> {
     shadow: Option<Cow<'s, ShadowMap>>,
     shadow_light: Option<usize>,
     camera_center_world: [f64; 3],
+    /// Per light, its direction normalised (once, not per pixel).
+    toward_lights: Vec<[f64; 3]>,
+    /// Per item, its Blinn-Phong exponent and specular strength (from the roughness).
+    specular: Vec<(f32, f32)>,
 }
 
 impl<'s, 'a> Shader<'s, 'a> {
@@ -919,6 +1039,16 @@ impl<'s, 'a> Shader<'s, 'a> {
                 (positions, normals)
             })
             .collect();
+        let specular = items
+            .iter()
+            .map(|item| {
+                let roughness = item.material.roughness;
+                (
+                    (2.0 / roughness.clamp(0.05, 1.0).powi(4) - 2.0).clamp(1.0, 4096.0),
+                    0.35 * (1.0 - roughness.clamp(0.0, 1.0)).powi(2),
+                )
+            })
+            .collect();
         Self {
             items,
             lighting,
@@ -926,6 +1056,12 @@ impl<'s, 'a> Shader<'s, 'a> {
             shadow,
             shadow_light,
             camera_center_world,
+            toward_lights: lighting
+                .lights
+                .iter()
+                .map(|l| normalize3(l.toward_light_world))
+                .collect(),
+            specular,
         }
     }
 
@@ -975,12 +1111,8 @@ impl<'s, 'a> Shader<'s, 'a> {
         let mut color: [f32; 3] = std::array::from_fn(|k| {
             albedo[k] * (lighting.sky_color[k] * hemi + lighting.ground_color[k] * (1.0 - hemi))
         });
-        // Blinn-Phong exponent from roughness.
-        let shininess =
-            (2.0 / material.roughness.clamp(0.05, 1.0).powi(4) - 2.0).clamp(1.0, 4096.0);
-        let specular_strength = 0.35 * (1.0 - material.roughness.clamp(0.0, 1.0)).powi(2);
-        for (li, light) in lighting.lights.iter().enumerate() {
-            let l = normalize3(light.toward_light_world);
+        let (shininess, specular_strength) = self.specular[item_index as usize];
+        for (li, (light, &l)) in lighting.lights.iter().zip(&self.toward_lights).enumerate() {
             let ndotl = dot3(n, l).max(0.0) as f32;
             if ndotl <= 0.0 {
                 continue;
@@ -1243,6 +1375,64 @@ mod tests {
             lum(left),
             lum(right)
         );
+    }
+
+    /// The rasterizer's own rounding is `f64::floor` / `f64::ceil` then `as i64` (which
+    /// saturates and maps NaN to 0) for every input: integers, halves, values beside
+    /// integers, huge values, infinities, NaN, and random ones. Control: plain truncation
+    /// (what `as i64` alone does) differs on negative fractions.
+    #[test]
+    fn rounding_to_integers_matches_the_standard_library() {
+        let mut values = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2.5,
+            -2.5,
+            1e-300,
+            -1e-300,
+            4503599627370495.5,
+            -4503599627370495.5,
+            9.2e18,
+            -9.2e18,
+            9.3e18,
+            -9.3e18,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            f64::MAX,
+            f64::MIN,
+        ];
+        for k in -70..70 {
+            let x = k as f64 * 0.37;
+            values.extend([
+                x,
+                x.next_up(),
+                x.next_down(),
+                x.round().next_up(),
+                x.round().next_down(),
+            ]);
+        }
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        for _ in 0..10_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            values.push(f64::from_bits(state));
+            values.push((state % 1_000_000) as f64 / 997.0 - 500.0);
+        }
+        for &x in &values {
+            assert_eq!(floor_i64(x), x.floor() as i64, "floor {x:e}");
+            assert_eq!(ceil_i64(x), x.ceil() as i64, "ceil {x:e}");
+        }
+        // The inputs tell truncation from flooring and from ceiling.
+        assert!(values.iter().any(|&x| x as i64 != x.floor() as i64));
+        assert!(values.iter().any(|&x| x as i64 != x.ceil() as i64));
     }
 
     #[test]

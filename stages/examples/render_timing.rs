@@ -1,0 +1,129 @@
+//! Times the parts of one rendered view (the render bench's scene: the front view of
+//! `dressing_table_0001` of `mesa demo --seed 7`, 15 objects, 512×512, 2×2 samples at
+//! silhouettes): the shadow map, the centre and first-sample visibility passes, the whole
+//! picture with the shadow map built beforehand, and the PNG. Prints the minimum over
+//! `--repeat` runs of each part, milliseconds, on one thread. A profiling aid: the figures
+//! the docs quote come from the criterion bench (`stages/benches/render.rs`).
+//!
+//! `cargo run --release -p mesa-stages --example render_timing -- [--repeat 20]`
+
+use std::collections::BTreeMap;
+use std::error::Error;
+use std::hint::black_box;
+use std::time::Instant;
+
+use mesa_schemas::DatasetLayout;
+use mesa_stages::demo::{write_demo, DemoOptions};
+use mesa_stages::mesh::Affine3;
+use mesa_stages::raster::{visibility, ShadowMap};
+use mesa_stages::render::{
+    camera, draw_items, load_render_asset, place_layout, render_picture_shadowed, LayoutScene,
+    RenderConfig, SceneView,
+};
+
+fn min_ms(repeat: usize, mut f: impl FnMut()) -> f64 {
+    (0..repeat)
+        .map(|_| {
+            let start = Instant::now();
+            f();
+            start.elapsed().as_secs_f64() * 1e3
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn main() -> Result<(), Box<dyn Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let repeat = match args.as_slice() {
+        [] => 20,
+        [flag, n] if flag == "--repeat" => n.parse()?,
+        _ => return Err("usage: render_timing [--repeat N]".into()),
+    };
+    let dir = tempfile::tempdir()?;
+    write_demo(
+        dir.path(),
+        &DemoOptions::default().with_scenes(5).with_seed(7),
+    )?;
+    let scene = dir
+        .path()
+        .join("scenes/dressing_table/dressing_table_0001/truth/layout.json");
+    let layout: DatasetLayout = serde_json::from_str(&std::fs::read_to_string(scene)?)?;
+    let config = RenderConfig::default();
+    let mut assets = BTreeMap::new();
+    for object in &layout.objects {
+        let uid = &object.retrieved_uid;
+        if !assets.contains_key(uid) {
+            let path = dir.path().join(format!("assets/library/{uid}.glb"));
+            let asset = load_render_asset(&std::fs::read(path)?, 0.0, config.max_texture_px)?;
+            assets.insert(uid.clone(), asset);
+        }
+    }
+    let (placed, _) = place_layout(&layout, |uid| Ok(&assets[uid]))?;
+    let scene = LayoutScene::new(&layout, &placed, &config);
+    let items = draw_items(&placed, Some(&scene.table));
+    let view = camera::scene_camera(
+        SceneView::Front,
+        &scene.frame,
+        config.width_px,
+        config.height_px,
+        config.fov_x_deg,
+        config.distance_factor,
+    );
+    let camera_from_table = view
+        .table_from_camera
+        .inverse()
+        .unwrap_or(Affine3::IDENTITY);
+    let shadow = ShadowMap::of_lighting(&scene.lighting, &items);
+    let picture = render_picture_shadowed(
+        &items,
+        &view,
+        &scene.lighting,
+        config.supersampling,
+        shadow.as_ref(),
+    );
+    let parts = [
+        (
+            "shadow_map",
+            min_ms(repeat, || {
+                black_box(ShadowMap::of_lighting(&scene.lighting, &items));
+            }),
+        ),
+        (
+            "visibility_pass",
+            min_ms(repeat, || {
+                black_box(visibility(&view.intrinsics, &camera_from_table, &items));
+            }),
+        ),
+        (
+            "picture_without_shadow_map",
+            min_ms(repeat, || {
+                black_box(render_picture_shadowed(
+                    &items,
+                    &view,
+                    &scene.lighting,
+                    config.supersampling,
+                    shadow.as_ref(),
+                ));
+            }),
+        ),
+        (
+            "png",
+            min_ms(repeat, || {
+                black_box(picture.png(config.background).expect("png"));
+            }),
+        ),
+        (
+            "view_with_shadow_map",
+            min_ms(repeat, || {
+                black_box(
+                    LayoutScene::new(&layout, &placed, &config)
+                        .render_view(SceneView::Front, &config)
+                        .expect("render"),
+                );
+            }),
+        ),
+    ];
+    for (name, ms) in parts {
+        println!("{name:>28}: {ms:8.3} ms");
+    }
+    Ok(())
+}
