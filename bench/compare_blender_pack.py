@@ -10,13 +10,16 @@ steps with bpy (Blender 4.3, the version MesaTask pins) for the bench scene of
 first 15 objects. Draco compression, which MesaTask turns on, is off: the bpy wheel has no
 Draco library (and mesa packs without Draco too).
 
-mesa's figure is criterion's: run `cargo bench -p mesa-stages --bench pack` first; the script
-reads `<target>/criterion/pack/pack_15_objects/new/estimates.json` and prints the ratio.
+mesa is timed the same way, by `stages/examples/pack_timing.rs` (`pack_scene` on the same scene,
+the assets' GLBs in memory, snapshots and README included): one warm-up run, then `--repeat`
+runs timed one by one on one thread. Both sides print their min and median, and the ratio of
+each, with the load average and the CPU.
 
 Needs a Python with bpy 4.3 and numpy<2: the one scripts/test.sh installs into .venv-blender
 (`python3 -m venv .venv-blender && .venv-blender/bin/pip install "bpy==4.3.0" "numpy<2"`):
     .venv-blender/bin/python bench/compare_blender_pack.py [--repeat 5] [--target DIR]
-(`--target` is the cargo target directory, default target/ or $CARGO_TARGET_DIR.)
+(`--target` is the cargo target directory, default target/ or $CARGO_TARGET_DIR; the script
+builds mesa and the example in release mode.)
 """
 import argparse
 import json
@@ -101,8 +104,11 @@ def main():
     args = parser.parse_args()
     target = Path(args.target)
     mesa = target / "release/mesa"
-    if not mesa.exists():
-        subprocess.run(["cargo", "build", "--release"], cwd=ROOT, check=True)
+    env = dict(os.environ, CARGO_TARGET_DIR=str(target))
+    subprocess.run(["cargo", "build", "--release", "-q"], cwd=ROOT, check=True, env=env)
+    subprocess.run(["cargo", "build", "--release", "-q", "-p", "mesa-stages", "--example",
+                    "pack_timing"], cwd=ROOT, check=True, env=env)
+    load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         subprocess.run([str(mesa), "demo", str(work / "demo"), "--scenes", "20", "--seed", "7", "-q"],
@@ -111,23 +117,29 @@ def main():
         layout["objects"] = layout["objects"][:15]
         library = work / "demo/assets/library"
         assets = len({o["retrieved_uid"] for o in layout["objects"]})
+        # A warm-up run, as on mesa's side.
+        reconstruct(layout, library, work / "scene.glb")
         times = []
         for _ in range(args.repeat):
             start = time.perf_counter()
             reconstruct(layout, library, work / "scene.glb")
             times.append(time.perf_counter() - start)
         size = (work / "scene.glb").stat().st_size
-    blender = statistics.median(times)
+    mesa_out = subprocess.run([str(target / "release/examples/pack_timing"), "--repeat",
+                               str(args.repeat)], check=True, capture_output=True, text=True)
+    mesa_times = json.loads(mesa_out.stdout.strip().splitlines()[-1])["runs_s"]
+    load_after = os.getloadavg()[0]
+    cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo")
+                if line.startswith("model name")), "unknown CPU")
+    print(f"{cpu}, {os.cpu_count()} CPUs, load average {load_before:.2f} before, "
+          f"{load_after:.2f} after; {args.repeat} timed runs a side after one warm-up")
     print(f"Blender (bpy {bpy.app.version_string}), MesaTask's reconstruction, 15 objects "
-          f"({assets} assets): median {blender * 1000:.0f} ms over {args.repeat} runs "
-          f"(min {min(times) * 1000:.0f} ms), GLB {size / 1e6:.2f} MB")
-    estimates = target / "criterion/pack/pack_15_objects/new/estimates.json"
-    if estimates.exists():
-        mean_ns = json.loads(estimates.read_text())["mean"]["point_estimate"]
-        print(f"mesa pack (criterion mean, snapshots and README included): {mean_ns / 1e6:.2f} ms: "
-              f"{blender / (mean_ns / 1e9):.0f}x faster")
-    else:
-        print(f"no criterion figure at {estimates}: run `cargo bench -p mesa-stages --bench pack`")
+          f"({assets} assets), GLB {size / 1e6:.2f} MB: min {min(times) * 1000:.1f} ms, "
+          f"median {statistics.median(times) * 1000:.1f} ms")
+    print(f"mesa pack_scene, 15 objects, snapshots and README included: "
+          f"min {min(mesa_times) * 1000:.2f} ms, median {statistics.median(mesa_times) * 1000:.2f} ms")
+    print(f"ratio (Blender / mesa): {min(times) / min(mesa_times):.0f}x on the minima, "
+          f"{statistics.median(times) / statistics.median(mesa_times):.0f}x on the medians")
     sys.stdout.flush()
     os._exit(0)
 

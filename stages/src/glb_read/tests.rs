@@ -741,3 +741,112 @@ fn a_zero_quaternion_is_named_as_such() {
     );
     assert!(!e.contains("non-finite"), "{e}");
 }
+
+/// The old path of `parse_root`: every document through a `Value`, the version checked there.
+fn root_through_a_value(bytes: &[u8]) -> Result<Root, GlbError> {
+    let mut warnings = Vec::new();
+    let chunks = container::split(bytes, &mut warnings)?;
+    let end = chunks
+        .json
+        .iter()
+        .rposition(|b| !matches!(b, b' ' | b'\t' | b'\r' | b'\n' | 0))
+        .map_or(0, |i| i + 1);
+    let value: Value = serde_json::from_slice(&chunks.json[..end]).map_err(|e| GlbError::Json {
+        problem: e.to_string(),
+    })?;
+    serde_json::from_value(value).map_err(|e| GlbError::Json {
+        problem: e.to_string(),
+    })
+}
+
+/// `parse_root` reads a glTF 2.0 document straight into its types: the same root as through a
+/// `Value`, for real files of other tools (../shared/realdata: Khronos samples, Draco,
+/// meshopt, textures, vertex colours, a hierarchy) and the rich fixture; a repeated key, which
+/// the typed read refuses, still reads as before (its last value); other versions are still
+/// named. Control: a document the typed read takes but whose root differs (another
+/// generator) is told apart by the comparison.
+#[test]
+fn the_document_is_read_the_same_straight_or_through_a_value() {
+    let root_of = |bytes: &[u8]| {
+        let mut warnings = Vec::new();
+        let chunks = container::split(bytes, &mut warnings).expect("chunks");
+        parse_root(chunks.json, &mut warnings)
+    };
+    let same = |bytes: &[u8], what: &str| {
+        let straight = serde_json::to_value(root_of(bytes).expect(what)).expect("json");
+        let through = serde_json::to_value(root_through_a_value(bytes).expect(what)).expect("json");
+        assert_eq!(straight, through, "{what}");
+        straight
+    };
+    for name in [
+        "2CylinderEngine.glb",
+        "AlphaBlendModeTest.glb",
+        "Box.glb",
+        "BoxBadNormals.glb",
+        "BoxInterleaved.glb",
+        "BoxMeshopt.glb",
+        "BoxTextured.glb",
+        "BoxVertexColors.glb",
+        "Box_Draco.glb",
+        "CesiumMilkTruck.glb",
+        "CornellBox.glb",
+        "Cubes.glb",
+        "Duck.glb",
+        "Faces.glb",
+        "Fox.glb",
+        "GolfBall.glb",
+        "ShapeCollection.glb",
+        "box-textured-binary-separate.glb",
+        "cakeBirthday.glb",
+        "empty_nodes.glb",
+        "laptop_blender16.glb",
+        "laptop_blender_draco.glb",
+        "monkey.glb",
+        "mug_tinkercad.glb",
+        "nested.glb",
+        "quad_skin.glb",
+        "table_tinkercad.glb",
+    ] {
+        same(&crate::shared_glb(name), name);
+    }
+
+    let rich = same(&rich_fixture(), "rich fixture");
+    // A repeated key: the last value, as through a Value.
+    let repeated = br#"{"asset": {"version": "2.0", "generator": "a", "generator": "b"}}"#;
+    assert!(serde_json::from_slice::<Root>(repeated).is_err());
+    let doubled = {
+        // The JSON chunk holding the text as written, key repeated, padded to 4 bytes.
+        let mut json = repeated.to_vec();
+        while json.len() % 4 != 0 {
+            json.push(b' ');
+        }
+        let mut out = Vec::new();
+        out.extend_from_slice(b"glTF");
+        out.extend_from_slice(&2u32.to_le_bytes());
+        out.extend_from_slice(&(12 + 8 + json.len() as u32).to_le_bytes());
+        out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(&json);
+        out
+    };
+    let root = same(&doubled, "a repeated key");
+    assert_eq!(root["asset"]["generator"], "b");
+    // Other versions.
+    let error = |document: Value| root_of(&glb(&document, &[])).expect_err("refused");
+    assert_eq!(error(json!({"asset": {"version": "1.0"}})), GlbError::Gltf1);
+    assert_eq!(
+        error(json!({"asset": {"version": "3.0"}})).code(),
+        "version"
+    );
+    assert_eq!(
+        error(json!({"asset": {"version": "2.0", "minVersion": "2.1"}})).code(),
+        "version"
+    );
+    // Control.
+    let mut other = rich.clone();
+    other["asset"]["generator"] = json!("another");
+    assert_ne!(
+        serde_json::to_value(root_of(&glb(&other, &[])).expect("reads")).expect("json"),
+        rich
+    );
+}

@@ -32,45 +32,48 @@ pub fn snapshot_png(
     margin: Margin,
 ) -> Result<Option<Vec<u8>>, ImageError> {
     let (w, h) = (photo.width, photo.height);
-    let inside: Vec<usize> = pixels
-        .iter()
-        .map(|p| *p as usize)
-        .filter(|p| *p < w * h)
-        .collect();
-    if inside.is_empty() {
-        return Ok(None);
-    }
+    let n = w * h;
+    // The mask's bounds, one division per pixel; pixels past the photo are left out.
     let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
-    for p in &inside {
-        let (u, v) = (p % w, p / w);
+    for &p in pixels {
+        let p = p as usize;
+        if p >= n {
+            continue;
+        }
+        let (v, u) = (p / w, p % w);
         u0 = u0.min(u);
         v0 = v0.min(v);
         u1 = u1.max(u);
         v1 = v1.max(v);
+    }
+    if u0 == usize::MAX {
+        return Ok(None);
     }
     let side = (u1 - u0 + 1).max(v1 - v0 + 1) as f64;
     let m = ((margin.fraction * side).round() as usize).max(margin.min_px as usize);
     let (cu0, cv0) = (u0.saturating_sub(m), v0.saturating_sub(m));
     let (cu1, cv1) = ((u1 + m).min(w - 1), (v1 + m).min(h - 1));
     let (cw, ch) = (cu1 - cu0 + 1, cv1 - cv0 + 1);
-    let mut mask = vec![false; cw * ch];
-    for p in &inside {
-        let (u, v) = (p % w, p / w);
-        if (cu0..=cu1).contains(&u) && (cv0..=cv1).contains(&v) {
-            mask[(v - cv0) * cw + (u - cu0)] = true;
-        }
-    }
-    let mut rgb = Vec::with_capacity(cw * ch * 3);
-    for v in cv0..=cv1 {
-        for u in cu0..=cu1 {
-            let px = photo.rgb[v * w + u];
-            if mask[(v - cv0) * cw + (u - cu0)] {
-                rgb.extend_from_slice(&px);
-            } else {
-                // Halfway to a mid grey: context without competing with the instance.
-                rgb.extend(px.iter().map(|c| ((u16::from(*c) + 96) / 2) as u8));
+    // The crop, every pixel dimmed halfway to a mid grey (context without competing with the
+    // instance), then the mask's pixels in their own colours.
+    let mut rgb = vec![0u8; cw * ch * 3];
+    for (v, out) in (cv0..=cv1).zip(rgb.chunks_exact_mut(cw * 3)) {
+        let row = &photo.rgb[v * w + cu0..=v * w + cu1];
+        for (px, o) in row.iter().zip(out.chunks_exact_mut(3)) {
+            for k in 0..3 {
+                o[k] = ((u16::from(px[k]) + 96) / 2) as u8;
             }
         }
+    }
+    for &p in pixels {
+        let p = p as usize;
+        if p >= n {
+            continue;
+        }
+        // Inside the bounds, hence the crop.
+        let (v, u) = (p / w, p % w);
+        let o = ((v - cv0) * cw + (u - cu0)) * 3;
+        rgb[o..o + 3].copy_from_slice(&photo.rgb[p]);
     }
     encode_rgb8(cw as u32, ch as u32, &rgb).map(Some)
 }

@@ -1,0 +1,43 @@
+//! Times `pack_scene` on the pack bench's scene (`benches/common/pack_scene.rs`: 15 objects of
+//! the demo's office_table_0003, seed 7, snapshots and README included), the mesa side of
+//! `bench/compare_blender_pack.py`: one warm-up run, then `--repeat` runs timed one by one on
+//! one thread, as the script times Blender. Prints one JSON line: the seconds of each run.
+//!
+//! `cargo run --release -p mesa-stages --example pack_timing -- [--repeat 5]`
+
+use std::error::Error;
+use std::hint::black_box;
+use std::time::Instant;
+
+use mesa_stages::pack::{pack_scene, PackConfig};
+
+#[path = "../benches/common/pack_scene.rs"]
+// Parts of it serve one of its two users only.
+#[allow(dead_code)]
+mod pack_scene;
+
+fn main() -> Result<(), Box<dyn Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let repeat: usize = match args.as_slice() {
+        [] => 5,
+        [flag, n] if flag == "--repeat" => n.parse()?,
+        _ => return Err("usage: pack_timing [--repeat N]".into()),
+    };
+    let inputs = pack_scene::PackScene::new();
+    let assets = inputs.assets();
+    let request = inputs.request(&assets);
+    let config = PackConfig::default();
+    let objects = pack_scene(&request, &config)?.index.objects.len();
+    let runs: Vec<f64> = (0..repeat)
+        .map(|_| {
+            let start = Instant::now();
+            black_box(pack_scene(&request, &config).expect("packs"));
+            start.elapsed().as_secs_f64()
+        })
+        .collect();
+    println!(
+        "{}",
+        serde_json::json!({ "objects": objects, "runs_s": runs })
+    );
+    Ok(())
+}
