@@ -2,10 +2,15 @@
 # Renders one 512x512 front view of a 15-object demo scene (dressing_table_0001 of
 # `mesa demo --seed 7`, its true layout) with `mesa render` and with Blender (Workbench by
 # default, or ENGINE=EEVEE / CYCLES), both on the CPU, and prints the time of each and the
-# ratio. mesa is timed by its criterion bench (the view alone, assets loaded), run here on one
+# ratio. mesa is timed by stages/examples/render_timing.rs (the view alone, assets loaded), on one
 # thread; Blender by bench/render_blender.py (the render call alone, after a first render that
 # compiles its shaders), with one OpenMP and one llvmpipe thread. Blender's picture is written
 # beside mesa's for comparison.
+#
+# Both sides are timed the same way: one warm-up render, then REPEAT (default 5) renders timed
+# one by one; mesa by stages/examples/render_timing.rs (each view with its scene's shadow map,
+# PNG encoded, on one thread). The script prints min and median of each side, the ratio of
+# each, the load average and the CPU.
 #
 #   bench/compare_blender.sh [OUT_DIR]
 #
@@ -27,12 +32,29 @@ ws="$out/demo"
 "$mesa" render "$ws" --layout truth --scenes dressing_table_0001 --progress off -q
 cp "$ws/$scene_rel/render/front.png" "$out/mesa_front.png"
 
-echo "mesa (criterion, one thread):"
-(cd "$root" && RAYON_NUM_THREADS=1 cargo bench -q -p mesa-stages --bench render -- \
-  'render/front_512_15_objects$' 2>/dev/null | grep -E "time:" | head -1)
-
-echo "Blender ($engine):"
+repeat="${REPEAT:-5}"
+(cd "$root" && cargo build --release -q -p mesa-stages --example render_timing)
+load_before="$(cut -d' ' -f1 /proc/loadavg)"
+RAYON_NUM_THREADS=1 "$root/target/release/examples/render_timing" --repeat "$repeat" \
+  > "$out/mesa.json"
 OMP_NUM_THREADS=1 LP_NUM_THREADS=1 "$python" "$root/bench/render_blender.py" "$ws/$scene_rel" \
   "$ws/assets/library" truth/layout.json "$out/blender_front.png" --engine "$engine" \
-  --repeat 5 2>/dev/null | grep '^{' | tee "$out/blender.json"
+  --repeat "$repeat" 2>/dev/null | grep '^{' > "$out/blender.json"
+load_after="$(cut -d' ' -f1 /proc/loadavg)"
+python3 - "$out/mesa.json" "$out/blender.json" "$engine" "$load_before" "$load_after" <<'PY'
+import json, os, statistics, sys
+mesa = json.load(open(sys.argv[1]))["runs_s"]
+blender = json.load(open(sys.argv[2]))
+# Blender's first render compiles its shaders: the warm-up, as mesa's untimed first view.
+b = blender["renders_s"][1:]
+cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo")
+            if l.startswith("model name")), "unknown CPU")
+print(f"{cpu}, {os.cpu_count()} CPUs, load average {sys.argv[4]} before, {sys.argv[5]} after; "
+      f"{len(mesa)} timed renders a side after one warm-up, one thread")
+print(f"mesa:    min {min(mesa) * 1e3:.1f} ms, median {statistics.median(mesa) * 1e3:.1f} ms")
+print(f"Blender ({sys.argv[3]}): min {min(b) * 1e3:.0f} ms, median {statistics.median(b) * 1e3:.0f} ms "
+      f"(CPU, median {blender['median_render_cpu_s'] * 1e3:.0f} ms)")
+print(f"ratio (Blender / mesa): {min(b) / min(mesa):.0f}x on the minima, "
+      f"{statistics.median(b) / statistics.median(mesa):.0f}x on the medians")
+PY
 echo "pictures: $out/mesa_front.png $out/blender_front.png"

@@ -1,11 +1,14 @@
-//! Times the parts of one rendered view (the render bench's scene: the front view of
-//! `dressing_table_0001` of `mesa demo --seed 7`, 15 objects, 512×512, 2×2 samples at
-//! silhouettes): the shadow map, the centre and first-sample visibility passes, the whole
-//! picture with the shadow map built beforehand, and the PNG. Prints the minimum over
-//! `--repeat` runs of each part, milliseconds, on one thread. A profiling aid: the figures
-//! the docs quote come from the criterion bench (`stages/benches/render.rs`).
+//! Times one rendered view (the render bench's scene: the front view of `dressing_table_0001`
+//! of `mesa demo --seed 7`, 15 objects, 512×512, 2×2 samples at silhouettes, shadows, PNG
+//! encoded, assets loaded), the mesa side of `bench/compare_blender.sh`: one warm-up, then
+//! `--repeat` views timed one by one on one thread, each with its scene's shadow map (as
+//! Blender's render call pays for its shadows). Prints one JSON line: the seconds of each.
 //!
-//! `cargo run --release -p mesa-stages --example render_timing -- [--repeat 20]`
+//! With `--parts`, prints the minimum over the runs of each part of a view instead: the
+//! shadow map, one visibility pass, the picture with the shadow map built beforehand, the
+//! PNG (a profiling aid).
+//!
+//! `cargo run --release -p mesa-stages --example render_timing -- [--repeat 20] [--parts]`
 
 use std::collections::BTreeMap;
 use std::error::Error;
@@ -32,12 +35,15 @@ fn min_ms(repeat: usize, mut f: impl FnMut()) -> f64 {
 }
 
 fn main() -> Result<(), Box<dyn Error>> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let repeat = match args.as_slice() {
-        [] => 20,
-        [flag, n] if flag == "--repeat" => n.parse()?,
-        _ => return Err("usage: render_timing [--repeat N]".into()),
-    };
+    let mut args = std::env::args().skip(1);
+    let (mut repeat, mut parts) = (20, false);
+    while let Some(arg) = args.next() {
+        match arg.as_str() {
+            "--repeat" => repeat = args.next().ok_or("--repeat N")?.parse()?,
+            "--parts" => parts = true,
+            _ => return Err("usage: render_timing [--repeat N] [--parts]".into()),
+        }
+    }
     let dir = tempfile::tempdir()?;
     write_demo(
         dir.path(),
@@ -58,6 +64,27 @@ fn main() -> Result<(), Box<dyn Error>> {
         }
     }
     let (placed, _) = place_layout(&layout, |uid| Ok(&assets[uid]))?;
+    let view_once = || {
+        LayoutScene::new(&layout, &placed, &config)
+            .render_view(SceneView::Front, &config)
+            .expect("render")
+    };
+    if !parts {
+        black_box(view_once());
+        let runs: Vec<f64> = (0..repeat)
+            .map(|_| {
+                let start = Instant::now();
+                black_box(view_once());
+                start.elapsed().as_secs_f64()
+            })
+            .collect();
+        let triangles: usize = placed.iter().map(|p| p.asset.triangles).sum();
+        println!(
+            "{}",
+            serde_json::json!({ "objects": placed.len(), "triangles": triangles, "runs_s": runs })
+        );
+        return Ok(());
+    }
     let scene = LayoutScene::new(&layout, &placed, &config);
     let items = draw_items(&placed, Some(&scene.table));
     let view = camera::scene_camera(
@@ -114,11 +141,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         (
             "view_with_shadow_map",
             min_ms(repeat, || {
-                black_box(
-                    LayoutScene::new(&layout, &placed, &config)
-                        .render_view(SceneView::Front, &config)
-                        .expect("render"),
-                );
+                black_box(view_once());
             }),
         ),
     ];
