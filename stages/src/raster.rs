@@ -322,6 +322,9 @@ fn clip_near(tri: [ClipVertex; 3], near: f64, out: &mut Vec<ClipVertex>) {
 trait Samples {
     /// The grid's width and height in pixels (the rasterizer clips to it).
     fn grid(&self) -> (i64, i64);
+    /// Whether row `y` keeps any pixel (a triangle's rows that keep none are skipped before
+    /// their span is worked out).
+    fn row_kept(&self, y: i64) -> bool;
     /// Calls `visit(x, index)` for every kept pixel `(x, y)` with `x_lo <= x <= x_hi`, in
     /// increasing `x`, with its buffer index.
     fn visit_row(&self, y: i64, x_lo: i64, x_hi: i64, visit: impl FnMut(i64, usize));
@@ -339,6 +342,11 @@ struct Every {
 impl Samples for Every {
     fn grid(&self) -> (i64, i64) {
         (self.width, self.height)
+    }
+
+    #[inline(always)]
+    fn row_kept(&self, _: i64) -> bool {
+        true
     }
 
     #[inline(always)]
@@ -380,7 +388,7 @@ pub struct SampleMask {
 }
 
 /// The side of a [`SampleMask`] tile, picture pixels.
-const TILE: i64 = 8;
+const TILE: i64 = 4;
 
 impl SampleMask {
     /// The mask of a `width × height` picture sampled `factor × factor` per pixel, selecting
@@ -458,6 +466,15 @@ impl SampleMask {
 impl Samples for SampleMask {
     fn grid(&self) -> (i64, i64) {
         (self.width * self.factor, self.height * self.factor)
+    }
+
+    #[inline(always)]
+    fn row_kept(&self, y: i64) -> bool {
+        let py = match self.shift {
+            Some(s) => y >> s,
+            None => y / self.factor,
+        } as usize;
+        self.row_runs[py] != self.row_runs[py + 1]
     }
 
     #[inline(always)]
@@ -691,6 +708,9 @@ fn raster_triangle<S: Samples>(
         ..
     } = buffer;
     for y in y_start..=y_end {
+        if !samples.row_kept(y) {
+            continue;
+        }
         let py = y as f64;
         // The span of x where every barycentric is non-negative.
         let (mut lo, mut hi) = (x_start as f64, x_end as f64);

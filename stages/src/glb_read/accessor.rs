@@ -193,15 +193,54 @@ fn read_dense(
             }
         }
     }
+    // One loop per component type, so that the common case (floats) is a plain copy.
+    Ok(match kind {
+        ComponentType::F32 => gather::<4>(bytes, stride, offset, count, width, |b| {
+            f64::from(f32::from_le_bytes(b))
+        }),
+        ComponentType::U32 | ComponentType::I16 | ComponentType::U16 if !normalized => match size {
+            4 => gather::<4>(bytes, stride, offset, count, width, |b| {
+                component(&b, kind, false)
+            }),
+            _ => gather::<2>(bytes, stride, offset, count, width, |b| {
+                component(&b, kind, false)
+            }),
+        },
+        _ => {
+            let mut out = Vec::with_capacity(count * width);
+            for i in 0..count {
+                let at = offset + i * stride;
+                for c in 0..width {
+                    let s = at + c * size;
+                    out.push(component(&bytes[s..s + size], kind, normalized));
+                }
+            }
+            out
+        }
+    })
+}
+
+/// `count` elements of `width` components of `N` bytes each, every `stride` bytes from
+/// `offset` (checked by the caller), each component converted by `convert`.
+fn gather<const N: usize>(
+    bytes: &[u8],
+    stride: usize,
+    offset: usize,
+    count: usize,
+    width: usize,
+    convert: impl Fn([u8; N]) -> f64,
+) -> Vec<f64> {
     let mut out = Vec::with_capacity(count * width);
     for i in 0..count {
         let at = offset + i * stride;
-        for c in 0..width {
-            let s = at + c * size;
-            out.push(component(&bytes[s..s + size], kind, normalized));
-        }
+        let element = &bytes[at..at + N * width];
+        out.extend(
+            element
+                .chunks_exact(N)
+                .map(|c| convert(c.try_into().expect("N bytes"))),
+        );
     }
-    Ok(out)
+    out
 }
 
 /// An accessor's elements as f64, flattened (`count × components` values), and the number of

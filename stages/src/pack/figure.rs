@@ -27,8 +27,14 @@ fn limb(radius: f64, bottom: [f64; 3], height: f64) -> TriMesh {
     placed(TriMesh::cylinder(radius, height, 16), bottom)
 }
 
-/// The H1 figure, its box centred on the origin and exactly [`H1_HEIGHT_M`] tall.
-pub fn h1_figure() -> Figure {
+/// The H1 figure, its box centred on the origin and exactly [`H1_HEIGHT_M`] tall: the same in
+/// every pack, so it is built once per process.
+pub fn h1_figure() -> &'static Figure {
+    static FIGURE: std::sync::OnceLock<Figure> = std::sync::OnceLock::new();
+    FIGURE.get_or_init(build_h1_figure)
+}
+
+fn build_h1_figure() -> Figure {
     // Heights from the floor (y = 0), metres; x to the figure's left (+X), z forward (+Z).
     let foot_h = 0.06;
     let shin = 0.40;

@@ -58,11 +58,9 @@ pub fn snapshot_png(
     // instance), then the mask's pixels in their own colours.
     let mut rgb = vec![0u8; cw * ch * 3];
     for (v, out) in (cv0..=cv1).zip(rgb.chunks_exact_mut(cw * 3)) {
-        let row = &photo.rgb[v * w + cu0..=v * w + cu1];
-        for (px, o) in row.iter().zip(out.chunks_exact_mut(3)) {
-            for k in 0..3 {
-                o[k] = ((u16::from(px[k]) + 96) / 2) as u8;
-            }
+        let row = photo.rgb[v * w + cu0..=v * w + cu1].as_flattened();
+        for (o, &c) in out.iter_mut().zip(row) {
+            *o = ((u16::from(c) + 96) / 2) as u8;
         }
     }
     for &p in pixels {
