@@ -322,9 +322,6 @@ fn clip_near(tri: [ClipVertex; 3], near: f64, out: &mut Vec<ClipVertex>) {
 trait Samples {
     /// The grid's width and height in pixels (the rasterizer clips to it).
     fn grid(&self) -> (i64, i64);
-    /// Whether row `y` keeps any pixel (a triangle's rows that keep none are skipped before
-    /// their span is worked out).
-    fn row_kept(&self, y: i64) -> bool;
     /// Calls `visit(x, index)` for every kept pixel `(x, y)` with `x_lo <= x <= x_hi`, in
     /// increasing `x`, with its buffer index.
     fn visit_row(&self, y: i64, x_lo: i64, x_hi: i64, visit: impl FnMut(i64, usize));
@@ -342,11 +339,6 @@ struct Every {
 impl Samples for Every {
     fn grid(&self) -> (i64, i64) {
         (self.width, self.height)
-    }
-
-    #[inline(always)]
-    fn row_kept(&self, _: i64) -> bool {
-        true
     }
 
     #[inline(always)]
@@ -372,13 +364,11 @@ pub struct SampleMask {
     shift: Option<u32>,
     width: i64,
     height: i64,
-    /// Per picture pixel, its rank among the selected pixels (`u32::MAX`: not selected).
-    slot: Vec<u32>,
-    /// The runs of selected pixels of each picture row, left to right: row `y`'s are
-    /// `runs[row_runs[y]..row_runs[y + 1]]`, each `(first x, last x, rank of the first)` (the
-    /// ranks of a run are consecutive), so a triangle's span visits only selected samples.
-    runs: Vec<[u32; 3]>,
-    row_runs: Vec<u32>,
+    /// Per picture pixel `p` (row-major) and one past the last, how many pixels before it are
+    /// selected: pixel `p` is selected when `before[p + 1] > before[p]`, and `before[p]` is
+    /// then its rank; a span of a row holds a selected pixel when the counts at its ends
+    /// differ (a triangle's row over none is left at once).
+    before: Vec<u32>,
     /// Per tile of `TILE × TILE` picture pixels, whether any is selected, as a summed-area
     /// table of `(tiles_x + 1) × (tiles_y + 1)` counts (a triangle over no selected tile is
     /// skipped whole).
@@ -397,32 +387,19 @@ impl SampleMask {
         let (w, h) = (width as usize, height as usize);
         assert_eq!(selected.len(), w * h, "one flag per pixel");
         let (tx, ty) = (w.div_ceil(TILE as usize), h.div_ceil(TILE as usize));
-        let mut slot = vec![u32::MAX; w * h];
-        let mut marked = vec![false; tx * ty];
+        let mut before = vec![0u32; w * h + 1];
         let mut count = 0u32;
-        for (p, _) in selected.iter().enumerate().filter(|(_, &s)| s) {
-            slot[p] = count;
-            count += 1;
-            marked[(p / w) / TILE as usize * tx + (p % w) / TILE as usize] = true;
+        for (b, &s) in before.iter_mut().zip(selected) {
+            *b = count;
+            count += u32::from(s);
         }
-        let mut runs: Vec<[u32; 3]> = Vec::new();
-        let mut row_runs = Vec::with_capacity(h + 1);
-        row_runs.push(0u32);
-        for row in slot.chunks(w.max(1)).take(h) {
-            let mut x = 0;
-            while x < w {
-                if row[x] == u32::MAX {
-                    x += 1;
-                    continue;
-                }
-                let start = x;
-                while x + 1 < w && row[x + 1] != u32::MAX {
-                    x += 1;
-                }
-                runs.push([start as u32, x as u32, row[start]]);
-                x += 1;
+        before[w * h] = count;
+        let mut marked = vec![false; tx * ty];
+        for (y, row) in selected.chunks_exact(w.max(1)).enumerate() {
+            let tiles = &mut marked[y / TILE as usize * tx..];
+            for (x, _) in row.iter().enumerate().filter(|(_, &s)| s) {
+                tiles[x / TILE as usize] = true;
             }
-            row_runs.push(runs.len() as u32);
         }
         let mut tiles = vec![0u32; (tx + 1) * (ty + 1)];
         for y in 0..ty {
@@ -438,9 +415,7 @@ impl SampleMask {
             shift: factor.is_power_of_two().then(|| factor.trailing_zeros()),
             width: w as i64,
             height: h as i64,
-            slot,
-            runs,
-            row_runs,
+            before,
             tiles,
             tiles_x: tx as i64,
             selected: count as usize,
@@ -455,8 +430,9 @@ impl SampleMask {
     /// Where sample `(dx, dy)` of picture pixel `(x, y)` is stored, `None` when the pixel is
     /// not selected.
     pub fn sample(&self, x: u32, y: u32, dx: u32, dy: u32) -> Option<usize> {
-        let k = self.slot[y as usize * self.width as usize + x as usize];
-        (k != u32::MAX).then(|| {
+        let p = y as usize * self.width as usize + x as usize;
+        let k = self.before[p];
+        (self.before[p + 1] > k).then(|| {
             let f = self.factor as usize;
             k as usize * f * f + dy as usize * f + dx as usize
         })
@@ -469,37 +445,24 @@ impl Samples for SampleMask {
     }
 
     #[inline(always)]
-    fn row_kept(&self, y: i64) -> bool {
-        let py = match self.shift {
-            Some(s) => y >> s,
-            None => y / self.factor,
-        } as usize;
-        self.row_runs[py] != self.row_runs[py + 1]
-    }
-
-    #[inline(always)]
     fn visit_row(&self, y: i64, x_lo: i64, x_hi: i64, mut visit: impl FnMut(i64, usize)) {
         let f = self.factor;
-        let (py, dy) = match self.shift {
-            Some(s) => (y >> s, y & (f - 1)),
-            None => (y / f, y % f),
+        let split = |v: i64| match self.shift {
+            Some(s) => (v >> s, v & (f - 1)),
+            None => (v / f, v % f),
         };
-        let row = &self.runs
-            [self.row_runs[py as usize] as usize..self.row_runs[py as usize + 1] as usize];
-        // The first run that ends at or after the span's first picture pixel.
-        let first = row.partition_point(|run| (run[1] as i64 + 1) * f <= x_lo);
-        for run in &row[first..] {
-            let (start, end) = (run[0] as i64 * f, (run[1] as i64 + 1) * f - 1);
-            if start > x_hi {
-                break;
-            }
-            let base = run[2] as i64 - run[0] as i64;
-            for x in x_lo.max(start)..=x_hi.min(end) {
-                let (px, dx) = match self.shift {
-                    Some(s) => (x >> s, x & (f - 1)),
-                    None => (x / f, x % f),
-                };
-                visit(x, ((base + px) * f * f + dy * f + dx) as usize);
+        let (py, dy) = split(y);
+        let row = (py * self.width) as usize;
+        let (first, last) = (row + split(x_lo).0 as usize, row + split(x_hi).0 as usize);
+        if self.before[last + 1] == self.before[first] {
+            return;
+        }
+        for x in x_lo..=x_hi {
+            let (px, dx) = split(x);
+            let p = row + px as usize;
+            let k = self.before[p];
+            if self.before[p + 1] > k {
+                visit(x, (k as i64 * f * f + dy * f + dx) as usize);
             }
         }
     }
@@ -708,9 +671,6 @@ fn raster_triangle<S: Samples>(
         ..
     } = buffer;
     for y in y_start..=y_end {
-        if !samples.row_kept(y) {
-            continue;
-        }
         let py = y as f64;
         // The span of x where every barycentric is non-negative.
         let (mut lo, mut hi) = (x_start as f64, x_end as f64);

@@ -562,27 +562,34 @@ fn silhouette_pixels(first: &VisibilityBuffer, centres: &VisibilityBuffer) -> Ve
             continue;
         }
         let below = &first.item[(y + 1) * w..(y + 2) * w];
-        for x in 0..w - 1 {
+        for (x, out) in out[..w - 1].iter_mut().enumerate() {
             let item = row[x];
-            out[x] =
-                centre[x] != item || row[x + 1] != item || below[x] != item || below[x + 1] != item;
+            *out = (centre[x] != item)
+                | (row[x + 1] != item)
+                | (below[x] != item)
+                | (below[x + 1] != item);
         }
         out[w - 1] = true;
     }
     // Grown by one pixel: a 3×3 dilation, done as a horizontal then a vertical pass.
     let mut wide = vec![false; w * h];
-    for y in 0..h {
-        let row = &differs[y * w..(y + 1) * w];
-        let out = &mut wide[y * w..(y + 1) * w];
-        for x in 0..w {
-            out[x] = row[x] || (x > 0 && row[x - 1]) || (x + 1 < w && row[x + 1]);
+    for (row, out) in differs.chunks_exact(w).zip(wide.chunks_exact_mut(w)) {
+        out[0] = row[0] | row.get(1).is_some_and(|&d| d);
+        for x in 1..w - 1 {
+            out[x] = row[x - 1] | row[x] | row[x + 1];
+        }
+        if w > 1 {
+            out[w - 1] = row[w - 2] | row[w - 1];
         }
     }
     let mut selected = vec![false; w * h];
-    for y in 0..h {
+    for (y, out) in selected.chunks_exact_mut(w).enumerate() {
         let (lo, hi) = (y.saturating_sub(1), (y + 1).min(h - 1));
-        for x in 0..w {
-            selected[y * w + x] = (lo..=hi).any(|yy| wide[yy * w + x]);
+        out.copy_from_slice(&wide[y * w..(y + 1) * w]);
+        for yy in [lo, hi] {
+            for (o, &d) in out.iter_mut().zip(&wide[yy * w..(yy + 1) * w]) {
+                *o |= d;
+            }
         }
     }
     selected
