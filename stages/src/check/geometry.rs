@@ -8,6 +8,8 @@
 //! GJK has absolute tolerances (about 10⁻⁵ of a unit): in metres it misjudges millimetre-thin
 //! parts (a cup's wall), in millimetres it resolves them to a few nanometres.
 
+use std::sync::{Arc, OnceLock};
+
 use parry3d::math::{Isometry, Point, Real, Vector};
 use parry3d::query::details::{
     cast_shapes_support_map_support_map, contact_support_map_support_map, ShapeCastOptions,
@@ -85,8 +87,13 @@ pub struct Hull {
     pub center: [f64; 3],
     /// The points relative to `center`.
     points: Vec<Point<Real>>,
-    /// The outward normals of the hull's faces (unit), when its faces are known.
-    normals: Vec<[f64; 3]>,
+    /// The points as given and the outward faces, to find the faces' normals from when a
+    /// depth needs them ([`Hull::normals`]): most placed parts never touch another, and
+    /// finding the normals of every part was most of a check's time.
+    faces: Arc<(Vec<[f64; 3]>, Vec<[u32; 3]>)>,
+    /// The outward normals of the hull's faces (unit), when its faces are known: found once,
+    /// on first use.
+    normals: OnceLock<Vec<[f64; 3]>>,
     /// Bounds in the table frame.
     pub bounds: Bounds,
 }
@@ -137,28 +144,38 @@ impl Hull {
                 )
             })
             .collect();
-        let mut normals: Vec<[f64; 3]> = Vec::with_capacity(triangles.len());
-        for t in triangles {
-            let [a, b, c] = t.map(|i| raw[i as usize]);
-            let (u, v) = (sub(b, a), sub(c, a));
-            let n = [
-                u[1] * v[2] - u[2] * v[1],
-                u[2] * v[0] - u[0] * v[2],
-                u[0] * v[1] - u[1] * v[0],
-            ];
-            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            if len > 1e-15 {
-                let n = n.map(|x| x / len);
-                if !normals.iter().any(|m| dot(*m, n) > 1.0 - 1e-9) {
-                    normals.push(n);
-                }
-            }
-        }
         Some(Self {
             center,
             points,
-            normals,
+            faces: Arc::new((raw.to_vec(), triangles.to_vec())),
+            normals: OnceLock::new(),
             bounds,
+        })
+    }
+
+    /// The outward normals of the hull's faces (unit; parallel ones once), from its points as
+    /// given (a later [`Hull::translate`] leaves them as they were).
+    fn normals(&self) -> &[[f64; 3]] {
+        self.normals.get_or_init(|| {
+            let (raw, triangles) = &*self.faces;
+            let mut normals: Vec<[f64; 3]> = Vec::with_capacity(triangles.len());
+            for t in triangles {
+                let [a, b, c] = t.map(|i| raw[i as usize]);
+                let (u, v) = (sub(b, a), sub(c, a));
+                let n = [
+                    u[1] * v[2] - u[2] * v[1],
+                    u[2] * v[0] - u[0] * v[2],
+                    u[0] * v[1] - u[1] * v[0],
+                ];
+                let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                if len > 1e-15 {
+                    let n = n.map(|x| x / len);
+                    if !normals.iter().any(|m| dot(*m, n) > 1.0 - 1e-9) {
+                        normals.push(n);
+                    }
+                }
+            }
+            normals
         })
     }
 
@@ -297,8 +314,8 @@ fn least_overlap(a: &Hull, b: &Hull, hint: Option<[f64; 3]>) -> Proximity {
     let candidates = sample_directions(a, b)
         .into_iter()
         .chain(hint)
-        .chain(a.normals.iter().copied())
-        .chain(b.normals.iter().map(|n| n.map(|v| -v)));
+        .chain(a.normals().iter().copied())
+        .chain(b.normals().iter().map(|n| n.map(|v| -v)));
     for d in candidates {
         let overlap = overlap_along(a, b, d);
         if overlap < least {
@@ -382,6 +399,35 @@ mod tests {
             }
         }
         Hull::new(&points).expect("points")
+    }
+
+    /// The face normals, found on first use, are those of the faces as placed: a box turned
+    /// about z has its six (each face's two triangles count once), the same after a move.
+    /// Control: without faces there are none.
+    #[test]
+    fn face_normals_are_found_on_first_use_from_the_faces_as_placed() {
+        let (c, s) = (0.6f64.cos(), 0.6f64.sin());
+        let turn = |p: [f64; 3]| [c * p[0] - s * p[1], s * p[0] + c * p[1], p[2]];
+        let mesh = crate::mesh::TriMesh::cuboid([0.2, 0.1, 0.05]);
+        let points: Vec<[f64; 3]> = mesh
+            .positions
+            .iter()
+            .map(|p| turn(p.map(f64::from)))
+            .collect();
+        let mut hull = Hull::with_faces(&points, &mesh.triangles).expect("hull");
+        hull.translate([1.0, -2.0, 0.5]);
+        let normals = hull.normals().to_vec();
+        assert_eq!(normals.len(), 6, "{normals:?}");
+        for axis in [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
+            for sign in [1.0, -1.0] {
+                let want = turn(axis.map(|v: f64| v * sign));
+                assert!(
+                    normals.iter().any(|n| dot(*n, want) > 1.0 - 1e-9),
+                    "{want:?} in {normals:?}"
+                );
+            }
+        }
+        assert!(Hull::new(&points).expect("hull").normals().is_empty());
     }
 
     #[test]
