@@ -80,6 +80,9 @@ impl Bounds {
     }
 }
 
+/// A hull's points as given and its outward triangles.
+type Faces = (Vec<[f64; 3]>, Vec<[u32; 3]>);
+
 /// One convex part placed in the table frame.
 #[derive(Debug, Clone)]
 pub struct Hull {
@@ -90,7 +93,7 @@ pub struct Hull {
     /// The points as given and the outward faces, to find the faces' normals from when a
     /// depth needs them ([`Hull::normals`]): most placed parts never touch another, and
     /// finding the normals of every part was most of a check's time.
-    faces: Arc<(Vec<[f64; 3]>, Vec<[u32; 3]>)>,
+    faces: Arc<Faces>,
     /// The outward normals of the hull's faces (unit), when its faces are known: found once,
     /// on first use.
     normals: OnceLock<Vec<[f64; 3]>>,
