@@ -84,18 +84,7 @@ fn every_real_asset_packs_into_a_valid_scene_that_ingests_back_exactly() {
     };
     layout.sort_objects();
     let layout_bytes = mesa_schemas::json::to_sorted_pretty(&layout).expect("json");
-    let assets: BTreeMap<String, AssetSource<'_>> = glbs
-        .iter()
-        .map(|(uid, glb)| {
-            (
-                uid.clone(),
-                AssetSource {
-                    glb,
-                    front_yaw_deg: 0.0,
-                },
-            )
-        })
-        .collect();
+    let assets = AssetSource::facing_front(&glbs);
     let masks = BTreeMap::new();
     let packed = pack_scene(
         &PackRequest {

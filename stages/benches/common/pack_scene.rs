@@ -90,18 +90,7 @@ impl PackScene {
 
     /// The assets, by uid, as `pack_scene` takes them.
     pub fn assets(&self) -> BTreeMap<String, AssetSource<'_>> {
-        self.glbs
-            .iter()
-            .map(|(uid, glb)| {
-                (
-                    uid.clone(),
-                    AssetSource {
-                        glb,
-                        front_yaw_deg: 0.0,
-                    },
-                )
-            })
-            .collect()
+        AssetSource::facing_front(&self.glbs)
     }
 
     /// The pack request of the scene.

@@ -105,6 +105,23 @@ pub struct AssetSource<'a> {
     pub front_yaw_deg: f64,
 }
 
+impl<'a> AssetSource<'a> {
+    /// The sources of GLBs by uid, each facing the front as it is (`front_yaw_deg` 0).
+    pub fn facing_front(glbs: &'a BTreeMap<String, Vec<u8>>) -> BTreeMap<String, Self> {
+        glbs.iter()
+            .map(|(uid, glb)| {
+                (
+                    uid.clone(),
+                    Self {
+                        glb,
+                        front_yaw_deg: 0.0,
+                    },
+                )
+            })
+            .collect()
+    }
+}
+
 /// Everything a scene's pack is made from.
 #[derive(Debug, Clone, Copy)]
 pub struct PackRequest<'a> {

@@ -268,19 +268,7 @@ pub fn photo_and_masks(layout: &DatasetLayout) -> (Vec<u8>, Photo, BTreeMap<Stri
 
 /// Packs a fixture (with its photo and masks).
 pub fn pack(f: &Fixture, config: &PackConfig) -> PackOutput {
-    let assets: BTreeMap<String, AssetSource<'_>> = f
-        .assets
-        .iter()
-        .map(|(uid, glb)| {
-            (
-                uid.clone(),
-                AssetSource {
-                    glb,
-                    front_yaw_deg: 0.0,
-                },
-            )
-        })
-        .collect();
+    let assets = AssetSource::facing_front(&f.assets);
     let (png, photo, masks) = photo_and_masks(&f.layout);
     pack_scene(
         &PackRequest {
