@@ -3,7 +3,8 @@
 //! `refined/layout.json`) is read and its container flags decided first, as the `graph` stage
 //! does (asset annotations, else the keyword rule); then `extract_graph` and `to_text` over all
 //! scenes are timed, one warm-up pass and `--repeat` timed passes, on one thread. Prints JSON:
-//! the seconds per scene of each pass, their min and median.
+//! the seconds per scene of each pass, their min and median, and the min and median of as many
+//! passes of `extract_graph` alone (no text).
 //!
 //! `cargo run --release -p mesa-stages --example graph_timing -- DATASET [--repeat 5]`
 
@@ -77,14 +78,35 @@ fn read_scenes(dataset: &Path) -> Result<Vec<SceneInput>, Box<dyn Error>> {
     Ok(scenes)
 }
 
-/// One pass over every scene: the seconds per scene.
-fn pass(scenes: &[(GraphScene, Vec<bool>)], options: &GraphOptions) -> Result<f64, GraphError> {
+/// One pass over every scene, the graph's text made too when `text`: the seconds per scene.
+fn pass(
+    scenes: &[(GraphScene, Vec<bool>)],
+    options: &GraphOptions,
+    text: bool,
+) -> Result<f64, GraphError> {
     let started = Instant::now();
     for (scene, flags) in scenes {
         let graph = extract_graph(black_box(scene), flags, options)?;
-        black_box(graph.to_text());
+        if text {
+            black_box(graph.to_text());
+        } else {
+            black_box(&graph);
+        }
     }
     Ok(started.elapsed().as_secs_f64() / scenes.len() as f64)
+}
+
+/// The min and median of some timings.
+fn min_median(runs: &[f64]) -> (f64, f64) {
+    let mut sorted = runs.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len();
+    let median = if n % 2 == 1 {
+        sorted[n / 2]
+    } else {
+        (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0
+    };
+    (sorted[0], median)
 }
 
 fn main() -> Result<(), Box<dyn Error>> {
@@ -103,23 +125,24 @@ fn main() -> Result<(), Box<dyn Error>> {
 
     let scenes = read_scenes(&dataset)?;
     let options = GraphOptions::default();
-    pass(&scenes, &options)?; // warm-up
+    pass(&scenes, &options, true)?; // warm-up
     let runs = (0..repeat)
-        .map(|_| pass(&scenes, &options))
+        .map(|_| pass(&scenes, &options, true))
         .collect::<Result<Vec<f64>, _>>()?;
-    let mut sorted = runs.clone();
-    sorted.sort_by(f64::total_cmp);
-    let median = if repeat % 2 == 1 {
-        sorted[repeat / 2]
-    } else {
-        (sorted[repeat / 2 - 1] + sorted[repeat / 2]) / 2.0
-    };
+    let (min, median) = min_median(&runs);
+    // The same passes without the text, for where the time goes.
+    let bare = (0..repeat)
+        .map(|_| pass(&scenes, &options, false))
+        .collect::<Result<Vec<f64>, _>>()?;
+    let (bare_min, bare_median) = min_median(&bare);
     let report = serde_json::json!({
         "scenes": scenes.len(),
         "repeat": repeat,
-        "min_s_per_scene": sorted[0],
+        "min_s_per_scene": min,
         "median_s_per_scene": median,
         "runs_s_per_scene": runs,
+        "extract_only_min_s_per_scene": bare_min,
+        "extract_only_median_s_per_scene": bare_median,
     });
     println!("{report}");
     Ok(())

@@ -42,12 +42,17 @@
 //! ## Cost
 //!
 //! The rules are stated over all pairs, but `in` and `above` need the two footprints to
-//! overlap and a horizontal pair needs the object among the subject's 5 nearest: a uniform grid
-//! over the footprints' boxes ([`BoxGrid`]) and one over the centres ([`CentreGrid`], searched
-//! ring by ring outward) test only pairs that can be related, so a table-like layout of n
-//! objects costs about n log n. The all-pairs versions are kept as the test oracle (a property
-//! test checks the output is identical). `are equally spaced along` (off by default) is about
-//! triples: its output alone can grow with n², and its search stays quadratic in n.
+//! overlap and a horizontal pair needs the object among the subject's 5 nearest: above
+//! [`ALL_PAIRS_UP_TO_OBJECTS`] objects, a uniform grid over the footprints' boxes ([`BoxGrid`])
+//! and one over the centres ([`CentreGrid`], searched ring by ring outward) test only pairs
+//! that can be related, so a table-like layout of n objects costs about n log n. A table's
+//! dozen or two objects are cheaper to test pair by pair, without building grids: each
+//! subject keeps its 5 nearest by insertion, and the distance limit is decided on squared
+//! distances ([`Within`]). The graph borrows the scene's names, so it allocates no strings,
+//! and its text is written in one buffer. A word-for-word version of the rules is kept as the
+//! test oracle (property tests check both searches give its output). `are equally spaced
+//! along` (off by default) is about triples: its output alone can grow with n², and its
+//! search stays quadratic in n.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -340,19 +345,26 @@ impl GraphScene {
                 problem: format!("is empty [{x_min}, {x_max}, {y_min}, {y_max}]"),
             });
         }
+        // Whether any name repeats, by sorting them; only then are first indices kept (the
+        // map costs more than the rest of the checks).
+        let mut sorted: Vec<&str> = self.objects.iter().map(|o| o.instance.as_str()).collect();
+        sorted.sort_unstable();
+        let repeats = sorted.windows(2).any(|pair| pair[0] == pair[1]);
         let mut first_index: BTreeMap<&str, usize> = BTreeMap::new();
         for (index, object) in self.objects.iter().enumerate() {
             if object.instance.trim().is_empty() {
                 return Err(GraphError::EmptyInstance { index });
             }
-            if let Some(&first) = first_index.get(object.instance.as_str()) {
-                return Err(GraphError::DuplicateInstance {
-                    index,
-                    instance: object.instance.clone(),
-                    first,
-                });
+            if repeats {
+                if let Some(&first) = first_index.get(object.instance.as_str()) {
+                    return Err(GraphError::DuplicateInstance {
+                        index,
+                        instance: object.instance.clone(),
+                        first,
+                    });
+                }
+                first_index.insert(&object.instance, index);
             }
-            first_index.insert(&object.instance, index);
             let number = |field: String, value: f64, expected: &'static str| GraphError::Number {
                 index,
                 instance: object.instance.clone(),
@@ -800,11 +812,12 @@ impl Evidence {
     }
 }
 
-/// A node: where an object is, where it faces, and the numbers behind them.
+/// A node: where an object is, where it faces, and the numbers behind them. The names of
+/// nodes and edges borrow the scene's: a graph allocates no string of its own.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Node {
+pub struct Node<'a> {
     /// The instance.
-    pub instance: String,
+    pub instance: &'a str,
     /// The nine-grid cell.
     pub is_at: GridCell,
     /// The facing direction.
@@ -817,22 +830,40 @@ pub struct Node {
 
 /// An edge `(subject, relation, object)`.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Edge {
+pub struct Edge<'a> {
     /// Subject instance.
-    pub subject: String,
+    pub subject: &'a str,
     /// The relation.
     pub relation: Relation,
     /// Object instance.
-    pub object: String,
+    pub object: &'a str,
     /// The numbers that decided it.
     pub evidence: Evidence,
 }
 
-impl Edge {
+impl Edge<'_> {
     /// `(subject, relation, object)`.
     pub fn triplet(&self) -> String {
-        format!("({}, {}, {})", self.subject, self.relation, self.object)
+        let mut line = String::new();
+        self.push_triplet(&mut line);
+        line
     }
+
+    fn push_triplet(&self, out: &mut String) {
+        push_fields(out, &[self.subject, self.relation.label(), self.object]);
+    }
+}
+
+/// Appends `(a, b, …)`: the fields between parentheses, separated by a comma and a space.
+fn push_fields(out: &mut String, fields: &[&str]) {
+    out.push('(');
+    for (i, field) in fields.iter().enumerate() {
+        if i > 0 {
+            out.push_str(", ");
+        }
+        out.push_str(field);
+    }
+    out.push(')');
 }
 
 /// An axis of the table frame.
@@ -856,9 +887,9 @@ impl Axis {
 
 /// Three objects equally spaced along an axis.
 #[derive(Debug, Clone, PartialEq)]
-pub struct EquallySpaced {
+pub struct EquallySpaced<'a> {
     /// The instances by increasing coordinate.
-    pub instances: [String; 3],
+    pub instances: [&'a str; 3],
     /// The axis.
     pub axis: Axis,
     /// The gaps b - a and c - b along the axis, cm.
@@ -867,51 +898,69 @@ pub struct EquallySpaced {
     pub spread_cm: f64,
 }
 
-impl EquallySpaced {
+impl EquallySpaced<'_> {
     /// `(a, b, c, are equally spaced along, x)`.
     pub fn triplet(&self) -> String {
-        format!(
-            "({}, {}, {}, are equally spaced along, {})",
-            self.instances[0],
-            self.instances[1],
-            self.instances[2],
-            self.axis.label()
-        )
+        let mut line = String::new();
+        self.push_triplet(&mut line);
+        line
+    }
+
+    fn push_triplet(&self, out: &mut String) {
+        let [a, b, c] = self.instances;
+        push_fields(
+            out,
+            &[a, b, c, "are equally spaced along", self.axis.label()],
+        );
     }
 }
 
 /// A scene graph: nodes in layout order, edges in output order.
 #[derive(Debug, Clone, PartialEq)]
-pub struct SceneGraph {
+pub struct SceneGraph<'a> {
     /// One node per object, in layout order.
-    pub nodes: Vec<Node>,
+    pub nodes: Vec<Node<'a>>,
     /// `in` edges, then `above` edges, then horizontal edges, as SCENE_GRAPH.md orders them.
-    pub edges: Vec<Edge>,
+    pub edges: Vec<Edge<'a>>,
     /// `are equally spaced along` triples (empty unless that option is on).
-    pub equally_spaced: Vec<EquallySpaced>,
+    pub equally_spaced: Vec<EquallySpaced<'a>>,
 }
 
-impl SceneGraph {
+impl SceneGraph<'_> {
+    /// Writes each triplet line in order into `out`, calling `end(out)` after each: per node
+    /// `is at` then `face to`, then the edges, then the equally-spaced triples.
+    fn write_lines(&self, out: &mut String, mut end: impl FnMut(&mut String)) {
+        for node in &self.nodes {
+            push_fields(out, &[node.instance, "is at", node.is_at.label()]);
+            end(out);
+            push_fields(out, &[node.instance, "face to", node.face_to.label()]);
+            end(out);
+        }
+        for edge in &self.edges {
+            edge.push_triplet(out);
+            end(out);
+        }
+        for spacing in &self.equally_spaced {
+            spacing.push_triplet(out);
+            end(out);
+        }
+    }
+
     /// The triplet lines: per node `is at` then `face to`, then the edges, then the
     /// equally-spaced triples.
     pub fn triplet_lines(&self) -> Vec<String> {
         let mut lines = Vec::with_capacity(2 * self.nodes.len() + self.edges.len());
-        for node in &self.nodes {
-            lines.push(format!("({}, is at, {})", node.instance, node.is_at));
-            lines.push(format!("({}, face to, {})", node.instance, node.face_to));
-        }
-        lines.extend(self.edges.iter().map(Edge::triplet));
-        lines.extend(self.equally_spaced.iter().map(EquallySpaced::triplet));
+        let mut buffer = String::with_capacity(128);
+        self.write_lines(&mut buffer, |line| lines.push(std::mem::take(line)));
         lines
     }
 
     /// `graph.txt`: the triplet lines, each ending with a newline.
     pub fn to_text(&self) -> String {
-        let mut text = String::new();
-        for line in self.triplet_lines() {
-            text.push_str(&line);
-            text.push('\n');
-        }
+        // About 40 bytes a line; one growth at most for long names.
+        let lines = 2 * self.nodes.len() + self.edges.len() + self.equally_spaced.len();
+        let mut text = String::with_capacity(40 * lines);
+        self.write_lines(&mut text, |text| text.push('\n'));
         text
     }
 
@@ -926,7 +975,7 @@ impl SceneGraph {
                 .nodes
                 .iter()
                 .map(|n| GraphNode {
-                    instance: n.instance.clone(),
+                    instance: n.instance.to_owned(),
                     is_at: n.is_at.label().to_owned(),
                     face_to: n.face_to.label().to_owned(),
                     container: n.container,
@@ -936,9 +985,9 @@ impl SceneGraph {
                 .edges
                 .iter()
                 .map(|e| GraphEdge {
-                    subject: e.subject.clone(),
+                    subject: e.subject.to_owned(),
                     relation: e.relation.label().to_owned(),
-                    object: e.object.clone(),
+                    object: e.object.to_owned(),
                     numbers: e.evidence.numbers(),
                 })
                 .collect(),
@@ -946,7 +995,7 @@ impl SceneGraph {
                 .equally_spaced
                 .iter()
                 .map(|s| GraphSpacing {
-                    instances: s.instances.clone(),
+                    instances: s.instances.map(str::to_owned),
                     axis: s.axis.label().to_owned(),
                     numbers: [
                         ("gap_1_cm".to_owned(), s.gaps_cm[0]),
@@ -1162,14 +1211,26 @@ impl Solid {
 // ---------------------------------------------------------------------------------------------
 // The extraction.
 
+/// Up to this many objects, the pairs that may be related are found by testing every pair: a
+/// table holds a dozen or two objects, and building the grids costs more than the tests they
+/// save (a measured crossover of about 40 objects on `stages/benches/graph.rs`). Above it, the
+/// grids. Both give the same graph (a property test compares them on up to 160 objects).
+const ALL_PAIRS_UP_TO_OBJECTS: usize = 40;
+
 /// Extracts the scene graph of `scene`, with `containers[i]` saying whether object i is a
-/// container (see [`keyword_containers`] for the keyword rule).
-pub fn extract_graph(
-    scene: &GraphScene,
+/// container (see [`keyword_containers`] for the keyword rule). The graph's names borrow the
+/// scene's.
+pub fn extract_graph<'a>(
+    scene: &'a GraphScene,
     containers: &[bool],
     options: &GraphOptions,
-) -> Result<SceneGraph, GraphError> {
-    extract(scene, containers, options, PairSearch::Grid)
+) -> Result<SceneGraph<'a>, GraphError> {
+    let search = if scene.objects.len() <= ALL_PAIRS_UP_TO_OBJECTS {
+        PairSearch::AllPairs
+    } else {
+        PairSearch::Grid
+    };
+    extract(scene, containers, options, search)
 }
 
 /// How the pairs that may be related are found.
@@ -1177,17 +1238,63 @@ pub fn extract_graph(
 enum PairSearch {
     /// Grids over footprints and centres: only pairs that can be related are tested.
     Grid,
-    /// Every pair, as the rules state them: the test oracle.
-    #[cfg(test)]
+    /// Every pair: for small scenes, and the grids' test oracle.
     AllPairs,
+    /// Every pair, the neighbours ranked word for word as SCENE_GRAPH.md states it: the test
+    /// oracle of the other two.
+    #[cfg(test)]
+    Literal,
 }
 
-fn extract(
-    scene: &GraphScene,
+/// The objects whose footprints may overlap a given object's.
+enum Overlaps {
+    /// Every object: the indices of all of them.
+    All(Vec<usize>),
+    /// Those whose footprint boxes overlap in a grid.
+    Grid(BoxGrid),
+}
+
+impl Overlaps {
+    /// In layout order, every object whose footprint may overlap that of `s` (a superset of
+    /// those that do, which may hold `s` itself); `buffer` holds the list when it is made.
+    fn of<'b>(&'b self, solids: &[Solid], s: usize, buffer: &'b mut Vec<usize>) -> &'b [usize] {
+        match self {
+            Self::All(all) => all,
+            Self::Grid(grid) => {
+                buffer.clear();
+                grid.overlapping(solids, s, buffer);
+                buffer
+            }
+        }
+    }
+
+    /// [`Overlaps::of`] among the `free` objects (in layout order; `is_free` their flags).
+    fn free_of<'b>(
+        &'b self,
+        solids: &[Solid],
+        s: usize,
+        free: &'b [usize],
+        is_free: &[bool],
+        buffer: &'b mut Vec<usize>,
+    ) -> &'b [usize] {
+        match self {
+            Self::All(_) => free,
+            Self::Grid(grid) => {
+                buffer.clear();
+                grid.overlapping(solids, s, buffer);
+                buffer.retain(|&o| is_free[o]);
+                buffer
+            }
+        }
+    }
+}
+
+fn extract<'a>(
+    scene: &'a GraphScene,
     containers: &[bool],
     options: &GraphOptions,
     search: PairSearch,
-) -> Result<SceneGraph, GraphError> {
+) -> Result<SceneGraph<'a>, GraphError> {
     scene.check()?;
     if containers.len() != scene.objects.len() {
         return Err(GraphError::ContainerFlags {
@@ -1208,7 +1315,7 @@ fn extract(
             let fx = zone_fraction(object.position_cm[0], x_min, width);
             let fy = zone_fraction(object.position_cm[1], y_min, depth);
             Node {
-                instance: object.instance.clone(),
+                instance: object.instance.as_str(),
                 is_at: GridCell::from_fractions(fx, fy),
                 face_to: Facing::from_yaw_deg(object.yaw_deg),
                 zone_fraction: [fx, fy],
@@ -1217,22 +1324,21 @@ fn extract(
         })
         .collect();
 
-    let mut edges = Vec::new();
-    let boxes = BoxGrid::new(&solids);
-    let near = |s: usize| -> Vec<usize> {
-        match search {
-            PairSearch::Grid => boxes.overlapping(&solids, s),
-            #[cfg(test)]
-            PairSearch::AllPairs => (0..solids.len()).collect(),
-        }
+    let overlaps = match search {
+        PairSearch::Grid => Overlaps::Grid(BoxGrid::new(&solids)),
+        PairSearch::AllPairs => Overlaps::All((0..solids.len()).collect()),
+        #[cfg(test)]
+        PairSearch::Literal => Overlaps::All((0..solids.len()).collect()),
     };
-    let container_of = containment(&solids, containers, &near);
+    let mut near = Vec::with_capacity(solids.len());
+    let container_of = containment(&solids, containers, &overlaps, &mut near);
+    let mut edges = Vec::with_capacity((NEIGHBOURS_PER_SUBJECT + 1) * solids.len());
     for (s, found) in container_of.iter().enumerate() {
         if let Some((c, evidence)) = found {
             edges.push(Edge {
-                subject: names[s].to_owned(),
+                subject: names[s],
                 relation: Relation::In,
-                object: names[*c].to_owned(),
+                object: names[*c],
                 evidence: *evidence,
             });
         }
@@ -1243,12 +1349,12 @@ fn extract(
         .collect();
     let is_free: Vec<bool> = container_of.iter().map(Option::is_none).collect();
     for &s in &free {
-        let near: Vec<usize> = near(s).into_iter().filter(|&o| is_free[o]).collect();
-        if let Some((o, evidence)) = support_of(s, &solids, &near) {
+        let near = overlaps.free_of(&solids, s, &free, &is_free, &mut near);
+        if let Some((o, evidence)) = support_of(s, &solids, near) {
             edges.push(Edge {
-                subject: names[s].to_owned(),
+                subject: names[s],
                 relation: Relation::Above,
-                object: names[o].to_owned(),
+                object: names[o],
                 evidence,
             });
         }
@@ -1256,17 +1362,19 @@ fn extract(
     let max_distance_cm = NEIGHBOUR_MAX_DISTANCE_SHARE * width.max(depth);
     let pairs = match search {
         PairSearch::Grid => nearest_pairs(&solids, &free, max_distance_cm),
-        #[cfg(test)]
         PairSearch::AllPairs => horizontal_pairs(&solids, &free, max_distance_cm),
+        #[cfg(test)]
+        PairSearch::Literal => literal_pairs(&solids, &free, max_distance_cm),
     };
-    for (s, o, relation, evidence) in pairs {
-        edges.push(Edge {
-            subject: names[s].to_owned(),
+    edges.extend(pairs.into_iter().map(|(s, o, rank)| {
+        let (relation, evidence) = proximity(s, o, &solids, max_distance_cm, rank);
+        Edge {
+            subject: names[s],
             relation,
-            object: names[o].to_owned(),
+            object: names[o],
             evidence,
-        });
-    }
+        }
+    }));
     let equally_spaced = if options.equally_spaced {
         spacings(&solids, &free, &names)
     } else {
@@ -1314,17 +1422,18 @@ fn containment_evidence(
 /// only the upper one (higher centre; on equal centres the later in layout order) is in the
 /// lower one. This also rules out longer cycles, so containment is a forest.
 ///
-/// `candidates(s)` lists, in layout order, every object that may contain `s` (a superset of
-/// those whose footprint overlaps it; all objects for the oracle).
+/// `overlaps` lists, in layout order, every object that may contain a given one (a superset of
+/// those whose footprint overlaps it); `near` is a buffer.
 fn containment(
     solids: &[Solid],
     containers: &[bool],
-    candidates: &dyn Fn(usize) -> Vec<usize>,
+    overlaps: &Overlaps,
+    near: &mut Vec<usize>,
 ) -> Vec<Option<(usize, Evidence)>> {
     (0..solids.len())
         .map(|s| {
             let mut best: Option<(usize, Evidence)> = None;
-            for c in candidates(s) {
+            for &c in overlaps.of(solids, s, near) {
                 let Some(evidence) = containment_evidence(s, c, solids, containers) else {
                     continue;
                 };
@@ -1370,15 +1479,103 @@ fn support_of(s: usize, solids: &[Solid], free: &[usize]) -> Option<(usize, Evid
     best
 }
 
-/// The horizontal pairs ("keep closest pairs, remove duals"), grouped by subject in layout
-/// order, each group in the order its pairs were chosen: each subject ranks every other
-/// object. The test oracle of [`nearest_pairs`].
-#[cfg(test)]
-fn horizontal_pairs(
+/// A horizontal pair: subject, object, and the object's rank among the subject's kept
+/// neighbours (from 0).
+type Pair = (usize, usize, usize);
+
+/// The subjects in the order the horizontal rule visits them: the free objects that are not
+/// raised in layout order, then the raised ones; with the raised flag of every object.
+fn visiting_order(solids: &[Solid], free: &[usize]) -> (Vec<usize>, Vec<bool>) {
+    let raised: Vec<bool> = solids.iter().map(|s| s.z_min > RAISED_Z_MIN_CM).collect();
+    let visit = free
+        .iter()
+        .filter(|&&i| !raised[i])
+        .chain(free.iter().filter(|&&i| raised[i]))
+        .copied()
+        .collect();
+    (visit, raised)
+}
+
+/// The relation of the pair (s, o), of rank `rank` (from 0) among the kept neighbours of
+/// `s`, and the numbers behind it.
+fn proximity(
+    s: usize,
+    o: usize,
     solids: &[Solid],
-    free: &[usize],
     max_distance_cm: f64,
-) -> Vec<(usize, usize, Relation, Evidence)> {
+    rank: usize,
+) -> (Relation, Evidence) {
+    let (ss, so) = (&solids[s], &solids[o]);
+    let (dx_cm, dy_cm) = (ss.x - so.x, ss.y - so.y);
+    (
+        Relation::horizontal(dx_cm, dy_cm),
+        Evidence::Proximity {
+            dx_cm,
+            dy_cm,
+            distance_2d_cm: (dx_cm * dx_cm + dy_cm * dy_cm).sqrt(),
+            distance_3d_cm: distance_3d(ss, so),
+            max_distance_cm,
+            rank: rank + 1,
+        },
+    )
+}
+
+/// The horizontal pairs ("keep closest pairs, remove duals"), grouped by subject in layout
+/// order, each group in the order its pairs were chosen: each subject looks at every other
+/// object, as the rules state it. Used for small scenes, and as the test oracle of
+/// [`nearest_pairs`].
+///
+/// The rules rank all objects by plane distance, drop those too far in space and keep the
+/// first 5: the same as keeping the 5 nearest of those near enough in space, which is what is
+/// done here, by insertion into a list of 5 (ties: layout order, as a stable ranking gives).
+fn horizontal_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> Vec<Pair> {
+    let n = solids.len();
+    let (visit, raised) = visiting_order(solids, free);
+    let mut emitted = vec![false; n * n];
+    let mut pairs: Vec<Pair> = Vec::with_capacity(NEIGHBOURS_PER_SUBJECT * free.len());
+    let within = Within::new(max_distance_cm);
+    for s in visit {
+        let ss = &solids[s];
+        let mut kept = [(0.0, 0usize); NEIGHBOURS_PER_SUBJECT];
+        let mut count = 0;
+        // `free` is in layout order: an object goes after every kept one at the same distance.
+        for &o in free {
+            if o == s || !within.holds(ss, &solids[o]) {
+                continue;
+            }
+            let (dx, dy) = (ss.x - solids[o].x, ss.y - solids[o].y);
+            let d2 = dx * dx + dy * dy;
+            if count == NEIGHBOURS_PER_SUBJECT && d2 >= kept[count - 1].0 {
+                continue;
+            }
+            let mut at = count.min(NEIGHBOURS_PER_SUBJECT - 1);
+            while at > 0 && kept[at - 1].0 > d2 {
+                kept[at] = kept[at - 1];
+                at -= 1;
+            }
+            kept[at] = (d2, o);
+            count = (count + 1).min(NEIGHBOURS_PER_SUBJECT);
+        }
+        for (rank, &(_, o)) in kept[..count].iter().enumerate() {
+            if (raised[s] && !raised[o]) || emitted[s * n + o] {
+                continue;
+            }
+            emitted[s * n + o] = true;
+            emitted[o * n + s] = true;
+            pairs.push((s, o, rank));
+        }
+    }
+    // Grouped by subject in layout order; the sort is stable, so each group keeps its order.
+    pairs.sort_by_key(|pair| pair.0);
+    pairs
+}
+
+/// The horizontal pairs word for word as SCENE_GRAPH.md states them: each subject ranks every
+/// other candidate by plane distance (a stable sort: ties in layout order), drops those whose
+/// distance in space exceeds the limit (by the square root), keeps the first 5. The oracle of
+/// [`horizontal_pairs`] and [`nearest_pairs`].
+#[cfg(test)]
+fn literal_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> Vec<Pair> {
     let n = solids.len();
     let raised: Vec<bool> = solids.iter().map(|s| s.z_min > RAISED_Z_MIN_CM).collect();
     let visit = free
@@ -1386,41 +1583,29 @@ fn horizontal_pairs(
         .filter(|&&i| !raised[i])
         .chain(free.iter().filter(|&&i| raised[i]));
     let mut emitted = vec![false; n * n];
-    let mut blocks: Vec<Vec<(usize, usize, Relation, Evidence)>> = vec![Vec::new(); n];
-    let mut ranked: Vec<(f64, usize)> = Vec::with_capacity(free.len());
+    let mut blocks: Vec<Vec<Pair>> = vec![Vec::new(); n];
     for &s in visit {
         let ss = &solids[s];
-        ranked.clear();
-        // `free` is in layout order and the sort is stable: equal distances keep layout order.
-        ranked.extend(free.iter().filter(|&&o| o != s).map(|&o| {
-            let (dx, dy) = (ss.x - solids[o].x, ss.y - solids[o].y);
-            (dx * dx + dy * dy, o)
-        }));
+        let mut ranked: Vec<(f64, usize)> = free
+            .iter()
+            .filter(|&&o| o != s)
+            .map(|&o| {
+                let (dx, dy) = (ss.x - solids[o].x, ss.y - solids[o].y);
+                (dx * dx + dy * dy, o)
+            })
+            .collect();
         ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
         let kept = ranked
             .iter()
             .filter(|&&(_, o)| distance_3d(ss, &solids[o]) <= max_distance_cm)
             .take(NEIGHBOURS_PER_SUBJECT);
-        for (rank, &(d2_squared, o)) in kept.enumerate() {
+        for (rank, &(_, o)) in kept.enumerate() {
             if (raised[s] && !raised[o]) || emitted[s * n + o] {
                 continue;
             }
             emitted[s * n + o] = true;
             emitted[o * n + s] = true;
-            let (dx_cm, dy_cm) = (ss.x - solids[o].x, ss.y - solids[o].y);
-            blocks[s].push((
-                s,
-                o,
-                Relation::horizontal(dx_cm, dy_cm),
-                Evidence::Proximity {
-                    dx_cm,
-                    dy_cm,
-                    distance_2d_cm: d2_squared.sqrt(),
-                    distance_3d_cm: distance_3d(ss, &solids[o]),
-                    max_distance_cm,
-                    rank: rank + 1,
-                },
-            ));
+            blocks[s].push((s, o, rank));
         }
     }
     blocks.into_iter().flatten().collect()
@@ -1429,22 +1614,13 @@ fn horizontal_pairs(
 /// [`horizontal_pairs`] without ranking every object: each subject's neighbours are searched
 /// ring by ring outward in a grid of the centres until the 5 nearest within the distance limit
 /// are certain (no unseen centre can come before them), or the rings pass the limit.
-fn nearest_pairs(
-    solids: &[Solid],
-    free: &[usize],
-    max_distance_cm: f64,
-) -> Vec<(usize, usize, Relation, Evidence)> {
-    let n = solids.len();
-    let raised: Vec<bool> = solids.iter().map(|s| s.z_min > RAISED_Z_MIN_CM).collect();
-    let visit = free
-        .iter()
-        .filter(|&&i| !raised[i])
-        .chain(free.iter().filter(|&&i| raised[i]));
+fn nearest_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> Vec<Pair> {
+    let (visit, raised) = visiting_order(solids, free);
     let grid = CentreGrid::new(solids, free);
     let mut emitted: std::collections::HashSet<(usize, usize)> = std::collections::HashSet::new();
-    let mut blocks: Vec<Vec<(usize, usize, Relation, Evidence)>> = vec![Vec::new(); n];
+    let mut pairs: Vec<Pair> = Vec::with_capacity(NEIGHBOURS_PER_SUBJECT * free.len());
     let mut found: Vec<(f64, usize)> = Vec::new();
-    for &s in visit {
+    for s in visit {
         let ss = &solids[s];
         found.clear();
         let (cx, cy) = grid.cell_of(ss.x, ss.y);
@@ -1470,27 +1646,15 @@ fn nearest_pairs(
                 break;
             }
         }
-        for (rank, &(d2_squared, o)) in found.iter().take(NEIGHBOURS_PER_SUBJECT).enumerate() {
+        for (rank, &(_, o)) in found.iter().take(NEIGHBOURS_PER_SUBJECT).enumerate() {
             if (raised[s] && !raised[o]) || !emitted.insert((s.min(o), s.max(o))) {
                 continue;
             }
-            let (dx_cm, dy_cm) = (ss.x - solids[o].x, ss.y - solids[o].y);
-            blocks[s].push((
-                s,
-                o,
-                Relation::horizontal(dx_cm, dy_cm),
-                Evidence::Proximity {
-                    dx_cm,
-                    dy_cm,
-                    distance_2d_cm: d2_squared.sqrt(),
-                    distance_3d_cm: distance_3d(ss, &solids[o]),
-                    max_distance_cm,
-                    rank: rank + 1,
-                },
-            ));
+            pairs.push((s, o, rank));
         }
     }
-    blocks.into_iter().flatten().collect()
+    pairs.sort_by_key(|pair| pair.0);
+    pairs
 }
 
 /// The bounds of a set of 2-D boxes and a uniform grid over them of about `cells_per_item`
@@ -1585,11 +1749,11 @@ impl BoxGrid {
         )
     }
 
-    /// The objects (other than `s`) whose boxes overlap that of `s`, in layout order.
-    fn overlapping(&self, solids: &[Solid], s: usize) -> Vec<usize> {
+    /// Appends to `out` the objects (other than `s`) whose boxes overlap that of `s`, in
+    /// layout order; `out` is empty on entry.
+    fn overlapping(&self, solids: &[Solid], s: usize, out: &mut Vec<usize>) {
         let ([x0, y0], [x1, y1]) = self.cell_range(&solids[s]);
         let (a, b) = Self::bounds(&solids[s]);
-        let mut out: Vec<usize> = Vec::new();
         for y in y0..=y1 {
             for x in x0..=x1 {
                 for &o in &self.cells[y * self.dims[0] + x] {
@@ -1606,7 +1770,6 @@ impl BoxGrid {
         }
         out.sort_unstable();
         out.dedup();
-        out
     }
 }
 
@@ -1694,8 +1857,41 @@ fn distance_3d(a: &Solid, b: &Solid) -> f64 {
     (dx * dx + dy * dy + dz * dz).sqrt()
 }
 
+/// The distance limit of horizontal pairs, `distance_3d(a, b) <= limit`, decided on squared
+/// distances where they are clear of the limit by a relative 1e-12 (far more than their
+/// rounding), and by the square root itself near it: the same answers, without a square root
+/// for almost every pair.
+struct Within {
+    limit: f64,
+    surely_in: f64,
+    surely_out: f64,
+}
+
+impl Within {
+    fn new(limit: f64) -> Self {
+        let squared = limit * limit;
+        Self {
+            limit,
+            surely_in: squared * (1.0 - 1e-12),
+            surely_out: squared * (1.0 + 1e-12),
+        }
+    }
+
+    fn holds(&self, a: &Solid, b: &Solid) -> bool {
+        let (dx, dy, dz) = (a.x - b.x, a.y - b.y, a.z - b.z);
+        let squared = dx * dx + dy * dy + dz * dz;
+        if squared < self.surely_in {
+            true
+        } else if squared > self.surely_out {
+            false
+        } else {
+            squared.sqrt() <= self.limit
+        }
+    }
+}
+
 /// The optional `are equally spaced along` triples, along x then y.
-fn spacings(solids: &[Solid], free: &[usize], names: &[&str]) -> Vec<EquallySpaced> {
+fn spacings<'a>(solids: &[Solid], free: &[usize], names: &[&'a str]) -> Vec<EquallySpaced<'a>> {
     let mut out = Vec::new();
     for axis in [Axis::X, Axis::Y] {
         let along = |i: usize| match axis {
@@ -1727,11 +1923,7 @@ fn spacings(solids: &[Solid], free: &[usize], names: &[&str]) -> Vec<EquallySpac
                         continue;
                     }
                     out.push(EquallySpaced {
-                        instances: [
-                            names[a].to_owned(),
-                            names[b].to_owned(),
-                            names[c].to_owned(),
-                        ],
+                        instances: [names[a], names[b], names[c]],
                         axis,
                         gaps_cm: [g1, g2],
                         spread_cm: spread,
@@ -1758,7 +1950,7 @@ mod tests {
     }
 
     /// The graph with the keyword container rule.
-    fn graph_of(scene: &GraphScene, options: &GraphOptions) -> SceneGraph {
+    fn graph_of<'a>(scene: &'a GraphScene, options: &GraphOptions) -> SceneGraph<'a> {
         extract_graph(scene, &keyword_containers(scene, options), options).expect("valid scene")
     }
 
@@ -1800,10 +1992,8 @@ mod tests {
             .enumerate()
             .map(|(i, ([x, y], _))| obj(&format!("o_{i}"), [*x, *y, 0.5], [1.0, 1.0, 1.0], 0.0))
             .collect();
-        let graph = graph_of(
-            &scene([0.0, 100.0, 0.0, 100.0], objects),
-            &GraphOptions::default(),
-        );
+        let layout = scene([0.0, 100.0, 0.0, 100.0], objects);
+        let graph = graph_of(&layout, &GraphOptions::default());
         for (node, (_, label)) in graph.nodes.iter().zip(cases) {
             assert_eq!(
                 node.is_at.label(),
@@ -1981,6 +2171,48 @@ mod tests {
             epsilon = 1e-9
         );
         assert_eq!(z_gap_cm, 0.0);
+    }
+
+    #[test]
+    fn the_distance_limit_on_squares_answers_as_the_square_root() {
+        let solid = |x: f64, y: f64, z: f64| Solid::new(&obj("a_0", [x, y, z], [1.0; 3], 0.0));
+        let origin = solid(0.0, 0.0, 0.0);
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let (mut checked, mut naive_wrong) = (0, 0);
+        for _ in 0..20_000 {
+            // A limit, and a point at that distance give or take a few units in the last place.
+            let limit: f64 = rng.random_range(0.01..500.0);
+            let direction = [
+                rng.random_range(-1.0..1.0f64),
+                rng.random_range(-1.0..1.0f64),
+                rng.random_range(-1.0..1.0f64),
+            ];
+            let norm = direction.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let ulps = rng.random_range(-4i64..=4);
+            let scale = f64::from_bits((limit / norm).to_bits().wrapping_add_signed(ulps));
+            let point = solid(
+                direction[0] * scale,
+                direction[1] * scale,
+                direction[2] * scale,
+            );
+            let exact = distance_3d(&point, &origin) <= limit;
+            assert_eq!(
+                Within::new(limit).holds(&point, &origin),
+                exact,
+                "{limit} {scale}"
+            );
+            let (dx, dy, dz) = (point.x, point.y, point.z);
+            naive_wrong += usize::from((dx * dx + dy * dy + dz * dz <= limit * limit) != exact);
+            checked += 1;
+        }
+        // Control: comparing squares without the square root near the limit gets some wrong.
+        assert!(naive_wrong > 0, "{naive_wrong} of {checked}");
+        // Far from the limit, no square root is needed and the answer is plain.
+        let within = Within::new(10.0);
+        assert!(within.holds(&solid(3.0, 4.0, 0.0), &origin));
+        assert!(within.holds(&solid(6.0, 8.0, 0.0), &origin));
+        assert!(!within.holds(&solid(6.0, 8.0, 0.001), &origin));
     }
 
     #[test]
@@ -2652,11 +2884,13 @@ mod tests {
         let options = GraphOptions::default();
         let flags = keyword_containers(&s, &options);
         let fast = extract(&s, &flags, &options, PairSearch::Grid).expect("valid");
-        let oracle = extract(&s, &flags, &options, PairSearch::AllPairs).expect("valid");
+        let oracle = extract(&s, &flags, &options, PairSearch::Literal).expect("valid");
         assert!(fast.edges.len() > count, "{}", fast.edges.len());
         assert!(fast.edges.iter().any(|e| e.relation == Relation::In));
         assert!(fast.edges.iter().any(|e| e.relation == Relation::Above));
         assert_eq!(fast, oracle);
+        let all_pairs = extract(&s, &flags, &options, PairSearch::AllPairs).expect("valid");
+        assert_eq!(all_pairs, oracle);
     }
 
     #[test]
@@ -2938,9 +3172,25 @@ mod tests {
         ) {
             let options = GraphOptions::default().with_equally_spaced(equally_spaced);
             let flags = keyword_containers(&s, &options);
+            let oracle = extract(&s, &flags, &options, PairSearch::Literal).expect("valid");
             let fast = extract(&s, &flags, &options, PairSearch::Grid).expect("valid");
-            let oracle = extract(&s, &flags, &options, PairSearch::AllPairs).expect("valid");
-            prop_assert_eq!(fast, oracle);
+            prop_assert_eq!(&fast, &oracle);
+            let all_pairs = extract(&s, &flags, &options, PairSearch::AllPairs).expect("valid");
+            prop_assert_eq!(&all_pairs, &oracle);
+            // What callers get: the all-pairs search for a table's few objects, else the grids.
+            let chosen = extract_graph(&s, &flags, &options).expect("valid");
+            prop_assert_eq!(&chosen, &oracle);
+        }
+
+        #[test]
+        fn small_scenes_give_the_literal_output(
+            s in arb_scene(),
+            equally_spaced in any::<bool>(),
+        ) {
+            let options = GraphOptions::default().with_equally_spaced(equally_spaced);
+            let flags = keyword_containers(&s, &options);
+            let oracle = extract(&s, &flags, &options, PairSearch::Literal).expect("valid");
+            prop_assert_eq!(extract_graph(&s, &flags, &options).expect("valid"), oracle);
         }
 
         #[test]
@@ -3021,9 +3271,9 @@ mod tests {
             let mut horizontal: BTreeMap<&str, usize> = BTreeMap::new();
             for edge in &graph.edges {
                 match edge.relation {
-                    Relation::Above => *above.entry(&edge.subject).or_default() += 1,
+                    Relation::Above => *above.entry(edge.subject).or_default() += 1,
                     Relation::In => {}
-                    _ => *horizontal.entry(&edge.subject).or_default() += 1,
+                    _ => *horizontal.entry(edge.subject).or_default() += 1,
                 }
             }
             prop_assert!(above.values().all(|&n| n == 1));

@@ -16,7 +16,7 @@
 use std::collections::BTreeSet;
 use std::path::PathBuf;
 
-use mesa_schemas::artifacts::{TaskRecord, TASKS_SCHEMA};
+use mesa_schemas::artifacts::{GraphArtifact, TaskRecord, TASKS_SCHEMA};
 use mesa_schemas::output::{parse_model_output, FINAL_ANSWER_MARKER};
 use mesa_schemas::{GalleryRecord, LlmLayout, TaskInfo};
 use mesa_stages::graph::{extract_graph, keyword_containers, GraphOptions, GraphScene};
@@ -72,12 +72,14 @@ fn gallery() -> Vec<Gallery> {
         .collect()
 }
 
-fn graph_of(layout: &LlmLayout) -> (Vec<String>, Vec<bool>, mesa_stages::graph::SceneGraph) {
+/// The triplet lines, container flags and `graph.json` of a published layout.
+fn graph_of(layout: &LlmLayout, name: &str) -> (Vec<String>, Vec<bool>, GraphArtifact) {
     let scene = GraphScene::from_llm(layout);
     let options = GraphOptions::default();
     let containers = keyword_containers(&scene, &options);
     let graph = extract_graph(&scene, &containers, &options).expect("graph");
-    (graph.triplet_lines(), containers, graph)
+    let artifact = graph.to_artifact(name, "layout.json");
+    (graph.triplet_lines(), containers, artifact)
 }
 
 fn task_record(scene_id: &str, index: u32, info: TaskInfo, reasoning: &str) -> TaskRecord {
@@ -104,7 +106,7 @@ fn outputs_assembled_from_published_layouts_reproduce_the_records() {
     for g in gallery() {
         // The published layouts already have one decimal: rounding changes nothing.
         assert_eq!(round_layout(&g.layout, 1), g.layout, "{}", g.name);
-        let (lines, containers, _) = graph_of(&g.layout);
+        let (lines, containers, _) = graph_of(&g.layout, &g.name);
         let input = SceneRecordsInput {
             scene_id: g.name.clone(),
             layout: g.layout.clone(),
@@ -201,7 +203,7 @@ fn the_reasoning_check_reads_the_published_paragraphs() {
 }
 
 fn scene_input(g: &Gallery) -> SceneInput {
-    let (lines, _, graph) = graph_of(&g.layout);
+    let (lines, _, graph) = graph_of(&g.layout, &g.name);
     SceneInput {
         scene_id: format!("gallery_{}", g.name),
         table_type: "dining_table".to_owned(),
@@ -209,7 +211,7 @@ fn scene_input(g: &Gallery) -> SceneInput {
         layout_file: "layout.json".to_owned(),
         layout_sha256: "0".repeat(64),
         graph_lines: lines,
-        graph: graph.to_artifact(&g.name, "layout.json"),
+        graph,
         views: Vec::new(),
     }
 }
@@ -276,7 +278,7 @@ fn every_corruption_of_every_published_task_is_what_it_says() {
         let tasks = write_scene_tasks(&input, &TasksConfig::default(), &prompts, &NoChat, 0)
             .expect("tasks")
             .records;
-        let (lines, containers, _) = graph_of(&g.layout);
+        let (lines, containers, _) = graph_of(&g.layout, &g.name);
         let scene = SceneRecordsInput {
             scene_id: input.scene_id.clone(),
             layout: g.layout.clone(),

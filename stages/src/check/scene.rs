@@ -53,13 +53,19 @@ fn holding_edges(
     containers: &[bool],
     options: &GraphOptions,
 ) -> Result<Vec<(String, &'static str, String)>, String> {
-    let graph = extract_graph(&GraphScene::from_dataset(layout), containers, options)
-        .map_err(|e| e.to_string())?;
+    let scene = GraphScene::from_dataset(layout);
+    let graph = extract_graph(&scene, containers, options).map_err(|e| e.to_string())?;
     Ok(graph
         .edges
         .iter()
         .filter(|e| matches!(e.relation, Relation::In | Relation::Above))
-        .map(|e| (e.subject.clone(), e.relation.label(), e.object.clone()))
+        .map(|e| {
+            (
+                e.subject.to_owned(),
+                e.relation.label(),
+                e.object.to_owned(),
+            )
+        })
         .collect())
 }
 
