@@ -80,8 +80,17 @@ impl Bounds {
     }
 }
 
-/// A hull's points as given and its outward triangles.
-type Faces = (Vec<[f64; 3]>, Vec<[u32; 3]>);
+/// A hull's points as given and its triangles, to find its faces' normals from.
+#[derive(Debug)]
+struct Faces {
+    /// The points as given, table frame, metres.
+    points: Vec<[f64; 3]>,
+    /// The triangles (indices into `points`), shared with the shape they were placed from.
+    triangles: Arc<[[u32; 3]]>,
+    /// Whether the triangles wind inward (a mirroring placement turns them inside out): the
+    /// normals are then those of the triangles, negated.
+    inward: bool,
+}
 
 /// One convex part placed in the table frame.
 #[derive(Debug, Clone)]
@@ -122,22 +131,27 @@ impl SupportMap for PointsRef<'_> {
 impl Hull {
     /// The hull of `points` (table frame, metres); `None` without points.
     pub fn new(points: &[[f64; 3]]) -> Option<Self> {
-        Self::with_faces(points, &[])
+        Self::with_faces(points.to_vec(), Arc::new([]), false)
     }
 
-    /// The hull of `points` whose faces are `triangles` (indices into `points`, outward
-    /// winding), which make penetration depths exact for face contacts.
-    pub fn with_faces(points: &[[f64; 3]], triangles: &[[u32; 3]]) -> Option<Self> {
+    /// The hull of `points` whose faces are `triangles` (indices into `points`), which make
+    /// penetration depths exact for face contacts. The triangles wind outward, or inward when
+    /// `inward` (a mirrored placement of outward ones: they are shared with the shape, not
+    /// rewound). The points are kept as given, without a copy.
+    pub fn with_faces(
+        points: Vec<[f64; 3]>,
+        triangles: Arc<[[u32; 3]]>,
+        inward: bool,
+    ) -> Option<Self> {
         if points.is_empty() {
             return None;
         }
         let mut bounds = Bounds::empty();
-        for p in points {
+        for p in &points {
             bounds = bounds.union(&Bounds { min: *p, max: *p });
         }
         let center = bounds.center();
-        let raw = points;
-        let points = points
+        let relative = points
             .iter()
             .map(|p| {
                 Point::new(
@@ -149,8 +163,12 @@ impl Hull {
             .collect();
         Some(Self {
             center,
-            points,
-            faces: Arc::new((raw.to_vec(), triangles.to_vec())),
+            points: relative,
+            faces: Arc::new(Faces {
+                points,
+                triangles,
+                inward,
+            }),
             normals: OnceLock::new(),
             bounds,
         })
@@ -160,11 +178,21 @@ impl Hull {
     /// given (a later [`Hull::translate`] leaves them as they were).
     fn normals(&self) -> &[[f64; 3]] {
         self.normals.get_or_init(|| {
-            let (raw, triangles) = &*self.faces;
+            let Faces {
+                points: raw,
+                triangles,
+                inward,
+            } = &*self.faces;
             let mut normals: Vec<[f64; 3]> = Vec::with_capacity(triangles.len());
-            for t in triangles {
+            for t in triangles.iter() {
                 let [a, b, c] = t.map(|i| raw[i as usize]);
-                let (u, v) = (sub(b, a), sub(c, a));
+                // Inward triangles are read rewound, [a, c, b]: the same arithmetic, so the
+                // same bits (a negated cross product would differ in the sign of zeros).
+                let (u, v) = if *inward {
+                    (sub(c, a), sub(b, a))
+                } else {
+                    (sub(b, a), sub(c, a))
+                };
                 let n = [
                     u[1] * v[2] - u[2] * v[1],
                     u[2] * v[0] - u[0] * v[2],
@@ -417,7 +445,8 @@ mod tests {
             .iter()
             .map(|p| turn(p.map(f64::from)))
             .collect();
-        let mut hull = Hull::with_faces(&points, &mesh.triangles).expect("hull");
+        let triangles: Arc<[[u32; 3]]> = mesh.triangles.clone().into();
+        let mut hull = Hull::with_faces(points.clone(), triangles.clone(), false).expect("hull");
         hull.translate([1.0, -2.0, 0.5]);
         let normals = hull.normals().to_vec();
         assert_eq!(normals.len(), 6, "{normals:?}");
@@ -431,6 +460,21 @@ mod tests {
             }
         }
         assert!(Hull::new(&points).expect("hull").normals().is_empty());
+
+        // Mirrored: the points through x = 0, the same triangles marked inward give, bit for
+        // bit, the normals of the triangles rewound. Control: not marked, they point inward.
+        let mirrored: Vec<[f64; 3]> = points.iter().map(|p| [-p[0], p[1], p[2]]).collect();
+        let rewound: Arc<[[u32; 3]]> = mesh.triangles.iter().map(|t| [t[0], t[2], t[1]]).collect();
+        let inward = Hull::with_faces(mirrored.clone(), triangles.clone(), true).expect("hull");
+        let outward = Hull::with_faces(mirrored.clone(), rewound, false).expect("hull");
+        let bits = |normals: &[[f64; 3]]| -> Vec<[u64; 3]> {
+            normals.iter().map(|n| n.map(f64::to_bits)).collect()
+        };
+        assert_eq!(bits(inward.normals()), bits(outward.normals()));
+        let unmarked = Hull::with_faces(mirrored, triangles, false).expect("hull");
+        for (n, m) in unmarked.normals().iter().zip(outward.normals()) {
+            assert_abs_diff_eq!(dot(*n, *m), -1.0, epsilon = 1e-12);
+        }
     }
 
     #[test]

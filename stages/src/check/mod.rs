@@ -42,7 +42,7 @@ use serde::{Deserialize, Serialize};
 
 use self::geometry::{fall_distance, proximity, Bounds, Hull};
 pub use self::scene::{check_layout, LayoutSource as CheckedLayout, SceneCheck, SETTLED_LAYOUT};
-pub use self::shapes::{AssetShape, Body, HullMesh, Pose, ShapeError};
+pub use self::shapes::{AssetShape, Body, HullMesh, PartMesh, Pose, ShapeError};
 
 /// Which layout of a scene `mesa check` reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]

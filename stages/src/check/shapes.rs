@@ -69,6 +69,10 @@ impl PartialEq for MeshSource {
 /// A convex hull as vertices and triangles.
 pub type HullMesh = (Vec<[f64; 3]>, Vec<[u32; 3]>);
 
+/// A convex part of a shape: its vertices and triangles, the triangles shared by every
+/// placement of the part.
+pub type PartMesh = (Vec<[f64; 3]>, Arc<[[u32; 3]]>);
+
 /// An asset's convex parts, relative to the centre of its bounding box.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AssetShape {
@@ -76,7 +80,7 @@ pub struct AssetShape {
     pub uid: String,
     /// The parts: hull vertices (metres, relative to the bounding-box centre of the asset) and
     /// faces.
-    parts: Vec<HullMesh>,
+    parts: Vec<PartMesh>,
     /// The asset's size [w, d, h] in its table-aligned frame, metres.
     pub size_m: [f64; 3],
     /// How far the parts reach outside the asset's mesh, as `mesa assets` measured it, in the
@@ -149,7 +153,8 @@ impl AssetShape {
                 .iter()
                 .map(|p| [p[0] - c[0], p[1] - c[1], p[2] - c[2]])
                 .collect();
-            parts.push(convex_hull(&centred));
+            let (points, triangles) = convex_hull(&centred);
+            parts.push((points, triangles.into()));
         }
         let d = &shapes.decomposition;
         let reach_m = d
@@ -170,7 +175,13 @@ impl AssetShape {
     pub fn from_parts(uid: &str, parts: Vec<Vec<[f64; 3]>>, size_m: [f64; 3]) -> Self {
         Self {
             uid: uid.to_owned(),
-            parts: parts.iter().map(|p| convex_hull(p)).collect(),
+            parts: parts
+                .iter()
+                .map(|p| {
+                    let (points, triangles) = convex_hull(p);
+                    (points, triangles.into())
+                })
+                .collect(),
             size_m,
             reach_m: 0.0,
             mesh: MeshSource::default(),
@@ -217,7 +228,7 @@ impl AssetShape {
     /// The convex parts: hull vertices (metres, relative to the centre of the asset's bounding
     /// box, in its table-aligned frame) and outward triangles (none for a part that spans no
     /// volume).
-    pub fn parts(&self) -> &[HullMesh] {
+    pub fn parts(&self) -> &[PartMesh] {
         &self.parts
     }
 
@@ -245,13 +256,8 @@ impl AssetShape {
                     })
                     .collect();
                 // A mirroring scale turns the faces inside out.
-                if s[0] * s[1] * s[2] < 0.0 {
-                    let flipped: Vec<[u32; 3]> =
-                        triangles.iter().map(|t| [t[0], t[2], t[1]]).collect();
-                    Hull::with_faces(&placed, &flipped)
-                } else {
-                    Hull::with_faces(&placed, triangles)
-                }
+                let inward = s[0] * s[1] * s[2] < 0.0;
+                Hull::with_faces(placed, Arc::clone(triangles), inward)
             })
             .collect()
     }
