@@ -1270,6 +1270,20 @@ impl Overlaps {
         }
     }
 
+    /// [`Overlaps::of`] among the containers (`containers` lists them all, in layout order).
+    fn containers_of<'b>(
+        &'b self,
+        solids: &[Solid],
+        s: usize,
+        containers: &'b [usize],
+        buffer: &'b mut Vec<usize>,
+    ) -> &'b [usize] {
+        match self {
+            Self::All(_) => containers,
+            Self::Grid(_) => self.of(solids, s, buffer),
+        }
+    }
+
     /// [`Overlaps::of`] among the `free` objects (in layout order; `is_free` their flags).
     fn free_of<'b>(
         &'b self,
@@ -1432,10 +1446,11 @@ fn containment(
     overlaps: &Overlaps,
     near: &mut Vec<usize>,
 ) -> Vec<Option<(usize, Evidence)>> {
+    let listed: Vec<usize> = (0..solids.len()).filter(|&c| containers[c]).collect();
     (0..solids.len())
         .map(|s| {
             let mut best: Option<(usize, Evidence)> = None;
-            for &c in overlaps.of(solids, s, near) {
+            for &c in overlaps.containers_of(solids, s, &listed, near) {
                 let Some(evidence) = containment_evidence(s, c, solids, containers) else {
                     continue;
                 };
@@ -1536,28 +1551,41 @@ fn horizontal_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> V
     let mut emitted = vec![false; n * n];
     let mut pairs: Vec<Pair> = Vec::with_capacity(NEIGHBOURS_PER_SUBJECT * free.len());
     let within = Within::new(max_distance_cm);
+    let centres: Vec<[f64; 3]> = free
+        .iter()
+        .map(|&o| [solids[o].x, solids[o].y, solids[o].z])
+        .collect();
     for s in visit {
         let ss = &solids[s];
-        let mut kept = [(0.0, 0usize); NEIGHBOURS_PER_SUBJECT];
-        let mut count = 0;
+        // The nearest so far by increasing plane distance; an infinite distance is a free slot.
+        let mut kept = [(f64::INFINITY, 0usize); NEIGHBOURS_PER_SUBJECT];
         // `free` is in layout order: an object goes after every kept one at the same distance.
-        for &o in free {
-            if o == s || !within.holds(ss, &solids[o]) {
-                continue;
-            }
-            let (dx, dy) = (ss.x - solids[o].x, ss.y - solids[o].y);
+        for (&o, centre) in free.iter().zip(&centres) {
+            let (dx, dy, dz) = (ss.x - centre[0], ss.y - centre[1], ss.z - centre[2]);
             let d2 = dx * dx + dy * dy;
-            if count == NEIGHBOURS_PER_SUBJECT && d2 >= kept[count - 1].0 {
-                continue;
+            // `Within::holds` on these numbers, the clear cases chosen without a jump.
+            let squared = d2 + dz * dz;
+            let mut key = if squared < within.surely_in {
+                d2
+            } else {
+                f64::INFINITY
+            };
+            if squared >= within.surely_in && within.holds_squared(squared) {
+                key = d2;
             }
-            let mut at = count.min(NEIGHBOURS_PER_SUBJECT - 1);
-            while at > 0 && kept[at - 1].0 > d2 {
-                kept[at] = kept[at - 1];
-                at -= 1;
+            if o == s {
+                key = f64::INFINITY;
             }
-            kept[at] = (d2, o);
-            count = (count + 1).min(NEIGHBOURS_PER_SUBJECT);
+            if key < kept[NEIGHBOURS_PER_SUBJECT - 1].0 {
+                let mut at = NEIGHBOURS_PER_SUBJECT - 1;
+                while at > 0 && kept[at - 1].0 > key {
+                    kept[at] = kept[at - 1];
+                    at -= 1;
+                }
+                kept[at] = (key, o);
+            }
         }
+        let count = kept.iter().take_while(|(d2, _)| d2.is_finite()).count();
         for (rank, &(_, o)) in kept[..count].iter().enumerate() {
             if (raised[s] && !raised[o]) || emitted[s * n + o] {
                 continue;
@@ -1879,9 +1907,14 @@ impl Within {
         }
     }
 
+    #[cfg(test)]
     fn holds(&self, a: &Solid, b: &Solid) -> bool {
         let (dx, dy, dz) = (a.x - b.x, a.y - b.y, a.z - b.z);
-        let squared = dx * dx + dy * dy + dz * dz;
+        self.holds_squared(dx * dx + dy * dy + dz * dz)
+    }
+
+    /// Whether a squared distance is within the limit.
+    fn holds_squared(&self, squared: f64) -> bool {
         if squared < self.surely_in {
             true
         } else if squared > self.surely_out {
