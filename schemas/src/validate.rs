@@ -180,9 +180,22 @@ fn push_key(path: &mut String, key: &str) -> usize {
 
 /// Appends `[i]` to the path being walked; returns the length to truncate back to.
 fn push_index(path: &mut String, i: usize) -> usize {
-    use std::fmt::Write as _;
     let len = path.len();
-    let _ = write!(path, "[{i}]");
+    // The digits by hand: the formatting machinery cost more than the rest of a small value's
+    // visit.
+    let mut digits = [0u8; 20];
+    let (mut rest, mut start) = (i, digits.len());
+    loop {
+        start -= 1;
+        digits[start] = b'0' + (rest % 10) as u8;
+        rest /= 10;
+        if rest == 0 {
+            break;
+        }
+    }
+    path.push('[');
+    path.extend(digits[start..].iter().map(|&d| char::from(d)));
+    path.push(']');
     len
 }
 
@@ -227,6 +240,62 @@ struct Walker<'a> {
     root: &'a Value,
 }
 
+/// The keywords of one schema object that the walk reads, found in one pass over its entries:
+/// the walk visits every value of a document, and looking each keyword up by name in every
+/// schema it passes cost more than the checks themselves.
+#[derive(Default)]
+struct Keywords<'a> {
+    any_of: Option<&'a Value>,
+    one_of: Option<&'a Value>,
+    all_of: Option<&'a Value>,
+    types: Option<&'a Value>,
+    constant: Option<&'a Value>,
+    options: Option<&'a Value>,
+    properties: Option<&'a Value>,
+    required: Option<&'a Value>,
+    additional: Option<&'a Value>,
+    min_items: Option<&'a Value>,
+    max_items: Option<&'a Value>,
+    prefix_items: Option<&'a Value>,
+    items: Option<&'a Value>,
+    minimum: Option<&'a Value>,
+    exclusive_minimum: Option<&'a Value>,
+    maximum: Option<&'a Value>,
+    exclusive_maximum: Option<&'a Value>,
+    min_length: Option<&'a Value>,
+}
+
+impl<'a> Keywords<'a> {
+    fn of(schema: &'a Map<String, Value>) -> Self {
+        let mut found = Self::default();
+        for (key, value) in schema {
+            let slot = match key.as_str() {
+                "anyOf" => &mut found.any_of,
+                "oneOf" => &mut found.one_of,
+                "allOf" => &mut found.all_of,
+                "type" => &mut found.types,
+                "const" => &mut found.constant,
+                "enum" => &mut found.options,
+                "properties" => &mut found.properties,
+                "required" => &mut found.required,
+                "additionalProperties" => &mut found.additional,
+                "minItems" => &mut found.min_items,
+                "maxItems" => &mut found.max_items,
+                "prefixItems" => &mut found.prefix_items,
+                "items" => &mut found.items,
+                "minimum" => &mut found.minimum,
+                "exclusiveMinimum" => &mut found.exclusive_minimum,
+                "maximum" => &mut found.maximum,
+                "exclusiveMaximum" => &mut found.exclusive_maximum,
+                "minLength" => &mut found.min_length,
+                _ => continue,
+            };
+            *slot = Some(value);
+        }
+        found
+    }
+}
+
 impl<'a> Walker<'a> {
     fn resolve(&self, schema: &'a Value) -> &'a Value {
         let mut schema = schema;
@@ -269,26 +338,27 @@ impl<'a> Walker<'a> {
         };
         // Made only for a problem (it formats the schema's words).
         let expected = || expectation(schema, own_description);
+        let keywords = Keywords::of(schema);
 
-        if let Some(branches) = schema
-            .get("anyOf")
-            .or_else(|| schema.get("oneOf"))
+        if let Some(branches) = keywords
+            .any_of
+            .or(keywords.one_of)
             .and_then(Value::as_array)
         {
             self.walk_alternatives(branches, value, path, &expected, out);
         }
-        if let Some(all) = schema.get("allOf").and_then(Value::as_array) {
+        if let Some(all) = keywords.all_of.and_then(Value::as_array) {
             for branch in all {
                 self.walk(branch, value, path, out);
             }
         }
-        if let Some(types) = schema.get("type") {
+        if let Some(types) = keywords.types {
             if !type_matches(types, value) {
                 out.push(Problem::new(path.as_str(), describe(value), expected()));
                 return;
             }
         }
-        if let Some(constant) = schema.get("const") {
+        if let Some(constant) = keywords.constant {
             if constant != value {
                 out.push(Problem::new(
                     path.as_str(),
@@ -298,7 +368,7 @@ impl<'a> Walker<'a> {
                 return;
             }
         }
-        if let Some(options) = schema.get("enum").and_then(Value::as_array) {
+        if let Some(options) = keywords.options.and_then(Value::as_array) {
             if !options.contains(value) {
                 let list: Vec<String> = options.iter().map(Value::to_string).collect();
                 out.push(Problem::new(
@@ -310,15 +380,17 @@ impl<'a> Walker<'a> {
             }
         }
         match value {
-            Value::Object(map) => self.walk_object(schema, map, path, out),
-            Value::Array(items) => self.walk_array(schema, items, path, own_description, out),
+            Value::Object(map) => self.walk_object(&keywords, map, path, out),
+            Value::Array(items) => {
+                self.walk_array(schema, &keywords, items, path, own_description, out)
+            }
             Value::Number(number) => {
                 if let Some(x) = number.as_f64() {
-                    check_bounds(schema, own_description, x, path.as_str(), out);
+                    check_bounds(schema, &keywords, own_description, x, path.as_str(), out);
                 }
             }
             Value::String(text) => {
-                if let Some(min) = schema.get("minLength").and_then(Value::as_u64) {
+                if let Some(min) = keywords.min_length.and_then(Value::as_u64) {
                     if (text.chars().count() as u64) < min {
                         out.push(Problem::new(
                             path.as_str(),
@@ -386,13 +458,13 @@ impl<'a> Walker<'a> {
 
     fn walk_object(
         &self,
-        schema: &'a Map<String, Value>,
+        keywords: &Keywords<'a>,
         map: &Map<String, Value>,
         path: &mut String,
         out: &mut Vec<Problem>,
     ) {
-        let properties = schema.get("properties").and_then(Value::as_object);
-        if let Some(required) = schema.get("required").and_then(Value::as_array) {
+        let properties = keywords.properties.and_then(Value::as_object);
+        if let Some(required) = keywords.required.and_then(Value::as_array) {
             for key in required.iter().filter_map(Value::as_str) {
                 if !map.contains_key(key) {
                     let expected = properties
@@ -421,7 +493,7 @@ impl<'a> Walker<'a> {
             if let Some(property) = properties.and_then(|p| p.get(key)) {
                 self.walk(property, item, path, out);
             } else {
-                match schema.get("additionalProperties") {
+                match keywords.additional {
                     Some(Value::Bool(false)) => {
                         let known: Vec<&str> = properties
                             .map(|p| p.keys().map(String::as_str).collect())
@@ -443,13 +515,14 @@ impl<'a> Walker<'a> {
     fn walk_array(
         &self,
         schema: &'a Map<String, Value>,
+        keywords: &Keywords<'a>,
         items: &[Value],
         path: &mut String,
         description: Option<&str>,
         out: &mut Vec<Problem>,
     ) {
-        let min = schema.get("minItems").and_then(Value::as_u64);
-        let max = schema.get("maxItems").and_then(Value::as_u64);
+        let min = keywords.min_items.and_then(Value::as_u64);
+        let max = keywords.max_items.and_then(Value::as_u64);
         let count = items.len() as u64;
         let count_ok = min.is_none_or(|m| count >= m) && max.is_none_or(|m| count <= m);
         if !count_ok {
@@ -470,11 +543,9 @@ impl<'a> Walker<'a> {
                 wanted,
             ));
         }
-        let prefix = schema.get("prefixItems").and_then(Value::as_array);
+        let prefix = keywords.prefix_items.and_then(Value::as_array);
         for (i, item) in items.iter().enumerate() {
-            let item_schema = prefix
-                .and_then(|p| p.get(i))
-                .or_else(|| schema.get("items"));
+            let item_schema = prefix.and_then(|p| p.get(i)).or(keywords.items);
             if let Some(item_schema) = item_schema {
                 let len = push_index(path, i);
                 self.walk(item_schema, item, path, out);
@@ -486,29 +557,30 @@ impl<'a> Walker<'a> {
 
 fn check_bounds(
     schema: &Map<String, Value>,
+    keywords: &Keywords<'_>,
     description: Option<&str>,
     x: f64,
     path: &str,
     out: &mut Vec<Problem>,
 ) {
-    let bound = |key: &str| schema.get(key).and_then(Value::as_f64);
+    let bound = |keyword: Option<&Value>| keyword.and_then(Value::as_f64);
     let mut violated = None;
-    if let Some(m) = bound("minimum") {
+    if let Some(m) = bound(keywords.minimum) {
         if x < m {
             violated = Some(format!("a number >= {m}"));
         }
     }
-    if let Some(m) = bound("exclusiveMinimum") {
+    if let Some(m) = bound(keywords.exclusive_minimum) {
         if x <= m {
             violated = Some(format!("a number > {m}"));
         }
     }
-    if let Some(m) = bound("maximum") {
+    if let Some(m) = bound(keywords.maximum) {
         if x > m {
             violated = Some(format!("a number <= {m}"));
         }
     }
-    if let Some(m) = bound("exclusiveMaximum") {
+    if let Some(m) = bound(keywords.exclusive_maximum) {
         if x >= m {
             violated = Some(format!("a number < {m}"));
         }
@@ -611,6 +683,17 @@ pub fn describe(value: &Value) -> String {
 #[cfg(test)]
 mod instance_name_tests {
     use super::*;
+
+    #[test]
+    fn indices_are_written_in_decimal() {
+        for i in [0usize, 7, 10, 99, 100, 12_345, usize::MAX] {
+            let mut path = "$.objects".to_owned();
+            let len = push_index(&mut path, i);
+            assert_eq!(path, format!("$.objects[{i}]"));
+            path.truncate(len);
+            assert_eq!(path, "$.objects");
+        }
+    }
 
     #[test]
     fn the_names_mesatask_uses_pass() {
