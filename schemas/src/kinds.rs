@@ -58,7 +58,8 @@ fn no_semantics(_: &Value) -> Vec<Problem> {
 }
 
 fn typed<T: DeserializeOwned>(value: &Value, check: impl Fn(&T) -> Vec<Problem>) -> Vec<Problem> {
-    match serde_json::from_value::<T>(value.clone()) {
+    // Read from the borrowed value: no copy of the document.
+    match T::deserialize(value) {
         Ok(typed) => check(&typed),
         // The structural walk already reported why; nothing more to say here.
         Err(_) => Vec::new(),
@@ -453,12 +454,20 @@ impl Kind {
     /// Validates one JSON document of this kind: non-finite numbers, the JSON Schema, then the
     /// semantic checks (only when the structure is sound, so each problem is reported once).
     pub fn validate_value(&self, value: &Value) -> Vec<Problem> {
-        let mut problems = Vec::new();
-        nonfinite_problems(value, "$", &mut problems);
-        validate_against(self.json_schema(), value, "$", &mut problems);
+        let mut problems = self.structure_problems(value);
         if problems.is_empty() {
             problems.extend((self.semantic)(value));
         }
+        problems
+    }
+
+    /// The first part of [`Kind::validate_value`]: non-finite numbers and the JSON Schema. A
+    /// reader that converts the document to its type anyway runs the semantic checks on the
+    /// typed value itself, converting once.
+    pub fn structure_problems(&self, value: &Value) -> Vec<Problem> {
+        let mut problems = Vec::new();
+        nonfinite_problems(value, "$", &mut problems);
+        validate_against(self.json_schema(), value, "$", &mut problems);
         problems
     }
 }

@@ -134,14 +134,30 @@ pub fn read_layout_value(value: &Value) -> Result<ReadLayout, Vec<Problem>> {
     } else {
         "llm-layout"
     };
-    let problems = validate_kind(kind, value);
+    // The structure, then the semantic checks on the typed layout: what `validate_kind` does,
+    // with the document converted once.
+    let problems = match Kind::by_name(kind) {
+        Some(kind) => kind.structure_problems(value),
+        None => validate_kind(kind, value),
+    };
     if !problems.is_empty() {
         return Err(name_objects(problems, Some(value), "$"));
     }
-    let layout = match form {
-        LayoutForm::Dataset => AnyLayout::Dataset(typed(value)?),
-        _ => AnyLayout::Llm(typed(value)?),
+    let (layout, problems) = match form {
+        LayoutForm::Dataset => {
+            let layout: DatasetLayout = typed(value)?;
+            let problems = layout.problems();
+            (AnyLayout::Dataset(layout), problems)
+        }
+        _ => {
+            let layout: LlmLayout = typed(value)?;
+            let problems = layout.problems();
+            (AnyLayout::Llm(layout), problems)
+        }
     };
+    if !problems.is_empty() {
+        return Err(name_objects(problems, Some(value), "$"));
+    }
     Ok(ReadLayout { form, layout })
 }
 
@@ -219,6 +235,81 @@ mod tests {
             layout_form_of(&serde_json::json!({"objects": []})),
             LayoutForm::Dataset
         );
+    }
+
+    /// Reading a layout converts it to its type once and runs the semantic checks on that:
+    /// the problems are exactly those of the kind's whole validation, named the same way.
+    /// Control: each document has problems of the kind checked (structure or semantic).
+    #[test]
+    fn one_conversion_reports_what_the_kinds_validation_reports() {
+        let object = |name: &str, quat: &str| {
+            format!(
+                r#"{{"instance": "{name}", "category": "mug", "position": [1, 2, 3],
+                "size": [1, 1, 1], "rotation": {quat}, "scale_factor": [1, 1, 1],
+                "retrieved_uid": "u"}}"#
+            )
+        };
+        let unit = "[0, 0, 0, 1]";
+        let dataset = |zone: &str, objects: &[String]| {
+            format!(
+                r#"{{"schema": "mesa.layout/1", "item_placement_zone": {zone},
+                "objects": [{}]}}"#,
+                objects.join(",")
+            )
+        };
+        let llm = |zone: &str, names: &[&str]| {
+            let objects: Vec<String> = names
+                .iter()
+                .map(|n| {
+                    format!(
+                        r#"{{"instance": "{n}", "size": [1, 1, 1], "position": [0, 0, 0],
+                        "z_rotation": 0}}"#
+                    )
+                })
+                .collect();
+            format!(
+                r#"{{"item_placement_zone": {zone}, "objects": [{}]}}"#,
+                objects.join(",")
+            )
+        };
+        let cases = [
+            (
+                "layout",
+                dataset("[0, 10, 0, 10]", &[object("mug_0", unit)]),
+            ),
+            // Semantic: a reversed zone, a repeated instance, a quaternion far from unit.
+            (
+                "layout",
+                dataset(
+                    "[10, 0, 0, 10]",
+                    &[object("mug_0", unit), object("mug_0", "[0, 0, 0, 2]")],
+                ),
+            ),
+            // Structural: a missing size.
+            (
+                "layout",
+                dataset(
+                    "[0, 10, 0, 10]",
+                    &[object("mug_0", unit).replace(r#""size": [1, 1, 1],"#, "")],
+                ),
+            ),
+            ("llm-layout", llm("[0, 10, 0, 10]", &["a_0", "b_0"])),
+            ("llm-layout", llm("[0, 10, 10, 0]", &["a_0", "a_0"])),
+        ];
+        let mut failing = 0;
+        for (kind, text) in &cases {
+            let value: Value = serde_json::from_str(text).expect("json");
+            let whole = Kind::by_name(kind).expect("kind").validate_value(&value);
+            let read = read_layout_text(text);
+            if whole.is_empty() {
+                assert!(read.is_ok(), "{text}: {read:?}");
+            } else {
+                failing += 1;
+                let expected = name_objects(whole, Some(&value), "$");
+                assert_eq!(read.expect_err("problems"), expected, "{text}");
+            }
+        }
+        assert_eq!(failing, 3);
     }
 
     #[test]
