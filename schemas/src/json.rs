@@ -179,17 +179,21 @@ impl<'de> serde::de::Visitor<'de> for UniqueValue<'_> {
     fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Value, A::Error> {
         let mut object = serde_json::Map::new();
         while let Some(key) = map.next_key::<String>()? {
-            if object.contains_key(&key) {
-                return Err(serde::de::Error::custom(format!(
-                    "duplicate key {} in {} (a JSON object holds each key once; keep one of \
-                     them)",
-                    Value::String(key),
-                    self.path.render()
-                )));
-            }
-            let path = PathSeg::Key(self.path, &key);
+            // One search of the map for both the check and the insert.
+            let slot = match object.entry(key) {
+                serde_json::map::Entry::Vacant(slot) => slot,
+                serde_json::map::Entry::Occupied(taken) => {
+                    return Err(serde::de::Error::custom(format!(
+                        "duplicate key {} in {} (a JSON object holds each key once; keep one \
+                         of them)",
+                        Value::String(taken.key().clone()),
+                        self.path.render()
+                    )));
+                }
+            };
+            let path = PathSeg::Key(self.path, slot.key());
             let value = map.next_value_seed(UniqueValue { path: &path })?;
-            object.insert(key, value);
+            slot.insert(value);
         }
         Ok(Value::Object(object))
     }
@@ -243,19 +247,21 @@ fn utf8_len(first: u8) -> usize {
     }
 }
 
-/// Serialises `value` with sorted keys, two-space indentation and a trailing newline.
+/// Serialises `value` with sorted keys, two-space indentation and a trailing newline: the bytes
+/// of `serde_json::to_vec_pretty(&serde_json::to_value(value)?)` and a newline, written without
+/// the `Value` tree ([`crate::sorted_writer`]).
 pub fn to_sorted_pretty<T: Serialize + ?Sized>(value: &T) -> Result<Vec<u8>, serde_json::Error> {
-    // Going through `Value` sorts struct fields too, not only maps.
-    let value = serde_json::to_value(value)?;
-    let mut bytes = serde_json::to_vec_pretty(&value)?;
+    let mut bytes = crate::sorted_writer::write_sorted(value, true)?;
     bytes.push(b'\n');
     Ok(bytes)
 }
 
-/// Serialises `value` on one line with sorted keys (for JSON Lines), without a newline.
+/// Serialises `value` on one line with sorted keys (for JSON Lines), without a newline: the
+/// text of `serde_json::to_string(&serde_json::to_value(value)?)`.
 pub fn to_sorted_line<T: Serialize + ?Sized>(value: &T) -> Result<String, serde_json::Error> {
-    let value = serde_json::to_value(value)?;
-    serde_json::to_string(&value)
+    let bytes = crate::sorted_writer::write_sorted(value, false)?;
+    // serde_json writes only UTF-8 (strings are &str, escapes are ASCII).
+    String::from_utf8(bytes).map_err(<serde_json::Error as serde::ser::Error>::custom)
 }
 
 #[cfg(test)]

@@ -30,6 +30,7 @@ pub mod order;
 pub mod output;
 pub mod render;
 pub mod rotation;
+mod sorted_writer;
 pub mod units;
 pub mod validate;
 
