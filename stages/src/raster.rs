@@ -662,7 +662,10 @@ fn raster_triangle<S: Samples>(
     // Per edge, -1 / a: each row's span bound is a product, not a division (the span is only
     // a guess with a pixel of slack; the exact test decides).
     let minus_inv_a = edges.map(|(a, _, _)| if a != 0.0 { -1.0 / a } else { 0.0 });
-    let with_attributes = !buffer.item.is_empty();
+    // What the buffer keeps besides depth: nothing (a shadow map), the item (a picture's
+    // silhouettes), or the item, triangle and barycentrics (what is shaded).
+    let with_items = !buffer.item.is_empty();
+    let with_attributes = !buffer.barycentric.is_empty();
     let VisibilityBuffer {
         depth_m,
         item: items,
@@ -719,13 +722,15 @@ fn raster_triangle<S: Samples>(
             let depth32 = depth as f32;
             if depth32 < depth_m[o] {
                 depth_m[o] = depth32;
+                if with_items {
+                    items[o] = item;
+                }
                 if with_attributes {
                     let mu = if perspective {
                         [q[0] / sum, q[1] / sum, q[2] / sum]
                     } else {
                         q
                     };
-                    items[o] = item;
                     triangles[o] = triangle;
                     let b: [f64; 3] = std::array::from_fn(|k| {
                         mu[0] * v[0].bary[k] + mu[1] * v[1].bary[k] + mu[2] * v[2].bary[k]
@@ -744,6 +749,37 @@ pub fn visibility(
     items: &[DrawItem<'_>],
 ) -> VisibilityBuffer {
     let mut buffer = VisibilityBuffer::new(camera.width, camera.height);
+    rasterize_into(
+        &mut buffer,
+        &Every {
+            width: camera.width as i64,
+            height: camera.height as i64,
+        },
+        Projection::Perspective(*camera),
+        camera_from_world,
+        items,
+        false,
+    );
+    buffer
+}
+
+/// [`visibility`] with only the depth and the item of each pixel: `triangle` and `barycentric`
+/// are left empty (for a picture's silhouettes, which need no shading; the items and depths
+/// are those [`visibility`] finds).
+pub fn visibility_items(
+    camera: &PinholeCamera,
+    camera_from_world: &Affine3,
+    items: &[DrawItem<'_>],
+) -> VisibilityBuffer {
+    let n = camera.width as usize * camera.height as usize;
+    let mut buffer = VisibilityBuffer {
+        width: camera.width,
+        height: camera.height,
+        depth_m: vec![f32::INFINITY; n],
+        item: vec![u32::MAX; n],
+        triangle: Vec::new(),
+        barycentric: Vec::new(),
+    };
     rasterize_into(
         &mut buffer,
         &Every {

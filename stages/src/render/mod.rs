@@ -41,9 +41,9 @@ use thiserror::Error;
 use crate::image_io::{encode_rgb8, encode_rgba8, ImageError};
 use crate::mesh::{normalize3, Aabb, Affine3, TriMesh};
 use crate::raster::{
-    linear_to_srgb_u8, srgb_u8_to_linear, visibility, visibility_of_selected, DirectionalLight,
-    DrawItem, Lighting, PinholeCamera, SampleMask, Shader, ShadowMap, SurfaceMaterial,
-    VisibilityBuffer,
+    linear_to_srgb_u8, srgb_u8_to_linear, visibility, visibility_items, visibility_of_selected,
+    DirectionalLight, DrawItem, Lighting, PinholeCamera, SampleMask, Shader, ShadowMap,
+    SurfaceMaterial, VisibilityBuffer,
 };
 
 pub use asset::{load_render_asset, AssetPart, RenderAsset, RenderAssetError};
@@ -642,7 +642,13 @@ fn render_selected(
     let (w, h) = (intrinsics.width as usize, intrinsics.height as usize);
     // What each pixel's centre (u, v) sees, as the camera files say pixels are sampled: the
     // silhouettes of the picture in SPEC 2's convention, comparable with masks.
-    let centres = visibility(&intrinsics, &camera_from_table, items);
+    // Shading needs the triangles and barycentrics of the centres only without supersampling;
+    // with it, the silhouettes need the items alone.
+    let centres = if f == 1 {
+        visibility(&intrinsics, &camera_from_table, items)
+    } else {
+        visibility_items(&intrinsics, &camera_from_table, items)
+    };
     let instances: Vec<u32> = centres.instance_ids(items);
     let mut rgba = vec![0u8; w * h * 4];
     let mut put = |p: usize, color: [f32; 3], alpha: u8| {
