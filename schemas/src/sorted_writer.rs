@@ -140,7 +140,7 @@ struct Object<'w> {
     key: Option<String>,
 }
 
-impl Object<'_> {
+impl<'w> Object<'w> {
     fn member<T: Serialize + ?Sized>(
         &mut self,
         key: Cow<'static, str>,
@@ -153,7 +153,9 @@ impl Object<'_> {
         Ok(())
     }
 
-    fn finish(mut self) -> Result<(), Error> {
+    /// Lays the members out in key order; gives the writer back (a struct variant's outer
+    /// object goes on with it).
+    fn finish(mut self) -> Result<&'w mut Writer, Error> {
         let writer = &mut *self.writer;
         writer.depth -= 1;
         let depth = writer.depth;
@@ -194,7 +196,7 @@ impl Object<'_> {
         writer.out.truncate(self.start + len);
         members.clear();
         writer.pool.push(std::mem::take(members));
-        Ok(())
+        Ok(self.writer)
     }
 }
 
@@ -308,7 +310,7 @@ impl<'w> ser::Serializer for &'w mut Writer {
     ) -> Result<(), Error> {
         let mut object = self.begin_object();
         object.member(Cow::Borrowed(variant), value)?;
-        object.finish()
+        object.finish().map(drop)
     }
     fn serialize_seq(self, _len: Option<usize>) -> Result<Array<'w>, Error> {
         Ok(self.begin_array())
@@ -361,16 +363,11 @@ impl<'w> ser::Serializer for &'w mut Writer {
         // `{"variant": {...}}`: the inner object is the outer one's one member; both open here.
         let outer = self.begin_object();
         let (writer, outer_start, outer_members) = (outer.writer, outer.start, outer.members);
-        writer.depth += 1;
-        let start = writer.out.len();
-        let inner = writer.pool.pop().unwrap_or_default();
         Ok(StructVariant {
-            writer,
+            inner: writer.begin_object(),
             outer_start,
             outer_members,
             variant,
-            start,
-            inner,
         })
     }
 }
@@ -384,53 +381,37 @@ struct TupleVariant<'w> {
     first: bool,
 }
 
-/// `{"variant": {fields}}`: the outer object's state is kept apart so that the inner one can
-/// borrow the writer while the fields come.
+/// `{"variant": {fields}}`: the outer object's state is kept apart while the inner one holds
+/// the writer.
 struct StructVariant<'w> {
-    writer: &'w mut Writer,
+    inner: Object<'w>,
     outer_start: usize,
     outer_members: Vec<Member>,
     variant: &'static str,
-    /// Where the inner object's text starts.
-    start: usize,
-    inner: Vec<Member>,
 }
 
-impl ser::SerializeSeq for Array<'_> {
-    type Ok = ();
-    type Error = Error;
-    fn serialize_element<T: Serialize + ?Sized>(&mut self, value: &T) -> Result<(), Error> {
-        self.element(value)
-    }
-    fn end(self) -> Result<(), Error> {
-        self.finish();
-        Ok(())
-    }
+/// A sequence, a tuple and a tuple struct are all arrays.
+macro_rules! array_like {
+    ($($trait:ident :: $element:ident),*) => {$(
+        impl ser::$trait for Array<'_> {
+            type Ok = ();
+            type Error = Error;
+            fn $element<T: Serialize + ?Sized>(&mut self, value: &T) -> Result<(), Error> {
+                self.element(value)
+            }
+            fn end(self) -> Result<(), Error> {
+                self.finish();
+                Ok(())
+            }
+        }
+    )*};
 }
 
-impl ser::SerializeTuple for Array<'_> {
-    type Ok = ();
-    type Error = Error;
-    fn serialize_element<T: Serialize + ?Sized>(&mut self, value: &T) -> Result<(), Error> {
-        self.element(value)
-    }
-    fn end(self) -> Result<(), Error> {
-        self.finish();
-        Ok(())
-    }
-}
-
-impl ser::SerializeTupleStruct for Array<'_> {
-    type Ok = ();
-    type Error = Error;
-    fn serialize_field<T: Serialize + ?Sized>(&mut self, value: &T) -> Result<(), Error> {
-        self.element(value)
-    }
-    fn end(self) -> Result<(), Error> {
-        self.finish();
-        Ok(())
-    }
-}
+array_like!(
+    SerializeSeq::serialize_element,
+    SerializeTuple::serialize_element,
+    SerializeTupleStruct::serialize_field
+);
 
 impl ser::SerializeTupleVariant for TupleVariant<'_> {
     type Ok = ();
@@ -456,7 +437,7 @@ impl ser::SerializeTupleVariant for TupleVariant<'_> {
             start: self.start,
             end,
         });
-        self.object.finish()
+        self.object.finish().map(drop)
     }
 }
 
@@ -475,7 +456,7 @@ impl ser::SerializeMap for Object<'_> {
         self.member(Cow::Owned(key), value)
     }
     fn end(self) -> Result<(), Error> {
-        self.finish()
+        self.finish().map(drop)
     }
 }
 
@@ -490,7 +471,7 @@ impl ser::SerializeStruct for Object<'_> {
         self.member(Cow::Borrowed(key), value)
     }
     fn end(self) -> Result<(), Error> {
-        self.finish()
+        self.finish().map(drop)
     }
 }
 
@@ -502,37 +483,26 @@ impl ser::SerializeStructVariant for StructVariant<'_> {
         key: &'static str,
         value: &T,
     ) -> Result<(), Error> {
-        let start = self.writer.out.len();
-        value.serialize(&mut *self.writer)?;
-        let end = self.writer.out.len();
-        self.inner.push(Member {
-            key: Cow::Borrowed(key),
+        self.inner.member(Cow::Borrowed(key), value)
+    }
+    fn end(self) -> Result<(), Error> {
+        let start = self.inner.start;
+        let writer = self.inner.finish()?;
+        let end = writer.out.len();
+        let mut members = self.outer_members;
+        members.push(Member {
+            key: Cow::Borrowed(self.variant),
             start,
             end,
         });
-        Ok(())
-    }
-    fn end(mut self) -> Result<(), Error> {
         Object {
-            writer: &mut *self.writer,
-            start: self.start,
-            members: std::mem::take(&mut self.inner),
+            writer,
+            start: self.outer_start,
+            members,
             key: None,
         }
-        .finish()?;
-        let end = self.writer.out.len();
-        let mut outer = Object {
-            writer: &mut *self.writer,
-            start: self.outer_start,
-            members: std::mem::take(&mut self.outer_members),
-            key: None,
-        };
-        outer.members.push(Member {
-            key: Cow::Borrowed(self.variant),
-            start: self.start,
-            end,
-        });
-        outer.finish()
+        .finish()
+        .map(drop)
     }
 }
 

@@ -748,7 +748,17 @@ pub fn visibility(
     camera_from_world: &Affine3,
     items: &[DrawItem<'_>],
 ) -> VisibilityBuffer {
-    let mut buffer = VisibilityBuffer::new(camera.width, camera.height);
+    let buffer = VisibilityBuffer::new(camera.width, camera.height);
+    draw_every_pixel(buffer, camera, camera_from_world, items)
+}
+
+/// Draws `items` into `buffer`, one sample per pixel of `camera`.
+fn draw_every_pixel(
+    mut buffer: VisibilityBuffer,
+    camera: &PinholeCamera,
+    camera_from_world: &Affine3,
+    items: &[DrawItem<'_>],
+) -> VisibilityBuffer {
     rasterize_into(
         &mut buffer,
         &Every {
@@ -772,7 +782,7 @@ pub fn visibility_items(
     items: &[DrawItem<'_>],
 ) -> VisibilityBuffer {
     let n = camera.width as usize * camera.height as usize;
-    let mut buffer = VisibilityBuffer {
+    let buffer = VisibilityBuffer {
         width: camera.width,
         height: camera.height,
         depth_m: vec![f32::INFINITY; n],
@@ -780,18 +790,7 @@ pub fn visibility_items(
         triangle: Vec::new(),
         barycentric: Vec::new(),
     };
-    rasterize_into(
-        &mut buffer,
-        &Every {
-            width: camera.width as i64,
-            height: camera.height as i64,
-        },
-        Projection::Perspective(*camera),
-        camera_from_world,
-        items,
-        false,
-    );
-    buffer
+    draw_every_pixel(buffer, camera, camera_from_world, items)
 }
 
 /// The visibility of the samples of the pixels `mask` selects, seen by `camera` (the picture's
