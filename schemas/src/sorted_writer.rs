@@ -160,8 +160,8 @@ impl<'w> Object<'w> {
         writer.depth -= 1;
         let depth = writer.depth;
         let members = &mut self.members;
-        // Key order, and of equal keys the last written (a stable sort keeps them in writing
-        // order; `dedup_by` keeps the first of a run, so the runs are reversed first).
+        // Key order, and of equal keys the last written: the stable sort keeps them in writing
+        // order, and each replaces the one before it.
         members.sort_by(|a, b| a.key.as_bytes().cmp(b.key.as_bytes()));
         if members.windows(2).any(|w| w[0].key == w[1].key) {
             let mut kept: Vec<Member> = Vec::with_capacity(members.len());
