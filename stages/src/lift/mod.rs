@@ -612,46 +612,13 @@ fn remove_outliers(
         grid[v * bw + u] = i as u32;
     }
     let (points, grid, bled) = keep_main_components(points, grid, bw, config);
-    // The points laid out on their pixels, with a margin of the window's radius all round, so
-    // a window is a few contiguous runs of a row, without bounds tests or an index lookup (the
-    // distances of a run are computed together, then added in the window's row-major order).
-    let r = config.outlier_window_px as usize;
-    let side = 2 * r + 1;
-    let (pw, ph) = (bw + 2 * r, bh + 2 * r);
-    let mut laid = vec![[f64::NAN; 3]; pw * ph];
-    for (cell, &i) in grid.iter().enumerate() {
-        if i != u32::MAX {
-            let x = points[i as usize].1;
-            laid[(cell / bw + r) * pw + cell % bw + r] = [x.x, x.y, x.z];
-        }
-    }
-    let mut distances = vec![0.0; side];
-    let mut scores = Vec::with_capacity(points.len());
-    for &(p, x) in &points {
-        let (u, v) = (p as usize % w - u0, p as usize / w - v0);
-        let footprint = (x.z / k.fx).max(1e-9);
-        let mut sum = 0.0;
-        let mut count = 0usize;
-        for dv in 0..side {
-            let row = &laid[(v + dv) * pw + u..(v + dv) * pw + u + side];
-            for (d, q) in distances.iter_mut().zip(row) {
-                let (dx, dy, dz) = (q[0] - x.x, q[1] - x.y, q[2] - x.z);
-                *d = (dx * dx + dy * dy + dz * dz).sqrt();
-            }
-            for (du, &d) in distances.iter().enumerate() {
-                // A missing neighbour is NaN; the centre is the point itself.
-                if !d.is_nan() && (du, dv) != (r, r) {
-                    sum += d;
-                    count += 1;
-                }
-            }
-        }
-        scores.push(if count == 0 {
-            f64::INFINITY
-        } else {
-            sum / count as f64 / footprint
-        });
-    }
+    let scores = window_scores(
+        &points,
+        &grid,
+        (bw, bh),
+        config.outlier_window_px as usize,
+        |x| (x.z / k.fx).max(1e-9),
+    );
     let finite: Vec<f64> = scores.iter().copied().filter(|s| s.is_finite()).collect();
     if finite.is_empty() {
         return (Vec::new(), points.len() + bled);
@@ -667,6 +634,92 @@ fn remove_outliers(
         .collect();
     let removed = points.len() - kept.len() + bled;
     (kept, removed)
+}
+
+/// The outlier rule's statistic of every point: its mean distance to the points of the
+/// window of radius `r` around its pixel (the centre left out), divided by its `footprint`;
+/// infinite for a point with no neighbour. `grid` maps the cells of the `bw` × `bh` box to
+/// indices into `points` (`u32::MAX`: no point).
+///
+/// The window is walked offset by offset over the whole box, not point by point: the points
+/// are laid out on their pixels as three planes of coordinates with a margin of `r` cells all
+/// round (NaN where there is no point), and for each offset of the window, in the window's
+/// row-major order, one pass over the box adds every cell's distance to the cell at that
+/// offset. Those passes are straight loops over contiguous memory that the compiler
+/// vectorises. Each point still adds its distances in the window's row-major order, so its sum
+/// is bit for bit the per-point loop's (adding 0.0 for a missing neighbour leaves a sum of
+/// non-negative distances, which starts at +0.0, unchanged).
+fn window_scores(
+    points: &[PixelPoint],
+    grid: &[u32],
+    (bw, bh): (usize, usize),
+    r: usize,
+    footprint: impl Fn(&Vector3<f64>) -> f64,
+) -> Vec<f64> {
+    let side = 2 * r + 1;
+    let (pw, ph) = (bw + 2 * r, bh + 2 * r);
+    let mut planes = [
+        vec![f64::NAN; pw * ph],
+        vec![f64::NAN; pw * ph],
+        vec![f64::NAN; pw * ph],
+    ];
+    // The padded cell of each cell of the box that holds a point.
+    let laid_out = || {
+        grid.chunks_exact(bw).enumerate().flat_map(move |(v, row)| {
+            row.iter()
+                .enumerate()
+                .filter(|(_, &i)| i != u32::MAX)
+                .map(move |(u, &i)| (i as usize, (v + r) * pw + u + r))
+        })
+    };
+    for (i, at) in laid_out() {
+        let x = points[i].1;
+        for (plane, value) in planes.iter_mut().zip([x.x, x.y, x.z]) {
+            plane[at] = value;
+        }
+    }
+    let [xs, ys, zs] = &planes;
+    // The cells whose every window offset stays inside the padded box: the box's rows, from
+    // the r-th cell of the first to the r-th last of the last (the margin columns between are
+    // computed and never read).
+    let (lo, hi) = (r * pw + r, (r + bh) * pw - r);
+    let mut sums = vec![0.0f64; hi - lo];
+    let mut counts = vec![0u32; hi - lo];
+    for dv in 0..side {
+        for du in 0..side {
+            if (du, dv) == (r, r) {
+                continue;
+            }
+            // The neighbour at this offset of the cell `lo + i` is the cell `at + i`.
+            let at = lo + dv * pw + du - r * pw - r;
+            let neighbours = xs[at..at + (hi - lo)]
+                .iter()
+                .zip(&ys[at..at + (hi - lo)])
+                .zip(&zs[at..at + (hi - lo)]);
+            let centres = xs[lo..hi].iter().zip(&ys[lo..hi]).zip(&zs[lo..hi]);
+            for (((sum, count), ((qx, qy), qz)), ((x, y), z)) in sums
+                .iter_mut()
+                .zip(counts.iter_mut())
+                .zip(neighbours)
+                .zip(centres)
+            {
+                let (dx, dy, dz) = (qx - x, qy - y, qz - z);
+                let d = (dx * dx + dy * dy + dz * dz).sqrt();
+                // A missing neighbour is NaN (so is every distance of an empty cell).
+                let found = !d.is_nan();
+                *sum += if found { d } else { 0.0 };
+                *count += u32::from(found);
+            }
+        }
+    }
+    let mut scores = vec![f64::INFINITY; points.len()];
+    for (i, at) in laid_out() {
+        let count = counts[at - lo];
+        if count > 0 {
+            scores[i] = sums[at - lo] / f64::from(count) / footprint(&points[i].1);
+        }
+    }
+    scores
 }
 
 /// A back-projected pixel: its row-major index and its camera-frame point (metres).
@@ -1188,6 +1241,89 @@ mod tests {
         // One value: every quantile is it.
         let one = WeightedQuantiles::new(&[(2.5, 1.0), (2.5, 3.0)]);
         assert_eq!((one.at(0.0), one.at(4.0), one.at(9.0)), (2.5, 2.5, 2.5));
+    }
+
+    /// The outlier statistic the obvious way, point by point (the loop `window_scores`
+    /// replaced): each point walks its window in row-major order. `column_major` walks it
+    /// column by column instead, for the control.
+    fn per_point_scores(
+        points: &[PixelPoint],
+        grid: &[u32],
+        bw: usize,
+        r: usize,
+        column_major: bool,
+    ) -> Vec<f64> {
+        let bh = grid.len() / bw;
+        let at = |u: isize, v: isize| -> Option<Vector3<f64>> {
+            let inside = (0..bw as isize).contains(&u) && (0..bh as isize).contains(&v);
+            let i = if inside {
+                grid[v as usize * bw + u as usize]
+            } else {
+                u32::MAX
+            };
+            (i != u32::MAX).then(|| points[i as usize].1)
+        };
+        let mut scores = vec![f64::NAN; points.len()];
+        for (cell, &i) in grid.iter().enumerate() {
+            if i == u32::MAX {
+                continue;
+            }
+            let (u, v) = ((cell % bw) as isize, (cell / bw) as isize);
+            let x = points[i as usize].1;
+            let (mut sum, mut count) = (0.0, 0usize);
+            let r = r as isize;
+            for a in -r..=r {
+                for b in -r..=r {
+                    let (du, dv) = if column_major { (a, b) } else { (b, a) };
+                    if (du, dv) == (0, 0) {
+                        continue;
+                    }
+                    if let Some(q) = at(u + du, v + dv) {
+                        sum += (q - x).norm();
+                        count += 1;
+                    }
+                }
+            }
+            scores[i as usize] = if count == 0 {
+                f64::INFINITY
+            } else {
+                sum / count as f64 / (x.z / 600.0).max(1e-9)
+            };
+        }
+        scores
+    }
+
+    #[test]
+    fn window_scores_are_the_per_point_loop_bit_for_bit() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut order_matters = 0;
+        for case in 0..200 {
+            let (bw, bh) = (rng.random_range(1..40usize), rng.random_range(1..40usize));
+            let r = [0, 1, 2, 3][case % 4];
+            let fill: f64 = rng.random_range(0.05..1.0);
+            let mut points = Vec::new();
+            let mut grid = vec![u32::MAX; bw * bh];
+            for (cell, slot) in grid.iter_mut().enumerate() {
+                if rng.random::<f64>() < fill {
+                    *slot = points.len() as u32;
+                    // Depths of a surface with steps and noise: the sums are not exact, so the
+                    // order of adding shows in the last bits.
+                    let z = 0.6 + 0.001 * (cell % bw) as f64 + rng.random_range(-0.01..0.01);
+                    let x = Vector3::new(z * rng.random_range(-0.5..0.5), rng.random(), z);
+                    points.push((cell as u32, x));
+                }
+            }
+            let fast = window_scores(&points, &grid, (bw, bh), r, |x| (x.z / 600.0).max(1e-9));
+            let slow = per_point_scores(&points, &grid, bw, r, false);
+            let bits = |v: &[f64]| v.iter().map(|s| s.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&fast), bits(&slow), "case {case}: {bw}x{bh}, r = {r}");
+            if bits(&per_point_scores(&points, &grid, bw, r, true)) != bits(&slow) {
+                order_matters += 1;
+            }
+        }
+        // Control: walking the window in another order changes the last bits in many cases,
+        // so the comparison above does check the order of adding.
+        assert!(order_matters > 50, "{order_matters}");
     }
 
     #[test]
