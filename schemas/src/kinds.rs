@@ -18,7 +18,7 @@ use crate::render::{
     annotation_problems, AssetAnnotationsFile, RenderCameraArtifact, ReportStats, ReportThumbs,
     RENDER_CAMERA_SCHEMA, REPORT_STATS_SCHEMA, REPORT_THUMBS_SCHEMA,
 };
-use crate::validate::{nonfinite_problems, validate_against, Problem};
+use crate::validate::{nonfinite_problems, Problem, Validator};
 
 /// How a kind's file is laid out.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -451,6 +451,22 @@ impl Kind {
             .1
     }
 
+    /// The kind's JSON Schema made ready to validate documents, once per process.
+    fn validator(&self) -> &'static Validator<'static> {
+        static CACHE: OnceLock<Vec<(&'static str, Validator<'static>)>> = OnceLock::new();
+        let cache = CACHE.get_or_init(|| {
+            kinds()
+                .iter()
+                .map(|k| (k.name, Validator::new(k.json_schema())))
+                .collect()
+        });
+        &cache
+            .iter()
+            .find(|(name, _)| *name == self.name)
+            .expect("every kind is in the cache")
+            .1
+    }
+
     /// Validates one JSON document of this kind: non-finite numbers, the JSON Schema, then the
     /// semantic checks (only when the structure is sound, so each problem is reported once).
     pub fn validate_value(&self, value: &Value) -> Vec<Problem> {
@@ -467,7 +483,7 @@ impl Kind {
     pub fn structure_problems(&self, value: &Value) -> Vec<Problem> {
         let mut problems = Vec::new();
         nonfinite_problems(value, "$", &mut problems);
-        validate_against(self.json_schema(), value, "$", &mut problems);
+        self.validator().validate(value, "$", &mut problems);
         problems
     }
 }

@@ -7,7 +7,9 @@
 //! typed value, when the structure is sound.
 
 use std::borrow::Cow;
+use std::collections::HashMap;
 use std::fmt;
+use std::hash::{BuildHasherDefault, Hasher};
 
 use serde_json::{Map, Value};
 
@@ -251,9 +253,9 @@ fn pointer_target<'v>(root: &'v Value, pointer: &str) -> Option<&'v Value> {
     let mut target = root;
     for token in pointer.strip_prefix('/')?.split('/') {
         let token = if token.contains('~') {
-            std::borrow::Cow::Owned(token.replace("~1", "/").replace("~0", "~"))
+            Cow::Owned(token.replace("~1", "/").replace("~0", "~"))
         } else {
-            std::borrow::Cow::Borrowed(token)
+            Cow::Borrowed(token)
         };
         target = match target {
             Value::Object(map) => map.get(token.as_ref())?,
@@ -269,24 +271,66 @@ fn pointer_target<'v>(root: &'v Value, pointer: &str) -> Option<&'v Value> {
 }
 
 /// Validates `value` against a generated JSON Schema (`root`), appending problems to `out`.
+/// To validate many documents against one schema, make a [`Validator`] once.
 pub fn validate_against(root: &Value, value: &Value, path: &str, out: &mut Vec<Problem>) {
-    Walker::new(root).walk(root, value, &mut path.to_owned(), out);
+    Validator::new(root).validate(value, path, out);
+}
+
+/// A generated JSON Schema made ready to validate documents: every schema object a document
+/// can meet is read once (its `$ref` followed, its keywords found), here rather than at each
+/// of the hundreds of values of every document.
+pub struct Validator<'a> {
+    walker: Walker<'a>,
+}
+
+impl<'a> Validator<'a> {
+    /// The validator of the schema `root`.
+    pub fn new(root: &'a Value) -> Self {
+        Self {
+            walker: Walker::new(root),
+        }
+    }
+
+    /// Validates `value`, appending problems to `out` (paths start at `path`).
+    pub fn validate(&self, value: &Value, path: &str, out: &mut Vec<Problem>) {
+        self.walker
+            .walk(self.walker.root, value, &mut path.to_owned(), out);
+    }
 }
 
 struct Walker<'a> {
     root: &'a Value,
-    /// What the walk reads of each schema object it can meet: a document visits the same few
-    /// dozen schemas hundreds of times, and reading a schema's keywords and following its
-    /// `$ref` each time cost more than the checks.
-    prepared: Vec<(*const Value, Prepared<'a>)>,
-    /// `prepared` by address: an open-addressing table of indices into it (`usize::MAX`:
-    /// empty), a power of two at least twice as long.
-    slots: Vec<usize>,
+    /// What the walk reads of each schema object it can meet, by the object's address (a
+    /// document visits the same few dozen schemas hundreds of times, and reading a schema's
+    /// keywords and following its `$ref` each time cost more than the checks).
+    prepared: HashMap<usize, Prepared<'a>, BuildHasherDefault<AddressHasher>>,
 }
 
-/// The slot an address starts probing at, in a table of `2^bits` slots (Fibonacci hashing).
-fn slot_of(address: usize, bits: u32) -> usize {
-    ((address as u64 >> 3).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - bits)) as usize
+/// Hashes an address (the only key of [`Walker::prepared`]) by one multiplication (Fibonacci
+/// hashing): the default SipHash made the lookup, done at every value of a document, a tenth
+/// of the walk.
+#[derive(Default)]
+struct AddressHasher(u64);
+
+impl Hasher for AddressHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        // Only `write_usize` is called for a `usize` key; any other use still hashes.
+        for &b in bytes {
+            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        }
+    }
+
+    fn write_usize(&mut self, address: usize) {
+        // The low bits of an address are alignment, and hashbrown takes the top bits for its
+        // tags and the low bits for the bucket: the product mixes both ways.
+        self.0 = (address as u64)
+            .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            .rotate_left(26);
+    }
 }
 
 /// A schema object as the walk uses it: its own description, the schema its `$ref` leads to,
@@ -295,7 +339,8 @@ fn slot_of(address: usize, bits: u32) -> usize {
 struct Prepared<'a> {
     own_description: Option<&'a str>,
     resolved: &'a Value,
-    keywords: Option<Keywords<'a>>,
+    /// The keywords of `resolved` (none when it is not an object).
+    keywords: Keywords<'a>,
 }
 
 /// The keywords of one schema object that the walk reads, found in one pass over its entries:
@@ -378,48 +423,30 @@ impl<'a> Walker<'a> {
     fn new(root: &'a Value) -> Self {
         let mut walker = Self {
             root,
-            prepared: Vec::new(),
-            slots: Vec::new(),
+            prepared: HashMap::default(),
         };
         let mut stack = vec![root];
         while let Some(schema) = stack.pop() {
-            let address: *const Value = schema;
-            if walker
-                .prepared
-                .iter()
-                .any(|(known, _)| std::ptr::eq(*known, address))
-            {
+            let address = std::ptr::from_ref(schema) as usize;
+            if walker.prepared.contains_key(&address) {
                 continue;
             }
             let prepared = walker.read(schema);
-            if let Some(k) = &prepared.keywords {
-                let lists = [k.any_of, k.one_of, k.all_of, k.prefix_items];
-                stack.extend(
-                    lists
-                        .into_iter()
-                        .flatten()
-                        .filter_map(Value::as_array)
-                        .flatten(),
-                );
-                if let Some(properties) = k.properties.and_then(Value::as_object) {
-                    stack.extend(properties.values());
-                }
-                stack.extend(k.additional.filter(|a| a.is_object()));
-                stack.extend(k.items);
+            let k = &prepared.keywords;
+            let lists = [k.any_of, k.one_of, k.all_of, k.prefix_items];
+            stack.extend(
+                lists
+                    .into_iter()
+                    .flatten()
+                    .filter_map(Value::as_array)
+                    .flatten(),
+            );
+            if let Some(properties) = k.properties.and_then(Value::as_object) {
+                stack.extend(properties.values());
             }
-            walker.prepared.push((address, prepared));
-        }
-        let bits = (2 * walker.prepared.len())
-            .next_power_of_two()
-            .trailing_zeros()
-            .max(1);
-        walker.slots = vec![usize::MAX; 1 << bits];
-        for (i, (address, _)) in walker.prepared.iter().enumerate() {
-            let mut slot = slot_of(*address as usize, bits);
-            while walker.slots[slot] != usize::MAX {
-                slot = (slot + 1) & (walker.slots.len() - 1);
-            }
-            walker.slots[slot] = i;
+            stack.extend(k.additional.filter(|a| a.is_object()));
+            stack.extend(k.items);
+            walker.prepared.insert(address, prepared);
         }
         walker
     }
@@ -430,23 +457,15 @@ impl<'a> Walker<'a> {
         Prepared {
             own_description: schema.get("description").and_then(Value::as_str),
             resolved,
-            keywords: resolved.as_object().map(Keywords::of),
+            keywords: resolved.as_object().map(Keywords::of).unwrap_or_default(),
         }
     }
 
     /// `schema` prepared (every schema reachable from the root is; another is read now).
     fn prepare(&self, schema: &'a Value) -> Cow<'_, Prepared<'a>> {
-        let address: *const Value = schema;
-        let mask = self.slots.len() - 1;
-        let mut slot = slot_of(address as usize, mask.count_ones());
-        loop {
-            match self.slots[slot] {
-                usize::MAX => return Cow::Owned(self.read(schema)),
-                i if std::ptr::eq(self.prepared[i].0, address) => {
-                    return Cow::Borrowed(&self.prepared[i].1)
-                }
-                _ => slot = (slot + 1) & mask,
-            }
+        match self.prepared.get(&(std::ptr::from_ref(schema) as usize)) {
+            Some(prepared) => Cow::Borrowed(prepared),
+            None => Cow::Owned(self.read(schema)),
         }
     }
 
@@ -476,10 +495,6 @@ impl<'a> Walker<'a> {
         };
         // Made only for a problem (it formats the schema's words).
         let expected = || expectation(schema, own_description);
-        let keywords = match keywords {
-            Some(keywords) => Cow::Borrowed(keywords),
-            None => Cow::Owned(Keywords::of(schema)),
-        };
 
         if let Some(branches) = keywords
             .any_of
@@ -521,13 +536,13 @@ impl<'a> Walker<'a> {
             }
         }
         match value {
-            Value::Object(map) => self.walk_object(&keywords, map, path, out),
+            Value::Object(map) => self.walk_object(keywords, map, path, out),
             Value::Array(items) => {
-                self.walk_array(schema, &keywords, items, path, own_description, out)
+                self.walk_array(schema, keywords, items, path, own_description, out)
             }
             Value::Number(number) => {
                 if let Some(x) = number.as_f64() {
-                    check_bounds(schema, &keywords, own_description, x, path.as_str(), out);
+                    check_bounds(schema, keywords, own_description, x, path.as_str(), out);
                 }
             }
             Value::String(text) => {
@@ -560,8 +575,7 @@ impl<'a> Walker<'a> {
             let fits = self
                 .prepare(branch)
                 .keywords
-                .as_ref()
-                .and_then(|k| k.types)
+                .types
                 .is_none_or(|t| type_matches(t, value));
             if fits {
                 let mut problems = Vec::new();
@@ -874,7 +888,6 @@ mod instance_name_tests {
             let mut walker = Walker::new(root);
             if !prepared {
                 walker.prepared.clear();
-                walker.slots = vec![usize::MAX; 2];
             }
             let mut out = Vec::new();
             walker.walk(root, value, &mut "$".to_owned(), &mut out);
