@@ -1122,10 +1122,12 @@ struct WeightedQuantiles<'a> {
     max: f64,
     /// The buckets gathered so far, each with its samples in the samples' order.
     gathered: Vec<(usize, Vec<(f64, f64)>)>,
-    /// Every sample, bucket after bucket, and where each bucket starts: made when more than
-    /// [`Self::GATHERED`] buckets were needed.
-    laid_out: Option<(Vec<(f64, f64)>, Vec<usize>)>,
+    /// Made when more than [`Self::GATHERED`] buckets were needed.
+    laid_out: Option<ByBucket>,
 }
+
+/// Every sample, bucket after bucket, and where each bucket starts (`starts[b]..starts[b + 1]`).
+type ByBucket = (Vec<(f64, f64)>, Vec<usize>);
 
 impl<'a> WeightedQuantiles<'a> {
     /// The most buckets gathered one by one, each by a pass over the bucket numbers.
