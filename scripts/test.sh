@@ -20,7 +20,7 @@ venv="$root/.venv-tools"
 if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import trimesh, numpy, datasets, fcl, rtree, scipy, mujoco, compress_pickle, pybullet, pxr, PIL" 2>/dev/null; then
   echo "test.sh: installing trimesh and datasets into $venv" >&2
   python3 -m venv "$venv"
-  "$venv/bin/pip" install --quiet --disable-pip-version-check -r scripts/requirements-tools.txt
+  "$venv/bin/pip" install --quiet --disable-pip-version-check --no-cache-dir -r scripts/requirements-tools.txt
 fi
 export MESA_PYTHON="$venv/bin/python"
 
@@ -29,7 +29,7 @@ blender_venv="$root/.venv-blender"
 if [ ! -x "$blender_venv/bin/python" ] || ! "$blender_venv/bin/python" -c "import bpy" 2>/dev/null; then
   echo "test.sh: installing bpy 4.3 into $blender_venv (about 380 MB)" >&2
   python3 -m venv "$blender_venv"
-  "$blender_venv/bin/pip" install --quiet --disable-pip-version-check "bpy==4.3.0" "numpy<2"
+  "$blender_venv/bin/pip" install --quiet --disable-pip-version-check --no-cache-dir "bpy==4.3.0" "numpy<2"
 fi
 export MESA_BLENDER_PYTHON="$blender_venv/bin/python"
 

@@ -428,43 +428,38 @@ impl Kind {
     /// The kind's JSON Schema, generated from its Rust type (the `schema` field pinned to the
     /// kind's id).
     pub fn json_schema(&self) -> &'static Value {
-        static CACHE: OnceLock<Vec<(&'static str, Value)>> = OnceLock::new();
-        let cache = CACHE.get_or_init(|| {
-            kinds()
-                .iter()
-                .map(|k| {
-                    let mut schema = (k.generate)();
-                    if let Some(id) = k.schema_id {
-                        if let Some(field) = schema.pointer_mut("/properties/schema") {
-                            field["const"] = Value::String(id.to_owned());
-                        }
-                        schema["$id"] = Value::String(format!("https://mesa.dev/schemas/{id}"));
-                    }
-                    (k.name, schema)
-                })
-                .collect()
-        });
-        &cache
-            .iter()
-            .find(|(name, _)| *name == self.name)
-            .expect("every kind is in the cache")
-            .1
+        static CACHE: OnceLock<Vec<OnceLock<Value>>> = OnceLock::new();
+        self.cached(&CACHE, || {
+            let mut schema = (self.generate)();
+            if let Some(id) = self.schema_id {
+                if let Some(field) = schema.pointer_mut("/properties/schema") {
+                    field["const"] = Value::String(id.to_owned());
+                }
+                schema["$id"] = Value::String(format!("https://mesa.dev/schemas/{id}"));
+            }
+            schema
+        })
     }
 
     /// The kind's JSON Schema made ready to validate documents, once per process.
     fn validator(&self) -> &'static Validator<'static> {
-        static CACHE: OnceLock<Vec<(&'static str, Validator<'static>)>> = OnceLock::new();
-        let cache = CACHE.get_or_init(|| {
-            kinds()
-                .iter()
-                .map(|k| (k.name, Validator::new(k.json_schema())))
-                .collect()
-        });
-        &cache
+        static CACHE: OnceLock<Vec<OnceLock<Validator<'static>>>> = OnceLock::new();
+        self.cached(&CACHE, || Validator::new(self.json_schema()))
+    }
+
+    /// This kind's slot of `cache` (one slot per kind, in the order of [`kinds`]), filled by
+    /// `make` the first time this kind asks for it.
+    fn cached<T>(
+        &self,
+        cache: &'static OnceLock<Vec<OnceLock<T>>>,
+        make: impl FnOnce() -> T,
+    ) -> &'static T {
+        let slots = cache.get_or_init(|| kinds().iter().map(|_| OnceLock::new()).collect());
+        let index = kinds()
             .iter()
-            .find(|(name, _)| *name == self.name)
-            .expect("every kind is in the cache")
-            .1
+            .position(|k| k.name == self.name)
+            .expect("every kind is listed");
+        slots[index].get_or_init(make)
     }
 
     /// Validates one JSON document of this kind: non-finite numbers, the JSON Schema, then the

@@ -270,35 +270,10 @@ fn pointer_target<'v>(root: &'v Value, pointer: &str) -> Option<&'v Value> {
     Some(target)
 }
 
-/// Validates `value` against a generated JSON Schema (`root`), appending problems to `out`.
-/// To validate many documents against one schema, make a [`Validator`] once.
-pub fn validate_against(root: &Value, value: &Value, path: &str, out: &mut Vec<Problem>) {
-    Validator::new(root).validate(value, path, out);
-}
-
 /// A generated JSON Schema made ready to validate documents: every schema object a document
 /// can meet is read once (its `$ref` followed, its keywords found), here rather than at each
 /// of the hundreds of values of every document.
 pub struct Validator<'a> {
-    walker: Walker<'a>,
-}
-
-impl<'a> Validator<'a> {
-    /// The validator of the schema `root`.
-    pub fn new(root: &'a Value) -> Self {
-        Self {
-            walker: Walker::new(root),
-        }
-    }
-
-    /// Validates `value`, appending problems to `out` (paths start at `path`).
-    pub fn validate(&self, value: &Value, path: &str, out: &mut Vec<Problem>) {
-        self.walker
-            .walk(self.walker.root, value, &mut path.to_owned(), out);
-    }
-}
-
-struct Walker<'a> {
     root: &'a Value,
     /// What the walk reads of each schema object it can meet, by the object's address (a
     /// document visits the same few dozen schemas hundreds of times, and reading a schema's
@@ -306,7 +281,7 @@ struct Walker<'a> {
     prepared: HashMap<usize, Prepared<'a>, BuildHasherDefault<AddressHasher>>,
 }
 
-/// Hashes an address (the only key of [`Walker::prepared`]) by one multiplication (Fibonacci
+/// Hashes an address (the only key of [`Validator::prepared`]) by one multiplication (Fibonacci
 /// hashing): the lookup is done at every value of a document, and an address needs none of
 /// SipHash's resistance to chosen keys. (Not measured against SipHash; it replaced a
 /// hand-written open-addressing table with a hash of the same kind, and the graph stage did not
@@ -401,7 +376,7 @@ impl<'a> Keywords<'a> {
     }
 }
 
-impl<'a> Walker<'a> {
+impl<'a> Validator<'a> {
     fn resolve(&self, schema: &'a Value) -> &'a Value {
         let mut schema = schema;
         // Follow local references (`#/$defs/Name`); a cycle cannot occur in generated schemas
@@ -421,19 +396,20 @@ impl<'a> Walker<'a> {
         schema
     }
 
-    /// The walker of the schema `root`, with every schema object it can walk into prepared.
-    fn new(root: &'a Value) -> Self {
-        let mut walker = Self {
+    /// The validator of the schema `root`, with every schema object a document can lead to
+    /// prepared.
+    pub fn new(root: &'a Value) -> Self {
+        let mut validator = Self {
             root,
             prepared: HashMap::default(),
         };
         let mut stack = vec![root];
         while let Some(schema) = stack.pop() {
             let address = std::ptr::from_ref(schema) as usize;
-            if walker.prepared.contains_key(&address) {
+            if validator.prepared.contains_key(&address) {
                 continue;
             }
-            let prepared = walker.read(schema);
+            let prepared = validator.read(schema);
             let k = &prepared.keywords;
             let lists = [k.any_of, k.one_of, k.all_of, k.prefix_items];
             stack.extend(
@@ -448,9 +424,14 @@ impl<'a> Walker<'a> {
             }
             stack.extend(k.additional.filter(|a| a.is_object()));
             stack.extend(k.items);
-            walker.prepared.insert(address, prepared);
+            validator.prepared.insert(address, prepared);
         }
-        walker
+        validator
+    }
+
+    /// Validates `value`, appending problems to `out` (paths start at `path`).
+    pub fn validate(&self, value: &Value, path: &str, out: &mut Vec<Problem>) {
+        self.walk(self.root, value, &mut path.to_owned(), out);
     }
 
     /// What the walk reads of `schema`.
@@ -863,7 +844,7 @@ mod instance_name_tests {
     /// The walk with every schema prepared beforehand reports exactly what a walk that reads
     /// each schema afresh at every value reports, on a valid layout and on mutants of it (each
     /// value in turn replaced by null, a string, a number, NaN's stand-in, an empty object and
-    /// an empty array; each object given an unknown key and each key removed). Control: most
+    /// an empty array; each key in turn replaced by an unknown one). Control: most
     /// mutants have problems (397 of 560; NaN's stand-in is reported elsewhere), so the
     /// comparison is not between empty lists.
     #[test]
@@ -887,12 +868,12 @@ mod instance_name_tests {
         let good = serde_json::to_value(dataset_from_llm(&llm).layout).expect("layout");
         let root = crate::Kind::by_name("layout").expect("kind").json_schema();
         let report = |value: &Value, prepared: bool| {
-            let mut walker = Walker::new(root);
+            let mut validator = Validator::new(root);
             if !prepared {
-                walker.prepared.clear();
+                validator.prepared.clear();
             }
             let mut out = Vec::new();
-            walker.walk(root, value, &mut "$".to_owned(), &mut out);
+            validator.validate(value, "$", &mut out);
             out
         };
         fn pointers(value: &Value, at: String, out: &mut Vec<String>) {
