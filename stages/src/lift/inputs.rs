@@ -203,12 +203,15 @@ pub fn read_depth(
             *d = apply_calibration(*d, calibration);
         }
     }
+    // Anything but a positive finite depth is "no measurement"; counted in the same pass,
+    // without branches, so that the loop vectorises.
+    let mut valid = 0usize;
     for d in &mut raw {
-        if !(d.is_finite() && *d > 0.0) {
-            *d = f32::NAN;
-        }
+        let ok = d.is_finite() & (*d > 0.0);
+        valid += usize::from(ok);
+        *d = if ok { *d } else { f32::NAN };
     }
-    if raw.iter().all(|d| d.is_nan()) {
+    if valid == 0 {
         return Err(LiftError::input(
             &path,
             "$",
