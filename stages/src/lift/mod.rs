@@ -1132,14 +1132,8 @@ struct WeightedQuantiles<'a> {
 /// of taking extremes changes only the sign of a zero (`min(0.0, -0.0)` may be either), so an
 /// extreme that is zero is found again by the fold.
 fn value_range(samples: &[(f64, f64)]) -> (f64, f64) {
-    let fold = |samples: &[(f64, f64)]| {
-        samples.iter().fold(
-            (f64::INFINITY, f64::NEG_INFINITY),
-            |(lo, hi), &(value, _)| (lo.min(value), hi.max(value)),
-        )
-    };
     let chunks = samples.chunks_exact(4);
-    let (mut lo, mut hi) = fold(chunks.remainder());
+    let (mut lo, mut hi) = value_range_in_order(chunks.remainder());
     let mut lanes = ([f64::INFINITY; 4], [f64::NEG_INFINITY; 4]);
     for chunk in chunks {
         for (lane, &(value, _)) in chunk.iter().enumerate() {
@@ -1152,9 +1146,17 @@ fn value_range(samples: &[(f64, f64)]) -> (f64, f64) {
         hi = hi.max(lanes.1[lane]);
     }
     if lo == 0.0 || hi == 0.0 {
-        return fold(samples);
+        return value_range_in_order(samples);
     }
     (lo, hi)
+}
+
+/// The least and greatest values of `samples`, by one fold in their order.
+fn value_range_in_order(samples: &[(f64, f64)]) -> (f64, f64) {
+    samples.iter().fold(
+        (f64::INFINITY, f64::NEG_INFINITY),
+        |(lo, hi), &(value, _)| (lo.min(value), hi.max(value)),
+    )
 }
 
 /// Every sample, bucket after bucket, and where each bucket starts (`starts[b]..starts[b + 1]`).
@@ -1354,11 +1356,7 @@ mod tests {
                     (value, 1.0)
                 })
                 .collect();
-            let fold = samples
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &(v, _)| {
-                    (lo.min(v), hi.max(v))
-                });
+            let fold = value_range_in_order(&samples);
             let range = value_range(&samples);
             assert_eq!(
                 (range.0.to_bits(), range.1.to_bits()),
