@@ -109,34 +109,39 @@ impl Texture {
         }
         let x = uv[0] as f64 * w as f64 - 0.5;
         let y = uv[1] as f64 * h as f64 - 0.5;
-        let (x0, y0) = (x.floor(), y.floor());
+        let (x0, y0) = (floor_f64(x), floor_f64(y));
         let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
         let pow2 = (w & (w - 1)) == 0 && (h & (h - 1)) == 0;
-        let texel = |xi: i64, yi: i64| -> [f32; 3] {
-            let (xi, yi) = if pow2 {
-                ((xi & (w - 1)) as usize, (yi & (h - 1)) as usize)
-            } else {
-                (xi.rem_euclid(w) as usize, yi.rem_euclid(h) as usize)
-            };
-            let o = (yi * self.width as usize + xi) * 4;
-            [
-                lut[self.rgba[o] as usize],
-                lut[self.rgba[o + 1] as usize],
-                lut[self.rgba[o + 2] as usize],
-            ]
-        };
         let (x0, y0) = (x0 as i64, y0 as i64);
         let (a, b, c, d) = (
-            texel(x0, y0),
-            texel(x0 + 1, y0),
-            texel(x0, y0 + 1),
-            texel(x0 + 1, y0 + 1),
+            self.texel(lut, pow2, x0, y0),
+            self.texel(lut, pow2, x0 + 1, y0),
+            self.texel(lut, pow2, x0, y0 + 1),
+            self.texel(lut, pow2, x0 + 1, y0 + 1),
         );
         std::array::from_fn(|i| {
             let top = a[i] + (b[i] - a[i]) * fx;
             let bottom = c[i] + (d[i] - c[i]) * fx;
             top + (bottom - top) * fy
         })
+    }
+
+    /// The linear RGB of texel `(xi, yi)` wrapped into the texture (`pow2`: both sides are
+    /// powers of two, so the wrap is a mask).
+    #[inline(always)]
+    fn texel(&self, lut: &[f32; 256], pow2: bool, xi: i64, yi: i64) -> [f32; 3] {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let (xi, yi) = if pow2 {
+            ((xi & (w - 1)) as usize, (yi & (h - 1)) as usize)
+        } else {
+            (xi.rem_euclid(w) as usize, yi.rem_euclid(h) as usize)
+        };
+        let o = (yi * self.width as usize + xi) * 4;
+        [
+            lut[self.rgba[o] as usize],
+            lut[self.rgba[o + 1] as usize],
+            lut[self.rgba[o + 2] as usize],
+        ]
     }
 }
 
@@ -328,6 +333,9 @@ trait Samples {
     /// Whether any pixel of the box `x0..=x1 × y0..=y1` is kept (a triangle over none is
     /// skipped whole).
     fn any_in(&self, x0: i64, y0: i64, x1: i64, y1: i64) -> bool;
+    /// Whether any pixel of row `y` with `x0 <= x <= x1` is kept (a triangle's row over none
+    /// is skipped before its span is worked out).
+    fn any_in_row(&self, y: i64, x0: i64, x1: i64) -> bool;
 }
 
 /// Every pixel of a `width`-wide buffer, row-major.
@@ -350,6 +358,11 @@ impl Samples for Every {
     }
 
     fn any_in(&self, _: i64, _: i64, _: i64, _: i64) -> bool {
+        true
+    }
+
+    #[inline(always)]
+    fn any_in_row(&self, _: i64, _: i64, _: i64) -> bool {
         true
     }
 }
@@ -467,6 +480,19 @@ impl Samples for SampleMask {
         }
     }
 
+    #[inline(always)]
+    fn any_in_row(&self, y: i64, x0: i64, x1: i64) -> bool {
+        let (row, first, last) = match self.shift {
+            Some(s) => ((y >> s) * self.width, x0 >> s, x1 >> s),
+            None => (
+                (y / self.factor) * self.width,
+                x0 / self.factor,
+                x1 / self.factor,
+            ),
+        };
+        self.before[(row + last) as usize + 1] > self.before[(row + first) as usize]
+    }
+
     fn any_in(&self, x0: i64, y0: i64, x1: i64, y1: i64) -> bool {
         let t = self.factor * TILE;
         let tiles_y = (self.height + TILE - 1) / TILE;
@@ -490,6 +516,25 @@ fn floor_i64(x: f64) -> i64 {
         t.saturating_sub(1)
     } else {
         t
+    }
+}
+
+/// `x.floor()`, bit for bit, without a call into libm where `x` is finite and below 2^52 in
+/// magnitude (every texture coordinate the shader meets); anything else goes to `f64::floor`.
+#[inline(always)]
+fn floor_f64(x: f64) -> f64 {
+    if x.abs() < 4_503_599_627_370_496.0 {
+        // Exact: |x| < 2^52, so the truncation and its conversion back are exact, and a
+        // negative zero or a value in (-1, 0) gives -0.0 or -1.0 as `floor` does.
+        let t = x as i64 as f64;
+        let f = if t > x { t - 1.0 } else { t };
+        if f == 0.0 && x.is_sign_negative() {
+            -0.0
+        } else {
+            f
+        }
+    } else {
+        x.floor()
     }
 }
 
@@ -674,6 +719,9 @@ fn raster_triangle<S: Samples>(
         ..
     } = buffer;
     for y in y_start..=y_end {
+        if !samples.any_in_row(y, x_start, x_end) {
+            continue;
+        }
         let py = y as f64;
         // The span of x where every barycentric is non-negative.
         let (mut lo, mut hi) = (x_start as f64, x_end as f64);
@@ -1393,9 +1441,11 @@ mod tests {
     }
 
     /// The rasterizer's own rounding is `f64::floor` / `f64::ceil` then `as i64` (which
-    /// saturates and maps NaN to 0) for every input: integers, halves, values beside
-    /// integers, huge values, infinities, NaN, and random ones. Control: plain truncation
-    /// (what `as i64` alone does) differs on negative fractions.
+    /// saturates and maps NaN to 0), and the texture sampler's `floor_f64` is `f64::floor` bit
+    /// for bit, for every input: integers, halves, values beside integers, huge values,
+    /// infinities, NaN, and random ones. Control: plain truncation (what `as i64` alone does)
+    /// differs on negative fractions; a floor that loses the sign of a negative zero was tried
+    /// and fails on `-0.0`.
     #[test]
     fn rounding_to_integers_matches_the_standard_library() {
         let mut values = vec![
@@ -1444,8 +1494,15 @@ mod tests {
         for &x in &values {
             assert_eq!(floor_i64(x), x.floor() as i64, "floor {x:e}");
             assert_eq!(ceil_i64(x), x.ceil() as i64, "ceil {x:e}");
+            assert_eq!(
+                floor_f64(x).to_bits(),
+                x.floor().to_bits(),
+                "floor_f64 {x:e}"
+            );
         }
-        // The inputs tell truncation from flooring and from ceiling.
+        // The inputs tell truncation from flooring and from ceiling, and reach the sign of a
+        // zero (a negative zero floors to itself, not to +0).
+        assert!(values.iter().any(|&x| x == 0.0 && x.is_sign_negative()));
         assert!(values.iter().any(|&x| x as i64 != x.floor() as i64));
         assert!(values.iter().any(|&x| x as i64 != x.ceil() as i64));
     }
