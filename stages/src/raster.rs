@@ -440,6 +440,16 @@ impl SampleMask {
         self.selected
     }
 
+    /// A sample coordinate split into its picture pixel and its sample within that pixel
+    /// (shifts where the factor is a power of two).
+    #[inline(always)]
+    fn split(&self, v: i64) -> (i64, i64) {
+        match self.shift {
+            Some(s) => (v >> s, v & (self.factor - 1)),
+            None => (v / self.factor, v % self.factor),
+        }
+    }
+
     /// Where sample `(dx, dy)` of picture pixel `(x, y)` is stored, `None` when the pixel is
     /// not selected.
     pub fn sample(&self, x: u32, y: u32, dx: u32, dy: u32) -> Option<usize> {
@@ -459,19 +469,14 @@ impl Samples for SampleMask {
 
     #[inline(always)]
     fn visit_row(&self, y: i64, x_lo: i64, x_hi: i64, mut visit: impl FnMut(i64, usize)) {
-        let f = self.factor;
-        let split = |v: i64| match self.shift {
-            Some(s) => (v >> s, v & (f - 1)),
-            None => (v / f, v % f),
-        };
-        let (py, dy) = split(y);
-        let row = (py * self.width) as usize;
-        let (first, last) = (row + split(x_lo).0 as usize, row + split(x_hi).0 as usize);
-        if self.before[last + 1] == self.before[first] {
+        if !self.any_in_row(y, x_lo, x_hi) {
             return;
         }
+        let f = self.factor;
+        let (py, dy) = self.split(y);
+        let row = (py * self.width) as usize;
         for x in x_lo..=x_hi {
-            let (px, dx) = split(x);
+            let (px, dx) = self.split(x);
             let p = row + px as usize;
             let k = self.before[p];
             if self.before[p + 1] > k {
@@ -482,14 +487,8 @@ impl Samples for SampleMask {
 
     #[inline(always)]
     fn any_in_row(&self, y: i64, x0: i64, x1: i64) -> bool {
-        let (row, first, last) = match self.shift {
-            Some(s) => ((y >> s) * self.width, x0 >> s, x1 >> s),
-            None => (
-                (y / self.factor) * self.width,
-                x0 / self.factor,
-                x1 / self.factor,
-            ),
-        };
+        let row = self.split(y).0 * self.width;
+        let (first, last) = (self.split(x0).0, self.split(x1).0);
         self.before[(row + last) as usize + 1] > self.before[(row + first) as usize]
     }
 
