@@ -74,15 +74,36 @@ impl Masks {
     /// Pixels covered by no mask (background), sorted. Made on demand: only a scene without a
     /// support mask fits its table on them.
     pub fn background(&self) -> Vec<u32> {
-        let mut covered = vec![false; self.len];
-        for list in self.pixels.values() {
-            for &p in list {
-                covered[p as usize] = true;
-            }
-        }
+        let (covered, _) = self.covered();
         (0..self.len as u32)
             .filter(|&p| !covered[p as usize])
             .collect()
+    }
+
+    /// Every `step`-th pixel of [`Masks::background`], from the first, with `step` the
+    /// smallest that leaves at most `at_most` of them: what `background().iter().step_by(step)`
+    /// gives, without listing the whole background first (a real frame's is most of its
+    /// million pixels, of which the table fit keeps a fifth).
+    pub fn background_sample(&self, at_most: usize) -> Vec<u32> {
+        let (covered, count) = self.covered();
+        let step = (self.len - count).div_ceil(at_most.max(1)).max(1);
+        (0..self.len as u32)
+            .filter(|&p| !covered[p as usize])
+            .step_by(step)
+            .collect()
+    }
+
+    /// Which pixels some mask covers, and how many do.
+    fn covered(&self) -> (Vec<bool>, usize) {
+        let mut covered = vec![false; self.len];
+        let mut count = 0;
+        for list in self.pixels.values() {
+            for &p in list {
+                count += usize::from(!covered[p as usize]);
+                covered[p as usize] = true;
+            }
+        }
+        (covered, count)
     }
 }
 
@@ -974,5 +995,55 @@ mod tests {
             read_npy_depth(&path).expect("one row"),
             (3, 1, vec![7.0, 8.0, 9.0])
         );
+    }
+
+    #[test]
+    fn a_background_sample_is_every_step_th_background_pixel() {
+        // Overlapping masks (per-instance mask files may overlap) over a 97-pixel image.
+        let masks = Masks {
+            pixels: BTreeMap::from([
+                (1, vec![0, 1, 2, 10, 11, 50]),
+                (2, vec![2, 3, 50, 51, 96]),
+                (3, (60..80).collect()),
+            ]),
+            len: 97,
+            source: String::new(),
+        };
+        let background = masks.background();
+        assert_eq!(background.len(), 97 - 6 - 3 - 20);
+        for at_most in [1, 2, 5, 7, 30, 67, 68, 1000] {
+            let step = background.len().div_ceil(at_most).max(1);
+            let expected: Vec<u32> = background.iter().copied().step_by(step).collect();
+            assert!(expected.len() <= at_most, "{at_most}");
+            assert_eq!(
+                masks.background_sample(at_most),
+                expected,
+                "at most {at_most}"
+            );
+        }
+        // Control: counting a pixel covered twice twice changes the step, and the sample.
+        // (68 background pixels, 66 if the two pixels of two masks counted twice: at most 33,
+        // a step of 3, not 2.)
+        let step_if_counted_twice = (97 - 31usize).div_ceil(33);
+        assert_eq!(step_if_counted_twice, 2);
+        let wrong: Vec<u32> = background
+            .iter()
+            .copied()
+            .step_by(step_if_counted_twice)
+            .collect();
+        assert_ne!(masks.background_sample(33), wrong);
+        // Nothing covered, and everything covered.
+        let empty = Masks {
+            pixels: BTreeMap::new(),
+            len: 10,
+            source: String::new(),
+        };
+        assert_eq!(empty.background_sample(4), vec![0, 3, 6, 9]);
+        let full = Masks {
+            pixels: BTreeMap::from([(1, (0..10).collect())]),
+            len: 10,
+            source: String::new(),
+        };
+        assert!(full.background_sample(4).is_empty());
     }
 }

@@ -252,24 +252,23 @@ pub fn lift_scene(
         .filter(|i| i.support)
         .flat_map(|i| masks.pixels[&i.id].iter().copied())
         .collect();
+    // The plane and the zone's percentiles need a few hundred thousand points at most: every
+    // step-th pixel of the support (or background), the step the smallest that leaves at most
+    // this many.
+    const PLANE_PIXELS: usize = 200_000;
     let (plane_pixels, source) = if support.is_empty() {
-        (masks.background(), "background")
+        (masks.background_sample(PLANE_PIXELS), "background")
     } else {
         let mut s = support;
         s.sort_unstable();
         s.dedup();
-        (s, "support")
+        let step = s.len().div_ceil(PLANE_PIXELS).max(1);
+        (s.into_iter().step_by(step).collect(), "support")
     };
-    // The plane and the zone's percentiles need a few hundred thousand points at most.
-    const PLANE_PIXELS: usize = 200_000;
-    let step = plane_pixels.len().div_ceil(PLANE_PIXELS).max(1);
-    let mut plane_points: Vec<Vector3<f64>> = Vec::with_capacity(plane_pixels.len() / step + 1);
-    plane_points.extend(
-        plane_pixels
-            .iter()
-            .step_by(step)
-            .filter_map(|&p| back_project(&depth, &k, p)),
-    );
+    let plane_points: Vec<Vector3<f64>> = plane_pixels
+        .iter()
+        .filter_map(|&p| back_project(&depth, &k, p))
+        .collect();
     let object_pixels: Vec<u32> = instances
         .iter()
         .filter(|i| !i.support)
