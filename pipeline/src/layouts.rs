@@ -33,11 +33,11 @@ pub fn present_layouts(scene: &Scene) -> Vec<&'static str> {
         .collect()
 }
 
-/// The bytes of a layout file as text, with their SHA-256.
-fn read_text(path: &Path) -> anyhow::Result<(String, String)> {
+/// The bytes of a layout file as text (hashed only by the readers that return the SHA-256:
+/// the graph stage reads 10,000 layouts whose digests the runner already has).
+fn read_text(path: &Path) -> anyhow::Result<String> {
     let bytes = read_bounded(path, JSON_LIMIT)
         .with_context(|| format!("{}: cannot read", path.display()))?;
-    let sha = sha256_hex(&bytes);
     let text = String::from_utf8(bytes).map_err(|_| {
         anyhow!(
             "{}: not UTF-8 text (expected a layout JSON)",
@@ -47,7 +47,7 @@ fn read_text(path: &Path) -> anyhow::Result<(String, String)> {
     if mesa_schemas::json::starts_with_bom(&text) {
         bail!("{}: {}", path.display(), mesa_schemas::json::BOM_PROBLEM);
     }
-    Ok((text, sha))
+    Ok(text)
 }
 
 fn invalid(path: &Path, problems: &[mesa_schemas::Problem]) -> anyhow::Error {
@@ -64,9 +64,9 @@ fn invalid(path: &Path, problems: &[mesa_schemas::Problem]) -> anyhow::Error {
 
 /// Reads a layout file of any form with the SHA-256 of its bytes.
 pub fn read_layout_file(path: &Path) -> anyhow::Result<(ReadLayout, String)> {
-    let (text, sha) = read_text(path)?;
+    let text = read_text(path)?;
     let read = read_layout_text(&text).map_err(|problems| invalid(path, &problems))?;
-    Ok((read, sha))
+    Ok((read, sha256_hex(text.as_bytes())))
 }
 
 /// Reads a layout file of any form (`mesa convert`).
@@ -81,7 +81,7 @@ pub fn read_dataset_layout_bytes(
     path: &Path,
     needs_assets_to: &str,
 ) -> anyhow::Result<(DatasetLayout, Vec<u8>)> {
-    let (text, _) = read_text(path)?;
+    let text = read_text(path)?;
     let layout = dataset_layout(path, &text, needs_assets_to)?;
     Ok((layout, text.into_bytes()))
 }
@@ -91,7 +91,8 @@ pub fn read_dataset_layout(
     path: &Path,
     needs_assets_to: &str,
 ) -> anyhow::Result<(DatasetLayout, String)> {
-    let (text, sha) = read_text(path)?;
+    let text = read_text(path)?;
+    let sha = sha256_hex(text.as_bytes());
     Ok((dataset_layout(path, &text, needs_assets_to)?, sha))
 }
 
@@ -112,7 +113,7 @@ fn dataset_layout(path: &Path, text: &str, needs_assets_to: &str) -> anyhow::Res
 /// Reads a layout file of any form for the scene graph (`mesa graph`): problems one per line,
 /// each naming the file.
 pub fn read_graph_layout(path: &Path) -> anyhow::Result<LoadedLayout> {
-    let (text, _) = read_text(path)?;
+    let text = read_text(path)?;
     mesa_stages::graph::read_layout_text(&text).map_err(|e| {
         let lines: Vec<String> = e
             .problems
