@@ -402,7 +402,12 @@ pub fn read_text_bounded(path: &Path, limit: SizeLimit) -> io::Result<String> {
 /// [`HASHED_INPUT_LIMIT`] is hashed (see [`check_regular_file`]).
 pub fn sha256_file(path: &Path) -> io::Result<String> {
     check_regular_file(path, HASHED_INPUT_LIMIT)?;
-    let mut file = fs::File::open(path)?.take(HASHED_INPUT_LIMIT.bytes);
+    sha256_reader(fs::File::open(path)?, HASHED_INPUT_LIMIT)
+}
+
+/// SHA-256 of what `reader` gives, streamed, up to `limit`'s bytes.
+pub fn sha256_reader(reader: impl Read, limit: SizeLimit) -> io::Result<String> {
+    let mut file = reader.take(limit.bytes);
     let mut hasher = Sha256::new();
     let mut buf = vec![0u8; 1 << 16];
     loop {

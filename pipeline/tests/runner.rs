@@ -94,6 +94,108 @@ fn reference(scenes: usize) -> (tempfile::TempDir, BTreeMap<String, Vec<u8>>) {
     (dir, snap)
 }
 
+/// Writes the first line of `input/big.txt` (a large input) to `head/line.txt`.
+struct Head;
+
+impl SceneStage for Head {
+    fn name(&self) -> &'static str {
+        "head"
+    }
+
+    fn inputs(&self, _: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
+        Ok(vec![scene.rel("input/big.txt")])
+    }
+
+    fn config_digest(&self, _: &StageContext<'_>) -> String {
+        String::new()
+    }
+
+    fn run(&self, _: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
+        let text = std::fs::read_to_string(scene.path("input/big.txt"))?;
+        let mut out = SceneOutput::new();
+        out.add_file("head/line.txt", text.lines().next().unwrap_or("").into());
+        Ok(out)
+    }
+}
+
+#[test]
+fn a_large_input_is_hashed_again_only_when_its_identity_changed() {
+    use mesa_pipeline::runner::digests::{REMEMBER_FROM_BYTES, SETTLED_AFTER};
+    use sha2::Digest as _;
+    let sha = |bytes: &[u8]| format!("{:x}", sha2::Sha256::digest(bytes));
+    let dir = tempfile::tempdir().expect("tempdir");
+    let rel = "scenes/dining_table/dining_table_0000/input/big.txt";
+    let input = dir.path().join(rel);
+    std::fs::create_dir_all(input.parent().expect("parent")).expect("mkdir");
+    let text = "abc\n".repeat(100_000);
+    assert!(text.len() as u64 >= REMEMBER_FROM_BYTES);
+    std::fs::write(&input, &text).expect("write");
+    // Only a file that last changed SETTLED_AFTER ago is remembered.
+    std::thread::sleep(SETTLED_AFTER + Duration::from_millis(300));
+    let config = Config::default();
+    let ctx = StageContext {
+        dataset: dir.path(),
+        config: &config,
+    };
+    let run = || run_stage(&Head, &ctx, &options(1)).expect("run");
+    let marker_digest = || -> String {
+        let marker: serde_json::Value = common::read_json(
+            &dir.path()
+                .join(".mesa/markers/head/dining_table/dining_table_0000.json"),
+        );
+        marker["inputs"][rel].as_str().expect("digest").to_owned()
+    };
+    let remembered = dir
+        .path()
+        .join(".mesa/digests/head/dining_table/dining_table_0000.txt");
+    assert_eq!(run().done, 1);
+    let saved = std::fs::read_to_string(&remembered).expect("remembered");
+    assert!(saved.contains(&sha(text.as_bytes())), "{saved}");
+    assert_eq!(marker_digest(), sha(text.as_bytes()));
+    assert_eq!(run().skipped, 1);
+
+    // The remembered digest is the one used: a forged one makes the scene stale (and is what
+    // the marker then records), and without the file the truth is hashed again.
+    let forged = "ab".repeat(32);
+    std::fs::write(&remembered, saved.replace(&sha(text.as_bytes()), &forged)).expect("forge");
+    assert_eq!(run().done, 1);
+    assert_eq!(marker_digest(), forged);
+    std::fs::remove_file(&remembered).expect("rm");
+    assert_eq!(run().done, 1);
+    assert_eq!(marker_digest(), sha(text.as_bytes()));
+    assert_eq!(run().skipped, 1);
+
+    // Other bytes written in place, the size and modification time kept: a new ctime, so the
+    // file is hashed again and the scene redone.
+    let before = std::fs::metadata(&input).expect("meta");
+    let edited = "abd\n".repeat(100_000);
+    std::fs::write(&input, &edited).expect("edit");
+    std::fs::File::options()
+        .write(true)
+        .open(&input)
+        .and_then(|f| f.set_modified(before.modified().expect("mtime")))
+        .expect("set mtime");
+    let after = std::fs::metadata(&input).expect("meta");
+    {
+        use std::os::unix::fs::MetadataExt as _;
+        assert_eq!(
+            (after.ino(), after.len(), after.modified().expect("mtime")),
+            (
+                before.ino(),
+                before.len(),
+                before.modified().expect("mtime")
+            )
+        );
+    }
+    let redone = run();
+    assert_eq!((redone.done, redone.skipped), (1, 0));
+    assert_eq!(marker_digest(), sha(edited.as_bytes()));
+    let line = dir
+        .path()
+        .join("scenes/dining_table/dining_table_0000/head/line.txt");
+    assert_eq!(std::fs::read_to_string(line).expect("redone"), "abd");
+}
+
 #[test]
 fn a_second_run_skips_everything_and_an_edit_redoes_exactly_that_scene() {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -6,7 +6,8 @@
 //!   3-task arrays: assets, lift, retrieve, place, pack, the simulated annotator, ingest, check,
 //!   graph, render, tasks, then records, report and release as merge jobs, writes the tree of a
 //!   local `mesa run` and `mesa release` byte for byte (job logs, run summaries under
-//!   `.mesa/runs/` and the resolved configuration `mesa run` records are left out).
+//!   `.mesa/runs/`, the resolved configuration `mesa run` records and the remembered input
+//!   digests of `.mesa/digests/`, which hold file identities, are left out).
 //! - Preemption: an array task of `lift` cancelled (`scancel`) after the first of its scenes,
 //!   the chain going on without it, then the same submission again: done scenes are skipped and
 //!   the tree is the same.
@@ -155,8 +156,9 @@ fn copy_tree(from: &Path, to: &Path) {
     }
 }
 
-/// Every file of a dataset but the run summaries (`.mesa/runs/`) and `mesa run`'s record of
-/// its configuration.
+/// Every file of a dataset but the run summaries (`.mesa/runs/`), `mesa run`'s record of
+/// its configuration and the remembered input digests (`.mesa/digests/`: inodes and times,
+/// which differ between copies).
 fn tree(dataset: &Path) -> BTreeMap<String, Vec<u8>> {
     fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
         for entry in std::fs::read_dir(dir).expect("read_dir") {
@@ -166,7 +168,8 @@ fn tree(dataset: &Path) -> BTreeMap<String, Vec<u8>> {
                 .expect("prefix")
                 .to_string_lossy()
                 .into_owned();
-            if rel == ".mesa/runs" || rel == ".mesa/config.resolved.toml" {
+            if rel == ".mesa/runs" || rel == ".mesa/digests" || rel == ".mesa/config.resolved.toml"
+            {
                 continue;
             }
             if path.is_dir() {

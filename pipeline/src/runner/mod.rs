@@ -7,7 +7,8 @@
 //!   and every file are the same for any thread count);
 //! - skip-done: a done marker records the digests of the scene's inputs and of the stage's
 //!   configuration; a rerun skips scenes whose marker still matches, redoes changed ones, and
-//!   `--force` redoes all;
+//!   `--force` redoes all; the digest of a large input that has not changed since it was last
+//!   hashed is taken from `.mesa/digests/` ([`digests`]), not hashed again;
 //! - atomic writes: a stage returns its files in memory; the runner writes them only when the
 //!   scene succeeded, each through a temporary file and a rename, and the done marker last
 //!   (datatrove's rule: a relaunch trusts only completed markers);
@@ -25,6 +26,7 @@
 
 mod core;
 pub mod dataset;
+pub mod digests;
 pub mod lock;
 mod scene;
 

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Component, Path, PathBuf};
-use std::time::Instant;
+use std::time::{Instant, SystemTime};
 
 use anyhow::Context as _;
 use mesa_schemas::artifacts::{MarkerStatus, RunMarker, MARKER_SCHEMA};
@@ -16,6 +16,7 @@ use super::core::{
     discover_all, progress, read_marker, select_scenes, thread_pool, write_run_record, RunError,
     RunOptions, Scene, StageContext, RUN_DIR,
 };
+use super::digests::RememberedDigests;
 use crate::exit::UsageError;
 use crate::fsio::{
     sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic, write_if_changed, DigestCache,
@@ -250,20 +251,47 @@ struct Prepared {
     previous: Option<RunMarker>,
 }
 
+/// Where the digests of a scene's large inputs are remembered for a stage ([`digests`]).
+///
+/// [`digests`]: super::digests
+pub fn digests_path(dataset: &Path, stage: &str, scene: &Scene) -> PathBuf {
+    dataset
+        .join(RUN_DIR)
+        .join("digests")
+        .join(stage)
+        .join(&scene.table_type)
+        .join(format!("{}.txt", scene.scene_id))
+}
+
+/// Whether [`prepare`] writes back the digests it remembers (a run does; `mesa status`, which
+/// holds no lock, only reads them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Remember {
+    Save,
+    ReadOnly,
+}
+
 fn prepare(
     stage: &dyn SceneStage,
     ctx: &StageContext<'_>,
     scene: &Scene,
     cache: &DigestCache,
+    remember: Remember,
 ) -> anyhow::Result<Prepared> {
     let previous = read_marker(&marker_path(ctx.dataset, stage.name(), scene));
     let listed = stage.inputs(ctx, scene)?;
     let scene_prefix = scene.rel("");
+    let mut remembered = RememberedDigests::at(digests_path(ctx.dataset, stage.name(), scene));
+    let now = SystemTime::now();
     let mut inputs = BTreeMap::new();
     for rel in listed {
         let path = ctx.dataset.join(&rel);
-        let shared = !rel.starts_with(&scene_prefix);
-        let digest = cache.digest(&path, shared).map_err(|e| {
+        let digest = if rel.starts_with(&scene_prefix) {
+            remembered.digest(&path, &rel, now)
+        } else {
+            cache.digest(&path, true)
+        };
+        let digest = digest.map_err(|e| {
             if e.kind() == std::io::ErrorKind::NotFound {
                 missing_input(&path, &rel, stage.name())
             } else {
@@ -271,6 +299,11 @@ fn prepare(
             }
         })?;
         inputs.insert(rel, digest);
+    }
+    if remember == Remember::Save {
+        remembered.retain(&inputs);
+        // Only a shortcut (see `digests`): a file not written means hashing again next time.
+        let _ = remembered.save();
     }
     Ok(Prepared { inputs, previous })
 }
@@ -352,7 +385,7 @@ pub fn scene_state(
     if marker.status == MarkerStatus::Failed {
         return SceneState::Failed(marker.error.first().cloned().unwrap_or_default());
     }
-    match prepare(stage, ctx, scene, cache) {
+    match prepare(stage, ctx, scene, cache, Remember::ReadOnly) {
         Err(e) => SceneState::Stale(format!("{e:#}")),
         Ok(prepared) => match staleness(&marker, &prepared.inputs, config_digest, ctx.dataset) {
             None => SceneState::Done,
@@ -410,7 +443,7 @@ pub fn process_scene(
         warnings: Vec::new(),
         error: Vec::new(),
     };
-    let prepared = match prepare(stage, ctx, scene, cache) {
+    let prepared = match prepare(stage, ctx, scene, cache, Remember::Save) {
         Ok(p) => p,
         Err(e) => {
             let previous = read_marker(&marker_file);
@@ -611,19 +644,23 @@ fn write_marker(path: &Path, marker: &RunMarker) -> std::io::Result<()> {
     write_if_changed(path, &bytes).map(drop)
 }
 
-/// Sweeps the marker folders of `scenes` (each once) of dead writers' temporary files.
+/// Sweeps the marker folders of `scenes` (each once), and those of their remembered digests,
+/// of dead writers' temporary files.
 fn sweep_marker_folders(
     ctx: &StageContext<'_>,
     stage: &str,
     scenes: &[Scene],
 ) -> anyhow::Result<()> {
+    // The remembered digests' folders too, laid out as the markers' are.
     let folders: std::collections::BTreeSet<PathBuf> = scenes
         .iter()
-        .filter_map(|scene| {
-            marker_path(ctx.dataset, stage, scene)
-                .parent()
-                .map(Path::to_path_buf)
+        .flat_map(|scene| {
+            [
+                marker_path(ctx.dataset, stage, scene),
+                digests_path(ctx.dataset, stage, scene),
+            ]
         })
+        .filter_map(|path| path.parent().map(Path::to_path_buf))
         .collect();
     for folder in folders {
         sweep_dead_tmp_in(&folder).with_context(|| format!("{}: sweeping", folder.display()))?;

@@ -1,0 +1,388 @@
+//! Input digests remembered by file identity, so that a rerun does not hash again a large
+//! scene input that has not changed.
+//!
+//! A done marker records the SHA-256 of every input, and each run compares them to decide what
+//! is stale, so each run hashed every input anew: a real RGB-D frame is 5 MB (a 1280×720
+//! `depth.npy` and its photo), 5 ms of hashing a scene out of 35 ms of lifting it, and 50 GB
+//! for a rerun of 10,000 such scenes with nothing to do. Build tools and version control
+//! answer this with the file's identity: `git` trusts its index entry when a file's inode,
+//! size and times are those it recorded. So does this module, for the scene inputs of at
+//! least [`REMEMBER_FROM_BYTES`]; smaller ones cost less to hash than to look up.
+//!
+//! **The identity** is the device, the inode, the size, the modification time and the status
+//! change time (`ctime`), to the nanosecond. Writing to a file, truncating it, replacing it by
+//! rename, or setting its times (`touch -d`, `cp -p`, `rsync -t`) all set its `ctime` to the
+//! current time, and no system call sets `ctime` to a chosen value; a file put back with the
+//! old size and modification time still gets a new `ctime`.
+//!
+//! **Only settled files are remembered.** A file system keeps times to a granularity (a few
+//! milliseconds of kernel clock on ext4, two seconds on FAT): two writes within one tick can
+//! leave the same times. So a digest is remembered only when the file's `ctime` and `mtime`
+//! are [`SETTLED_AFTER`] or more in the past when it is hashed, and its identity is the same
+//! before and after the hashing (no writer was busy with it). A later change then gets a later
+//! `ctime` than the remembered one. A file written seconds ago is hashed at every run until it
+//! settles. What this does not survive is a system clock set back by more than the margin, or
+//! a file system whose clock runs behind this machine's; delete `.mesa/digests/` to have every
+//! input hashed again.
+//!
+//! **Where.** One small text file a stage and scene, `.mesa/digests/<stage>/<table_type>/
+//! <scene_id>.txt`, out of the scene folder and the markers: file identities differ between
+//! copies of a dataset, and markers must be the same bytes for the same work. A line is
+//! `<sha256> <dev> <ino> <size> <mtime> <ctime> <path>`, times as `<seconds>.<nanoseconds>`;
+//! the file is written atomically when an entry changes. A file that does not parse is ignored
+//! whole (every input is hashed, and the file is written anew).
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::io;
+use std::os::unix::fs::MetadataExt as _;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use crate::fsio::{
+    check_regular_file, read_bounded, sha256_reader, write_if_changed, SizeLimit,
+    HASHED_INPUT_LIMIT,
+};
+
+/// Inputs smaller than this are hashed every time (256 KiB: a quarter of a millisecond of
+/// hashing, against a lookup that costs a read of the digests file).
+pub const REMEMBER_FROM_BYTES: u64 = 256 << 10;
+
+/// How long ago a file must have last changed for its digest to be remembered.
+pub const SETTLED_AFTER: Duration = Duration::from_secs(3);
+
+/// A digests file read whole (1 MiB: a line is under 300 bytes, a scene has a few inputs).
+const DIGESTS_LIMIT: SizeLimit = SizeLimit {
+    bytes: 1 << 20,
+    what: "a remembered-digests file",
+    name: "DIGESTS_LIMIT",
+};
+
+/// The first line of a digests file.
+const HEADER: &str = "mesa.digests/1";
+
+/// A file's identity (module docs): what changes whenever its content may have.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FileIdentity {
+    dev: u64,
+    ino: u64,
+    size: u64,
+    mtime: (i64, i64),
+    ctime: (i64, i64),
+}
+
+impl FileIdentity {
+    /// The identity in `meta`.
+    pub fn of(meta: &fs::Metadata) -> Self {
+        Self {
+            dev: meta.dev(),
+            ino: meta.ino(),
+            size: meta.size(),
+            mtime: (meta.mtime(), meta.mtime_nsec()),
+            ctime: (meta.ctime(), meta.ctime_nsec()),
+        }
+    }
+
+    /// Whether the file last changed [`SETTLED_AFTER`] or more before `now`.
+    fn settled_at(&self, now: SystemTime) -> bool {
+        let Ok(now) = now.duration_since(UNIX_EPOCH) else {
+            return false;
+        };
+        let limit = now.saturating_sub(SETTLED_AFTER);
+        let before = |(seconds, nanos): (i64, i64)| {
+            u64::try_from(seconds).is_ok_and(|s| {
+                let nanos = u32::try_from(nanos).unwrap_or(u32::MAX).min(999_999_999);
+                Duration::new(s, nanos) <= limit
+            })
+        };
+        before(self.mtime) && before(self.ctime)
+    }
+
+    fn line(&self, digest: &str, rel: &str) -> String {
+        let Self {
+            dev,
+            ino,
+            size,
+            mtime,
+            ctime,
+        } = self;
+        format!(
+            "{digest} {dev} {ino} {size} {}.{:09} {}.{:09} {rel}\n",
+            mtime.0, mtime.1, ctime.0, ctime.1
+        )
+    }
+
+    fn parse(fields: &[&str]) -> Option<Self> {
+        let time = |text: &str| -> Option<(i64, i64)> {
+            let (seconds, nanos) = text.split_once('.')?;
+            let nanos: i64 = nanos.parse().ok()?;
+            (0..1_000_000_000).contains(&nanos).then_some(())?;
+            Some((seconds.parse().ok()?, nanos))
+        };
+        match fields {
+            [dev, ino, size, mtime, ctime] => Some(Self {
+                dev: dev.parse().ok()?,
+                ino: ino.parse().ok()?,
+                size: size.parse().ok()?,
+                mtime: time(mtime)?,
+                ctime: time(ctime)?,
+            }),
+            _ => None,
+        }
+    }
+}
+
+/// The remembered digests of one stage's inputs in one scene: loaded when first needed,
+/// written back by [`RememberedDigests::save`] when an entry changed.
+#[derive(Debug)]
+pub struct RememberedDigests {
+    path: PathBuf,
+    entries: Option<BTreeMap<String, (FileIdentity, String)>>,
+    changed: bool,
+}
+
+impl RememberedDigests {
+    /// The digests remembered in `path` (nothing is read yet).
+    pub fn at(path: PathBuf) -> Self {
+        Self {
+            path,
+            entries: None,
+            changed: false,
+        }
+    }
+
+    /// The entries, read from the file the first time (none when it is missing or does not
+    /// parse).
+    fn entries(&mut self) -> &mut BTreeMap<String, (FileIdentity, String)> {
+        let path = &self.path;
+        self.entries.get_or_insert_with(|| {
+            read_bounded(path, DIGESTS_LIMIT)
+                .ok()
+                .and_then(|bytes| String::from_utf8(bytes).ok())
+                .and_then(|text| parse(&text))
+                .unwrap_or_default()
+        })
+    }
+
+    /// The SHA-256 of the scene input `path` (`rel` names it in the file): the remembered one
+    /// when the file's identity is the one remembered with it, else hashed (and remembered
+    /// when the file has settled, as of `now`).
+    pub fn digest(&mut self, path: &Path, rel: &str, now: SystemTime) -> io::Result<String> {
+        let size = check_regular_file(path, HASHED_INPUT_LIMIT)?;
+        let file = fs::File::open(path)?;
+        if size < REMEMBER_FROM_BYTES || rel.contains('\n') {
+            return sha256_reader(file, HASHED_INPUT_LIMIT);
+        }
+        let before = FileIdentity::of(&file.metadata()?);
+        if let Some((identity, digest)) = self.entries().get(rel) {
+            if *identity == before {
+                return Ok(digest.clone());
+            }
+        }
+        let digest = sha256_reader(&file, HASHED_INPUT_LIMIT)?;
+        let after = FileIdentity::of(&file.metadata()?);
+        let entries = self.entries();
+        if before == after && before.settled_at(now) {
+            let entry = (before, digest.clone());
+            if entries.get(rel) != Some(&entry) {
+                entries.insert(rel.to_owned(), entry);
+                self.changed = true;
+            }
+        } else if entries.remove(rel).is_some() {
+            self.changed = true;
+        }
+        Ok(digest)
+    }
+
+    /// Keeps only the entries of `inputs` (a file no longer an input is forgotten).
+    pub fn retain(&mut self, inputs: &BTreeMap<String, String>) {
+        if let Some(entries) = &mut self.entries {
+            let before = entries.len();
+            entries.retain(|rel, _| inputs.contains_key(rel));
+            self.changed |= entries.len() != before;
+        }
+    }
+
+    /// Writes the file when an entry changed. The digests are only a shortcut: a file that
+    /// cannot be written means the inputs are hashed again next time, nothing worse, so the
+    /// caller may ignore the error (the marker written next reports a full disk).
+    pub fn save(&self) -> io::Result<()> {
+        let Some(entries) = self.entries.as_ref().filter(|_| self.changed) else {
+            return Ok(());
+        };
+        if entries.is_empty() {
+            return match fs::remove_file(&self.path) {
+                Err(e) if e.kind() != io::ErrorKind::NotFound => Err(e),
+                _ => Ok(()),
+            };
+        }
+        let mut text = format!("{HEADER}\n");
+        for (rel, (identity, digest)) in entries {
+            text.push_str(&identity.line(digest, rel));
+        }
+        write_if_changed(&self.path, text.as_bytes()).map(drop)
+    }
+}
+
+/// The entries of a digests file, or `None` when any line does not parse.
+fn parse(text: &str) -> Option<BTreeMap<String, (FileIdentity, String)>> {
+    let mut lines = text.lines();
+    (lines.next()? == HEADER).then_some(())?;
+    let mut entries = BTreeMap::new();
+    for line in lines {
+        let fields: Vec<&str> = line.splitn(7, ' ').collect();
+        let [digest, rest @ .., rel] = fields.as_slice() else {
+            return None;
+        };
+        let hex = digest.len() == 64 && digest.bytes().all(|b| b.is_ascii_hexdigit());
+        if !hex || rel.is_empty() {
+            return None;
+        }
+        let identity = FileIdentity::parse(rest)?;
+        entries.insert((*rel).to_owned(), (identity, (*digest).to_owned()));
+    }
+    Some(entries)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fsio::sha256_file;
+
+    const LATER: Duration = Duration::from_secs(3600);
+
+    /// A file of `len` bytes of `byte` in `dir`.
+    fn input(dir: &Path, name: &str, byte: u8, len: usize) -> PathBuf {
+        let path = dir.join(name);
+        fs::write(&path, vec![byte; len]).expect("write");
+        path
+    }
+
+    #[test]
+    fn a_settled_large_input_is_hashed_once_and_its_digest_then_trusted() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = input(dir.path(), "depth.npy", 7, 300_000);
+        let store = dir.path().join("digests/lift/t/s.txt");
+        // As if an hour had passed: the file has settled.
+        let later = SystemTime::now() + LATER;
+        let mut memo = RememberedDigests::at(store.clone());
+        let truth = sha256_file(&file).expect("sha");
+        assert_eq!(memo.digest(&file, "in/depth.npy", later).expect("d"), truth);
+        memo.save().expect("save");
+        let text = fs::read_to_string(&store).expect("saved");
+        assert!(text.starts_with("mesa.digests/1\n"), "{text}");
+        assert!(
+            text.contains(&truth) && text.ends_with(" in/depth.npy\n"),
+            "{text}"
+        );
+
+        // The remembered digest is what is returned, unread: a forged one shows it.
+        let forged = "ab".repeat(32);
+        fs::write(&store, text.replace(&truth, &forged)).expect("forge");
+        let mut memo = RememberedDigests::at(store.clone());
+        assert_eq!(
+            memo.digest(&file, "in/depth.npy", later).expect("d"),
+            forged
+        );
+
+        // Control: the same bytes written again in place (same inode, same size, the old
+        // modification time put back) is a new ctime: hashed again, and the truth comes back.
+        // (Past the file system's timestamp granularity first, which SETTLED_AFTER covers in
+        // real use and `later` skips here.)
+        let meta = fs::metadata(&file).expect("meta");
+        let mtime = meta.modified().expect("mtime");
+        std::thread::sleep(Duration::from_millis(50));
+        fs::write(&file, vec![7; 300_000]).expect("rewrite");
+        fs::File::options()
+            .write(true)
+            .open(&file)
+            .and_then(|f| f.set_modified(mtime))
+            .expect("set mtime");
+        let after = fs::metadata(&file).expect("meta");
+        assert_eq!((after.ino(), after.size()), (meta.ino(), meta.size()));
+        assert_eq!(after.modified().expect("mtime"), mtime);
+        assert_ne!(
+            (after.ctime(), after.ctime_nsec()),
+            (meta.ctime(), meta.ctime_nsec())
+        );
+        let mut memo = RememberedDigests::at(store.clone());
+        assert_eq!(memo.digest(&file, "in/depth.npy", later).expect("d"), truth);
+        memo.save().expect("save");
+        assert!(!fs::read_to_string(&store).expect("saved").contains(&forged));
+    }
+
+    #[test]
+    fn a_file_that_changed_lately_or_a_small_one_is_not_remembered() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let store = dir.path().join("digests.txt");
+        let big = input(dir.path(), "image.png", 1, 300_000);
+        let small = input(dir.path(), "camera.json", 2, 100);
+        let mut memo = RememberedDigests::at(store.clone());
+        // Now: the file was written a moment ago.
+        memo.digest(&big, "big", SystemTime::now()).expect("d");
+        memo.digest(&small, "small", SystemTime::now() + LATER)
+            .expect("d");
+        memo.save().expect("save");
+        assert!(!store.exists(), "nothing to remember");
+        // Control: an hour later the big one is remembered (and the small one still not).
+        memo.digest(&big, "big", SystemTime::now() + LATER)
+            .expect("d");
+        memo.digest(&small, "small", SystemTime::now() + LATER)
+            .expect("d");
+        memo.save().expect("save");
+        let text = fs::read_to_string(&store).expect("saved");
+        assert!(
+            text.ends_with(" big\n") && text.lines().count() == 2,
+            "{text}"
+        );
+        // An input no longer declared is forgotten; with none left, the file goes.
+        memo.retain(&BTreeMap::from([("small".to_owned(), String::new())]));
+        memo.save().expect("save");
+        assert!(!store.exists());
+    }
+
+    #[test]
+    fn a_damaged_digests_file_is_ignored_whole() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = input(dir.path(), "depth.npy", 3, 300_000);
+        let truth = sha256_file(&file).expect("sha");
+        let later = SystemTime::now() + LATER;
+        let store = dir.path().join("d.txt");
+        let mut memo = RememberedDigests::at(store.clone());
+        memo.digest(&file, "x", later).expect("d");
+        memo.save().expect("save");
+        let good = fs::read_to_string(&store).expect("saved");
+        let forged = good.replace(&truth, &"cd".repeat(32));
+        // Control: the forged file as it is is trusted.
+        fs::write(&store, &forged).expect("write");
+        let trusted = RememberedDigests::at(store.clone()).digest(&file, "x", later);
+        assert_eq!(trusted.expect("d"), "cd".repeat(32));
+        // The entry line with one field replaced.
+        let entry = forged.lines().nth(1).expect("entry").to_owned();
+        let with_field = |i: usize, value: &str| {
+            let mut fields: Vec<&str> = entry.split(' ').collect();
+            fields[i] = value;
+            format!("mesa.digests/1\n{}\n", fields.join(" "))
+        };
+        let mtime = entry.split(' ').nth(4).expect("mtime");
+        let (seconds, _) = mtime.split_once('.').expect("a dot");
+        for damaged in [
+            forged.replacen("mesa.digests/1", "mesa.digests/2", 1),
+            forged.clone() + "not a line\n",
+            with_field(0, &"zz".repeat(32)),
+            with_field(0, "cd"),
+            with_field(1, "-1"),
+            with_field(3, "300000x"),
+            with_field(4, &format!("{seconds}.1234567890")),
+            with_field(4, seconds),
+            with_field(5, "now"),
+            with_field(6, ""),
+            forged[..forged.len() / 2].to_owned(),
+            String::new(),
+        ] {
+            fs::write(&store, &damaged).expect("write");
+            let got = RememberedDigests::at(store.clone()).digest(&file, "x", later);
+            assert_eq!(got.expect("d"), truth, "{damaged:?}");
+        }
+    }
+}
