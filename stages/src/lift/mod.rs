@@ -1457,7 +1457,10 @@ mod tests {
         for case in 0..200 {
             // One case in five over several of window_scores' blocks of cells.
             let (bw, bh) = if case % 5 == 0 {
-                (rng.random_range(60..200usize), rng.random_range(30..70usize))
+                (
+                    rng.random_range(60..200usize),
+                    rng.random_range(30..70usize),
+                )
             } else {
                 (rng.random_range(1..40usize), rng.random_range(1..40usize))
             };
