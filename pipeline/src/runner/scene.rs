@@ -221,12 +221,24 @@ fn is_zero(n: &usize) -> bool {
 
 /// Where a stage's marker for a scene lives.
 pub fn marker_path(dataset: &Path, stage: &str, scene: &Scene) -> PathBuf {
+    per_scene_file(dataset, "markers", stage, scene, "json")
+}
+
+/// `.mesa/<folder>/<stage>/<table_type>/<scene_id>.<extension>`: how the runner lays out its
+/// files of a stage and scene.
+fn per_scene_file(
+    dataset: &Path,
+    folder: &str,
+    stage: &str,
+    scene: &Scene,
+    extension: &str,
+) -> PathBuf {
     dataset
         .join(RUN_DIR)
-        .join("markers")
+        .join(folder)
         .join(stage)
         .join(&scene.table_type)
-        .join(format!("{}.json", scene.scene_id))
+        .join(format!("{}.{extension}", scene.scene_id))
 }
 
 /// The state of a scene for a stage, as `mesa status` reports it.
@@ -255,12 +267,7 @@ struct Prepared {
 ///
 /// [`digests`]: super::digests
 pub fn digests_path(dataset: &Path, stage: &str, scene: &Scene) -> PathBuf {
-    dataset
-        .join(RUN_DIR)
-        .join("digests")
-        .join(stage)
-        .join(&scene.table_type)
-        .join(format!("{}.txt", scene.scene_id))
+    per_scene_file(dataset, "digests", stage, scene, "txt")
 }
 
 /// Whether [`prepare`] writes back the digests it remembers (a run does; `mesa status`, which
