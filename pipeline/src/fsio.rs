@@ -427,11 +427,9 @@ pub struct DigestCache {
 }
 
 impl DigestCache {
-    /// The digest of `path`; cached when `shared` (files outside a scene folder).
-    pub fn digest(&self, path: &Path, shared: bool) -> io::Result<String> {
-        if !shared {
-            return sha256_file(path);
-        }
+    /// The digest of `path` (a file outside the scene folders), hashed the first time only.
+    /// A scene's own inputs go through `runner::digests` instead.
+    pub fn digest(&self, path: &Path) -> io::Result<String> {
         if let Some(d) = self.lock().get(path) {
             return Ok(d.clone());
         }

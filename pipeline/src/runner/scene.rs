@@ -296,7 +296,7 @@ fn prepare(
         let digest = if rel.starts_with(&scene_prefix) {
             remembered.digest(&path, &rel, now)
         } else {
-            cache.digest(&path, true)
+            cache.digest(&path)
         };
         let digest = digest.map_err(|e| {
             if e.kind() == std::io::ErrorKind::NotFound {
