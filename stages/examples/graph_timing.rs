@@ -20,6 +20,11 @@ use mesa_stages::graph::{
 use mesa_stages::paths::dataset::{ANNOTATIONS, SCENES};
 use mesa_stages::paths::scene::LAYOUT_CANDIDATES;
 
+/// The allocator of the `mesa` executable (pipeline/src/main.rs), so that the figure is the
+/// one the `graph` stage gets.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 const USAGE: &str = "usage: graph_timing DATASET [--repeat N]";
 
 /// The sub-folders of `path`, hidden ones left out, sorted (as mesa lists scenes).
