@@ -407,29 +407,32 @@ impl GraphScene {
     }
 }
 
-/// A name's length with its first and last 8 bytes (zero-padded): equal names have equal
-/// summaries, and names of up to 16 bytes have equal summaries only when they are equal. A
-/// summary compares in a few instructions where a string comparison calls `memcmp`.
-type NameSummary = (usize, u64, u64);
+/// A 64-bit summary of a name: equal names have equal summaries. It mixes the name's
+/// length with its first and last 8 bytes, so different names rarely share one (a shared one
+/// only sends the check to the exact search by name). A summary compares in one instruction
+/// where a string comparison calls `memcmp`.
+type NameSummary = u64;
 
 /// The [`NameSummary`] of `name`.
 fn name_summary(name: &str) -> NameSummary {
     let bytes = name.as_bytes();
-    match (bytes.first_chunk::<8>(), bytes.last_chunk::<8>()) {
-        (Some(head), Some(tail)) => (
-            bytes.len(),
-            u64::from_le_bytes(*head),
-            u64::from_le_bytes(*tail),
-        ),
+    let (head, tail) = match (bytes.first_chunk::<8>(), bytes.last_chunk::<8>()) {
+        (Some(head), Some(tail)) => (u64::from_le_bytes(*head), u64::from_le_bytes(*tail)),
         // Shorter than 8 bytes: the whole name, byte by byte (no call to `memcpy`).
         _ => {
             let word = bytes
                 .iter()
                 .rev()
                 .fold(0u64, |word, &byte| word << 8 | u64::from(byte));
-            (bytes.len(), word, word)
+            (word, 0)
         }
-    }
+    };
+    // Multiply-xorshift rounds (the constants of splitmix64).
+    let mix = |h: u64| {
+        let h = (h ^ (h >> 31)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        (h ^ (h >> 29)).wrapping_mul(0x94d0_49bb_1331_11eb)
+    };
+    mix(mix(mix(bytes.len() as u64 ^ head) ^ tail))
 }
 
 /// Why a layout has no scene graph.
@@ -684,11 +687,24 @@ impl Facing {
     ];
 
     /// The sector of a yaw: 45° sectors centred on the directions.
+    ///
+    /// As `((a + 22.5) / 45).floor().rem_euclid(8)` with `a = (yaw + 180).rem_euclid(360) -
+    /// 180`, to the bit, without a call to `fmod` or `floor` for the usual yaws: a yaw in
+    /// [-180, 180) is already in the range `rem_euclid` returns, and `(a + 22.5) / 45` lies in
+    /// [-3.5, 4.5], where the floor and the remainder are integer operations. A NaN yaw is
+    /// `Front`, as before.
     pub fn from_yaw_deg(yaw_deg: f64) -> Self {
-        let a = (yaw_deg + 180.0).rem_euclid(360.0) - 180.0;
-        let k = ((a + 22.5) / 45.0).floor().rem_euclid(8.0);
-        // k is an integer in 0..8 for any finite yaw; the cast cannot truncate.
-        Self::ALL[(k as usize) % 8]
+        let turned = yaw_deg + 180.0;
+        let a = if (0.0..360.0).contains(&turned) {
+            turned
+        } else {
+            turned.rem_euclid(360.0)
+        } - 180.0;
+        let sector = (a + 22.5) / 45.0;
+        // The floor of `sector` (a NaN casts to 0, as `NaN as usize` did).
+        let truncated = sector as i64;
+        let floor = truncated - i64::from((truncated as f64) > sector);
+        Self::ALL[floor.rem_euclid(8) as usize]
     }
 
     /// The label, like `front_right`.
@@ -2161,6 +2177,39 @@ mod tests {
         ];
         for (yaw, label) in cases {
             assert_eq!(Facing::from_yaw_deg(yaw).label(), label, "yaw {yaw}");
+        }
+    }
+
+    /// The rule as SCENE_GRAPH.md writes it, in floating point throughout.
+    fn literal_facing(yaw_deg: f64) -> Facing {
+        let a = (yaw_deg + 180.0).rem_euclid(360.0) - 180.0;
+        let k = ((a + 22.5) / 45.0).floor().rem_euclid(8.0);
+        Facing::ALL[(k as usize) % 8]
+    }
+
+    #[test]
+    fn face_to_is_the_literal_rule_at_every_sector_edge() {
+        let mut yaws = vec![
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            1e300,
+            -1e300,
+            -1e-300,
+        ];
+        for k in -40..=40 {
+            let edge = 22.5 * f64::from(k);
+            let (mut below, mut above) = (edge, edge);
+            for _ in 0..4 {
+                yaws.extend([below, above]);
+                below = below.next_down();
+                above = above.next_up();
+            }
+        }
+        // And a sweep, every 1/64 of a degree over three turns.
+        yaws.extend((-34_560..34_560).map(|i| f64::from(i) / 64.0));
+        for yaw in yaws {
+            assert_eq!(Facing::from_yaw_deg(yaw), literal_facing(yaw), "yaw {yaw}");
         }
     }
 
