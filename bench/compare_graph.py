@@ -12,7 +12,8 @@ the median over the runs, in ms per scene, and the ratio python / mesa of each:
 
   a. in process: the layouts already parsed and the container flags decided, the graph of
      every scene extracted and its text produced, no file I/O. mesa: the example
-     stages/examples/graph_timing.rs (extract_graph + to_text), built here if missing. Python:
+     stages/examples/graph_timing.rs (extract_graph + to_text; mimalloc, the mesa executable's
+     allocator), built here if missing. Python:
      graph_rules.extract_graph + graph_text.
   b. as a dataset stage, whole processes timed from outside: `mesa graph DATASET --force
      --jobs 1` (reads every layout and the annotations, writes graph.json, graph.txt and the

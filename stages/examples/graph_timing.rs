@@ -6,6 +6,8 @@
 //! the seconds per scene of each pass, their min and median, and the min and median of as many
 //! passes of `extract_graph` alone (no text).
 //!
+//! It allocates through mimalloc, as the `mesa` executable does (pipeline/src/main.rs).
+//!
 //! `cargo run --release -p mesa-stages --example graph_timing -- DATASET [--repeat 5]`
 
 use std::error::Error;
