@@ -1642,20 +1642,23 @@ fn horizontal_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> V
         // Without a jump per candidate: whether a pair is near enough is no better than a coin
         // toss for the branch predictor. Only pairs within a rounding of the limit take the
         // square root, after the loop.
-        let mut borderline = false;
-        for ((key, centre), &o) in keys.iter_mut().zip(&centres).zip(free) {
+        // The squared distances to a centre: in the plane, and in space.
+        let squared = |centre: &[f64; 3]| {
             let (dx, dy, dz) = (ss.x - centre[0], ss.y - centre[1], ss.z - centre[2]);
             let d2 = dx * dx + dy * dy;
-            let squared = d2 + dz * dz;
+            (d2, d2 + dz * dz)
+        };
+        let mut borderline = false;
+        for ((key, centre), &o) in keys.iter_mut().zip(&centres).zip(free) {
+            let (d2, squared) = squared(centre);
             let inside = (squared < within.surely_in) & (o != s);
             borderline |= (squared >= within.surely_in) & (squared <= within.surely_out);
             *key = if inside { d2 } else { f64::INFINITY };
         }
         if borderline {
             for ((key, centre), &o) in keys.iter_mut().zip(&centres).zip(free) {
-                let (dx, dy, dz) = (ss.x - centre[0], ss.y - centre[1], ss.z - centre[2]);
-                let d2 = dx * dx + dy * dy;
-                if o != s && within.holds_squared(d2 + dz * dz) {
+                let (d2, squared) = squared(centre);
+                if o != s && within.holds_squared(squared) {
                     *key = d2;
                 }
             }
