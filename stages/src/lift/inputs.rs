@@ -176,6 +176,8 @@ pub fn read_depth(
 ) -> Result<(DepthMap, PathBuf), LiftError> {
     let png = input.join("depth.png");
     let npy = input.join("depth.npy");
+    // How many values are valid, when the reading of a depth.png counted them already.
+    let mut counted = None;
     let (width, height, mut raw, path) = match (png.exists(), npy.exists()) {
         (true, true) => {
             return Err(LiftError::input(
@@ -205,14 +207,29 @@ pub fn read_depth(
             };
             let (w, h) = buffer.dimensions();
             let scale = config.depth_png_scale_m as f32;
-            let values = buffer.into_raw().into_iter().map(|v| {
+            let metres = |v: u16| {
                 if v == 0 {
                     f32::NAN
                 } else {
                     f32::from(v) * scale
                 }
-            });
-            (w as usize, h as usize, values.collect::<Vec<f32>>(), png)
+            };
+            let units = buffer.as_raw();
+            let mut values = Vec::with_capacity(units.len());
+            if camera.calibration.is_none() {
+                // The validity pass below, done in the same pass (same values, one walk of
+                // the depth map instead of two).
+                let mut valid = 0usize;
+                values.extend(units.iter().map(|&v| {
+                    let (d, ok) = valid_depth(metres(v));
+                    valid += usize::from(ok);
+                    d
+                }));
+                counted = Some(valid);
+            } else {
+                values.extend(units.iter().map(|&v| metres(v)));
+            }
+            (w as usize, h as usize, values, png)
         }
         (false, true) => {
             let (w, h, values) = read_npy_depth(&npy)?;
@@ -224,14 +241,15 @@ pub fn read_depth(
             *d = apply_calibration(*d, calibration);
         }
     }
-    // Anything but a positive finite depth is "no measurement"; counted in the same pass,
-    // without branches, so that the loop vectorises.
-    let mut valid = 0usize;
-    for d in &mut raw {
-        let ok = d.is_finite() & (*d > 0.0);
-        valid += usize::from(ok);
-        *d = if ok { *d } else { f32::NAN };
-    }
+    let valid = counted.unwrap_or_else(|| {
+        let mut valid = 0usize;
+        for d in &mut raw {
+            let ok;
+            (*d, ok) = valid_depth(*d);
+            valid += usize::from(ok);
+        }
+        valid
+    });
     if valid == 0 {
         return Err(LiftError::input(
             &path,
@@ -248,6 +266,14 @@ pub fn read_depth(
         },
         path,
     ))
+}
+
+/// A depth as lift keeps it, and whether it is a measurement: anything but a positive finite
+/// depth is "no measurement" (NaN). Without branches, so that the loops calling it vectorise.
+#[inline(always)]
+fn valid_depth(d: f32) -> (f32, bool) {
+    let ok = d.is_finite() & (d > 0.0);
+    (if ok { d } else { f32::NAN }, ok)
 }
 
 fn apply_calibration(value: f32, c: DepthCalibration) -> f32 {
@@ -787,12 +813,8 @@ fn label_lists<T: Copy + PartialEq + Into<u32>>(labels: &[T]) -> BTreeMap<u32, V
     ) {
         let mut start = 0;
         while start < labels.len() {
-            let label = labels[start];
-            let end = labels[start..]
-                .iter()
-                .position(|&l| l != label)
-                .map_or(labels.len(), |n| start + n);
-            f(label.into() as usize, start, end);
+            let end = run_end(labels, start);
+            f(labels[start].into() as usize, start, end);
             start = end;
         }
     }
@@ -818,6 +840,26 @@ fn label_lists<T: Copy + PartialEq + Into<u32>>(labels: &[T]) -> BTreeMap<u32, V
         .filter(|(id, list)| *id != 0 && !list.is_empty())
         .map(|(id, list)| (id as u32, list))
         .collect()
+}
+
+/// The end of the run of equal labels that starts at `start`: blocks of 32 labels compared
+/// with the run's label at once (a loop without an exit, which the compiler vectorises), then
+/// one by one in the block where the run ends. Walking label by label to the run's end was
+/// most of the label image's reading.
+fn run_end<T: Copy + PartialEq>(labels: &[T], start: usize) -> usize {
+    const BLOCK: usize = 32;
+    let label = labels[start];
+    let mut at = start + 1;
+    while let Some(block) = labels.get(at..at + BLOCK) {
+        if !block.iter().fold(true, |same, &l| same & (l == label)) {
+            break;
+        }
+        at += BLOCK;
+    }
+    labels[at..]
+        .iter()
+        .position(|&l| l != label)
+        .map_or(labels.len(), |n| at + n)
 }
 
 fn check_size(
@@ -897,7 +939,8 @@ mod tests {
                 1 => 65_535,
                 _ => (state >> 40) as u16 % 7,
             };
-            let run = 1 + (state >> 20) as usize % 40;
+            // Runs shorter and longer than the 32-label blocks of `run_end`, and of many blocks.
+            let run = 1 + (state >> 20) as usize % if state % 3 == 0 { 300 } else { 40 };
             labels.extend(std::iter::repeat_n(label, run));
         }
         labels.push(3);

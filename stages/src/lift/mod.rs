@@ -247,11 +247,20 @@ pub fn lift_scene(
     }
 
     // The table plane.
-    let support: Vec<u32> = instances
-        .iter()
-        .filter(|i| i.support)
-        .flat_map(|i| masks.pixels[&i.id].iter().copied())
-        .collect();
+    // The big lists are made at their final size (or a bound of it): growing them by doubling
+    // copied each several times over.
+    let pixels_of = |support: bool| {
+        let lists = || {
+            instances
+                .iter()
+                .filter(move |i| i.support == support)
+                .map(|i| &masks.pixels[&i.id])
+        };
+        let mut all = Vec::with_capacity(lists().map(Vec::len).sum());
+        lists().for_each(|list| all.extend_from_slice(list));
+        all
+    };
+    let support: Vec<u32> = pixels_of(true);
     // The plane and the zone's percentiles need a few hundred thousand points at most: every
     // step-th pixel of the support (or background), the step the smallest that leaves at most
     // this many.
@@ -265,15 +274,13 @@ pub fn lift_scene(
         let step = s.len().div_ceil(PLANE_PIXELS).max(1);
         (s.into_iter().step_by(step).collect(), "support")
     };
-    let plane_points: Vec<Vector3<f64>> = plane_pixels
-        .iter()
-        .filter_map(|&p| back_project(&depth, &k, p))
-        .collect();
-    let object_pixels: Vec<u32> = instances
-        .iter()
-        .filter(|i| !i.support)
-        .flat_map(|i| masks.pixels[&i.id].iter().copied())
-        .collect();
+    let mut plane_points: Vec<Vector3<f64>> = Vec::with_capacity(plane_pixels.len());
+    plane_points.extend(
+        plane_pixels
+            .iter()
+            .filter_map(|&p| back_project(&depth, &k, p)),
+    );
+    let object_pixels: Vec<u32> = pixels_of(false);
     let object_points: Vec<Vector3<f64>> = object_pixels
         .iter()
         .step_by(object_pixels.len().div_ceil(20_000).max(1))
@@ -300,11 +307,13 @@ pub fn lift_scene(
         let instance = format!("{label}_{index}");
         *index += 1;
         let pixels = &masks.pixels[&entry.id];
-        let valid: Vec<u32> = pixels
-            .iter()
-            .copied()
-            .filter(|&p| depth.depth_m[p as usize].is_finite())
-            .collect();
+        let mut valid: Vec<u32> = Vec::with_capacity(pixels.len());
+        valid.extend(
+            pixels
+                .iter()
+                .copied()
+                .filter(|&p| depth.depth_m[p as usize].is_finite()),
+        );
         if valid.is_empty() {
             return Err(LiftError::input(
                 &masks_file,
@@ -588,10 +597,12 @@ fn remove_outliers(
     config: &LiftConfig,
 ) -> (Vec<(u32, Vector3<f64>)>, usize) {
     let w = depth.width;
-    let points: Vec<(u32, Vector3<f64>)> = pixels
-        .iter()
-        .filter_map(|&p| back_project(depth, k, p).map(|x| (p, x)))
-        .collect();
+    let mut points: Vec<(u32, Vector3<f64>)> = Vec::with_capacity(pixels.len());
+    points.extend(
+        pixels
+            .iter()
+            .filter_map(|&p| back_project(depth, k, p).map(|x| (p, x))),
+    );
     if points.is_empty() {
         return (points, 0);
     }
@@ -618,19 +629,22 @@ fn remove_outliers(
         config.outlier_window_px as usize,
         |x| (x.z / k.fx).max(1e-9),
     );
-    let finite: Vec<f64> = scores.iter().copied().filter(|s| s.is_finite()).collect();
+    let mut finite: Vec<f64> = Vec::with_capacity(scores.len());
+    finite.extend(scores.iter().copied().filter(|s| s.is_finite()));
     if finite.is_empty() {
         return (Vec::new(), points.len() + bled);
     }
     let mean = finite.iter().sum::<f64>() / finite.len() as f64;
     let var = finite.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / finite.len() as f64;
     let limit = mean + config.outlier_std_ratio * var.sqrt();
-    let kept: Vec<(u32, Vector3<f64>)> = points
-        .iter()
-        .zip(&scores)
-        .filter(|(_, s)| **s <= limit)
-        .map(|(p, _)| *p)
-        .collect();
+    let mut kept: Vec<(u32, Vector3<f64>)> = Vec::with_capacity(points.len());
+    kept.extend(
+        points
+            .iter()
+            .zip(&scores)
+            .filter(|(_, s)| **s <= limit)
+            .map(|(p, _)| *p),
+    );
     let removed = points.len() - kept.len() + bled;
     (kept, removed)
 }
@@ -1203,15 +1217,23 @@ impl<'a> WeightedQuantiles<'a> {
         let bucket = |value: f64| (((value - lo) * scale) as usize).min(buckets - 1);
         let mut counts = vec![0u32; buckets];
         let mut weights = vec![0.0; buckets];
-        let bucket_of = samples
-            .iter()
-            .map(|&(value, weight)| {
-                let b = bucket(value);
-                counts[b] += 1;
-                weights[b] += weight;
-                b as u16
-            })
-            .collect();
+        // Neighbouring samples (pixels of a row) often share a bucket: the bucket being filled
+        // is held in registers and stored when the next sample leaves it, instead of each
+        // sample loading what the one before it stored. Its weight is added to in the same
+        // order, one sample at a time, so every sum is the same to the bit.
+        let mut bucket_of = Vec::with_capacity(samples.len());
+        let (mut current, mut count, mut weight_sum) = (0, counts[0], weights[0]);
+        for &(value, weight) in samples {
+            let b = bucket(value);
+            if b != current {
+                (counts[current], weights[current]) = (count, weight_sum);
+                (current, count, weight_sum) = (b, counts[b], weights[b]);
+            }
+            count += 1;
+            weight_sum += weight;
+            bucket_of.push(b as u16);
+        }
+        (counts[current], weights[current]) = (count, weight_sum);
         Self {
             samples,
             bucket_of,
@@ -1300,6 +1322,41 @@ mod tests {
             }
         }
         sorted[sorted.len() - 1].0
+    }
+
+    #[test]
+    fn bucket_weights_are_the_per_sample_sums_to_the_bit() {
+        // Rows of a table seen in pixel order: runs of samples in one bucket, runs of samples
+        // each in another, and weights whose sums round (the cube of a depth).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut samples = Vec::new();
+        for row in 0..200 {
+            for column in 0..300 {
+                let value = if row % 2 == 0 {
+                    f64::from(row) * 0.01 + rng.random_range(0.0..1e-4)
+                } else {
+                    f64::from(column) * 0.003
+                };
+                let depth: f64 = rng.random_range(0.4..2.5);
+                samples.push((value, depth.powi(3)));
+            }
+        }
+        let quantiles = WeightedQuantiles::new(&samples);
+        let buckets = quantiles.counts.len();
+        let (mut counts, mut weights) = (vec![0u32; buckets], vec![0.0f64; buckets]);
+        for (&(_, weight), &b) in samples.iter().zip(&quantiles.bucket_of) {
+            counts[usize::from(b)] += 1;
+            weights[usize::from(b)] += weight;
+        }
+        assert_eq!(quantiles.counts, counts);
+        let bits = |w: &[f64]| w.iter().map(|w| w.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&quantiles.weights), bits(&weights));
+        // Control: the same sums in another order differ in some bucket.
+        let mut reordered = vec![0.0f64; buckets];
+        for (&(_, weight), &b) in samples.iter().zip(&quantiles.bucket_of).rev() {
+            reordered[usize::from(b)] += weight;
+        }
+        assert_ne!(bits(&reordered), bits(&weights));
     }
 
     #[test]
