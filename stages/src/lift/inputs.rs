@@ -271,15 +271,15 @@ fn metres(v: u16, scale: f32) -> f32 {
 /// compiled for AVX2 as well (eight values a vector instead of four), chosen at run time.
 #[multiversion::multiversion(targets("x86_64+avx2"))]
 fn valid_metres(units: &[u16], scale: f32) -> (Vec<f32>, usize) {
-    let mut values = vec![0.0f32; units.len()];
+    let mut values = Vec::with_capacity(units.len());
     let mut valid = 0usize;
-    for (out, block) in values.chunks_mut(4096).zip(units.chunks(4096)) {
+    for block in units.chunks(4096) {
         let mut count = 0u32;
-        for (d, &v) in out.iter_mut().zip(block) {
-            let ok;
-            (*d, ok) = valid_depth(metres(v, scale));
+        values.extend(block.iter().map(|&v| {
+            let (d, ok) = valid_depth(metres(v, scale));
             count += u32::from(ok);
-        }
+            d
+        }));
         valid += count as usize;
     }
     (values, valid)

@@ -552,10 +552,10 @@ pub fn erode(pixels: &[u32], width: usize, height: usize, radius: usize) -> Vec<
     // Separable min filter: rows, then columns. Outside the box (and the image) counts as out.
     let run_filter = |src: &[bool], len: usize, count: usize, stride: usize, step: usize| {
         let mut dst = vec![false; src.len()];
+        let mut runs = vec![0usize; len];
         for line in 0..count {
             let base = line * stride;
             let mut run = 0usize;
-            let mut runs = vec![0usize; len];
             for i in 0..len {
                 run = if src[base + i * step] { run + 1 } else { 0 };
                 runs[i] = run;
@@ -570,7 +570,8 @@ pub fn erode(pixels: &[u32], width: usize, height: usize, radius: usize) -> Vec<
     };
     let rows = run_filter(&inside, bw, bh, bw, 1);
     let both = run_filter(&rows, bh, bw, 1, bw);
-    let mut out = Vec::new();
+    // What survives is some of the mask's pixels.
+    let mut out = Vec::with_capacity(pixels.len());
     for v in 0..bh {
         for u in 0..bw {
             let (gu, gv) = (u + u0, v + v0);
