@@ -247,8 +247,7 @@ pub fn lift_scene(
     }
 
     // The table plane.
-    // The big lists are made at their final size (or a bound of it): growing them by doubling
-    // copied each several times over.
+    // The big lists are made at their final size (or a bound of it, [`collect_within`]).
     let pixels_of = |support: bool| {
         let lists = || {
             instances
@@ -274,8 +273,8 @@ pub fn lift_scene(
         let step = s.len().div_ceil(PLANE_PIXELS).max(1);
         (s.into_iter().step_by(step).collect(), "support")
     };
-    let mut plane_points: Vec<Vector3<f64>> = Vec::with_capacity(plane_pixels.len());
-    plane_points.extend(
+    let plane_points: Vec<Vector3<f64>> = collect_within(
+        plane_pixels.len(),
         plane_pixels
             .iter()
             .filter_map(|&p| back_project(&depth, &k, p)),
@@ -307,8 +306,8 @@ pub fn lift_scene(
         let instance = format!("{label}_{index}");
         *index += 1;
         let pixels = &masks.pixels[&entry.id];
-        let mut valid: Vec<u32> = Vec::with_capacity(pixels.len());
-        valid.extend(
+        let valid: Vec<u32> = collect_within(
+            pixels.len(),
             pixels
                 .iter()
                 .copied()
@@ -598,8 +597,8 @@ fn remove_outliers(
     config: &LiftConfig,
 ) -> (Vec<(u32, Vector3<f64>)>, usize) {
     let w = depth.width;
-    let mut points: Vec<(u32, Vector3<f64>)> = Vec::with_capacity(pixels.len());
-    points.extend(
+    let points: Vec<(u32, Vector3<f64>)> = collect_within(
+        pixels.len(),
         pixels
             .iter()
             .filter_map(|&p| back_project(depth, k, p).map(|x| (p, x))),
@@ -630,16 +629,18 @@ fn remove_outliers(
         config.outlier_window_px as usize,
         |x| (x.z / k.fx).max(1e-9),
     );
-    let mut finite: Vec<f64> = Vec::with_capacity(scores.len());
-    finite.extend(scores.iter().copied().filter(|s| s.is_finite()));
+    let finite: Vec<f64> = collect_within(
+        scores.len(),
+        scores.iter().copied().filter(|s| s.is_finite()),
+    );
     if finite.is_empty() {
         return (Vec::new(), points.len() + bled);
     }
     let mean = finite.iter().sum::<f64>() / finite.len() as f64;
     let var = finite.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / finite.len() as f64;
     let limit = mean + config.outlier_std_ratio * var.sqrt();
-    let mut kept: Vec<(u32, Vector3<f64>)> = Vec::with_capacity(points.len());
-    kept.extend(
+    let kept: Vec<(u32, Vector3<f64>)> = collect_within(
+        points.len(),
         points
             .iter()
             .zip(&scores)
@@ -837,6 +838,16 @@ fn keep_main_components(
         .map(|i| if i == u32::MAX { i } else { remap[i as usize] })
         .collect();
     (kept, grid, dropped)
+}
+
+/// `items` collected into a vector made at `bound` (at least as many as `items` gives), not
+/// grown by doubling: the big lists of a scene (hundreds of thousands of pixels or points),
+/// collected through a filter whose length is not known beforehand, were copied several times
+/// over as they grew.
+fn collect_within<T>(bound: usize, items: impl Iterator<Item = T>) -> Vec<T> {
+    let mut all = Vec::with_capacity(bound);
+    all.extend(items);
+    all
 }
 
 /// A fitted plane n·p + offset = 0 in the camera frame, n toward the camera.
