@@ -1308,17 +1308,7 @@ impl<'a> WeightedQuantiles<'a> {
     fn gather_for(&mut self, targets: &[f64]) {
         let mut wanted: Vec<usize> = Vec::new();
         for &target in targets {
-            let mut acc = 0.0;
-            let first = (0..self.weights.len()).find(|&b| {
-                if self.counts[b] == 0 {
-                    return false;
-                }
-                if acc + self.weights[b] < target {
-                    acc += self.weights[b];
-                    return false;
-                }
-                true
-            });
+            let first = self.walk_to(0, 0.0, target).map(|(b, _)| b);
             if let Some(b) =
                 first.filter(|b| !wanted.contains(b) && !self.gathered.iter().any(|(g, _)| g == b))
             {
@@ -1348,15 +1338,9 @@ impl<'a> WeightedQuantiles<'a> {
 
     /// The first value, in value order, at which the accumulated weight reaches `target`.
     fn at(&mut self, target: f64) -> f64 {
-        let mut acc = 0.0;
-        for b in 0..self.weights.len() {
-            if self.counts[b] == 0 {
-                continue;
-            }
-            if acc + self.weights[b] < target {
-                acc += self.weights[b];
-                continue;
-            }
+        let (mut from, mut acc) = (0, 0.0);
+        while let Some((b, before)) = self.walk_to(from, acc, target) {
+            acc = before;
             let mut bucket = self.bucket(b).to_vec();
             bucket.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
             for (value, weight) in bucket {
@@ -1365,8 +1349,27 @@ impl<'a> WeightedQuantiles<'a> {
                     return value;
                 }
             }
+            from = b + 1;
         }
         self.max
+    }
+
+    /// The walk over whole buckets, from bucket `from` with `acc` accumulated: the first
+    /// non-empty bucket whose weight, added to what comes before it, reaches `target`, and the
+    /// weight accumulated before it. Shared by [`Self::at`] and [`Self::gather_for`], so that
+    /// the buckets gathered beforehand are the ones the quantiles walk into.
+    fn walk_to(&self, from: usize, mut acc: f64, target: f64) -> Option<(usize, f64)> {
+        for b in from..self.weights.len() {
+            if self.counts[b] == 0 {
+                continue;
+            }
+            if acc + self.weights[b] < target {
+                acc += self.weights[b];
+                continue;
+            }
+            return Some((b, acc));
+        }
+        None
     }
 }
 
