@@ -81,15 +81,93 @@ impl Bounds {
 }
 
 /// A hull's points as given and its triangles, to find its faces' normals from.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 struct Faces {
     /// The points as given, table frame, metres.
-    points: Vec<[f64; 3]>,
-    /// The triangles (indices into `points`), shared with the shape they were placed from.
+    points: GivenPoints,
+    /// The triangles (indices into the points), shared with the shape they were placed from.
     triangles: Arc<[[u32; 3]]>,
     /// Whether the triangles wind inward (a mirroring placement turns them inside out): the
     /// normals are then those of the triangles, negated.
     inward: bool,
+}
+
+/// Where a hull's points as given come from.
+#[derive(Debug, Clone)]
+enum GivenPoints {
+    /// Kept as they were given.
+    Kept(Arc<[[f64; 3]]>),
+    /// A shape's part (its own frame) and the placement that put it in the table frame: the
+    /// points are placed again, by the same arithmetic, when the normals are asked for. Most
+    /// placed parts never are, so placing a part keeps no copy of its points in metres and
+    /// allocates nothing but its points in millimetres.
+    Placed {
+        part: Arc<[[f64; 3]]>,
+        placement: Arc<Placement>,
+    },
+}
+
+impl GivenPoints {
+    fn get(&self, i: usize) -> [f64; 3] {
+        match self {
+            Self::Kept(points) => points[i],
+            Self::Placed { part, placement } => placement.apply(part[i]),
+        }
+    }
+}
+
+/// How a layout places a shape's points in the table frame: scale in the asset's frame, then
+/// turn (`rotation`, a rotation matrix), then move.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    /// The rotation matrix.
+    pub rotation: [[f64; 3]; 3],
+    /// The scale along the asset's axes.
+    pub scale: [f64; 3],
+    /// The translation, metres.
+    pub translation: [f64; 3],
+}
+
+impl Placement {
+    /// Scale by `scale` along the asset's axes, turn by `rotation_xyzw` (a quaternion), move
+    /// to `position_m`.
+    pub fn new(position_m: [f64; 3], rotation_xyzw: [f64; 4], scale: [f64; 3]) -> Self {
+        Self {
+            rotation: crate::mesh::quat_to_matrix(rotation_xyzw),
+            scale,
+            translation: position_m,
+        }
+    }
+
+    /// The point `p` of the asset's frame in the table frame.
+    #[inline(always)]
+    pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
+        let (m, s, t) = (&self.rotation, self.scale, self.translation);
+        let q = [p[0] * s[0], p[1] * s[1], p[2] * s[2]];
+        std::array::from_fn(|r| t[r] + m[r][0] * q[0] + m[r][1] * q[1] + m[r][2] * q[2])
+    }
+
+    /// Whether the placement mirrors (turns faces inside out).
+    pub fn mirrors(&self) -> bool {
+        let s = self.scale;
+        s[0] * s[1] * s[2] < 0.0
+    }
+}
+
+/// The bounds of `points`, taken point by point in order.
+fn bounds_of(points: &[[f64; 3]]) -> Bounds {
+    let mut bounds = Bounds::empty();
+    for p in points {
+        bounds = bounds.union(&Bounds { min: *p, max: *p });
+    }
+    bounds
+}
+
+/// `part`'s points placed by `placement` into `out` (cleared first), and their bounds.
+fn place_points(part: &[[f64; 3]], placement: &Placement, out: &mut Vec<[f64; 3]>) -> Bounds {
+    out.clear();
+    out.extend(part.iter().map(|&p| placement.apply(p)));
+    bounds_of(out)
 }
 
 /// One convex part placed in the table frame.
@@ -102,7 +180,7 @@ pub struct Hull {
     /// The points as given and the outward faces, to find the faces' normals from when a
     /// depth needs them ([`Hull::normals`]): most placed parts never touch another, and
     /// finding the normals of every part was most of a check's time.
-    faces: Arc<Faces>,
+    faces: Faces,
     /// The outward normals of the hull's faces (unit), when its faces are known: found once,
     /// on first use.
     normals: OnceLock<Vec<[f64; 3]>>,
@@ -137,18 +215,45 @@ impl Hull {
     /// The hull of `points` whose faces are `triangles` (indices into `points`), which make
     /// penetration depths exact for face contacts. The triangles wind outward, or inward when
     /// `inward` (a mirrored placement of outward ones: they are shared with the shape, not
-    /// rewound). The points are kept as given, without a copy.
+    /// rewound).
     pub fn with_faces(
         points: Vec<[f64; 3]>,
         triangles: Arc<[[u32; 3]]>,
         inward: bool,
     ) -> Option<Self> {
+        let faces = Faces {
+            points: GivenPoints::Kept(Arc::from(&points[..])),
+            triangles,
+            inward,
+        };
+        Self::of_points(&points, bounds_of(&points), faces)
+    }
+
+    /// The hull of a shape's part (its own frame) put in the table frame by `placement`,
+    /// with the part's outward faces: [`Hull::with_faces`] of the placed points, which are
+    /// placed into `scratch` (reused from part to part) and not kept.
+    pub fn placed(
+        part: &Arc<[[f64; 3]]>,
+        triangles: &Arc<[[u32; 3]]>,
+        placement: &Arc<Placement>,
+        scratch: &mut Vec<[f64; 3]>,
+    ) -> Option<Self> {
+        let bounds = place_points(part, placement, scratch);
+        let faces = Faces {
+            points: GivenPoints::Placed {
+                part: Arc::clone(part),
+                placement: Arc::clone(placement),
+            },
+            triangles: Arc::clone(triangles),
+            inward: placement.mirrors(),
+        };
+        Self::of_points(scratch, bounds, faces)
+    }
+
+    /// The hull of `points` (their bounds given), with `faces`.
+    fn of_points(points: &[[f64; 3]], bounds: Bounds, faces: Faces) -> Option<Self> {
         if points.is_empty() {
             return None;
-        }
-        let mut bounds = Bounds::empty();
-        for p in &points {
-            bounds = bounds.union(&Bounds { min: *p, max: *p });
         }
         let center = bounds.center();
         let relative = points
@@ -164,11 +269,7 @@ impl Hull {
         Some(Self {
             center,
             points: relative,
-            faces: Arc::new(Faces {
-                points,
-                triangles,
-                inward,
-            }),
+            faces,
             normals: OnceLock::new(),
             bounds,
         })
@@ -182,10 +283,10 @@ impl Hull {
                 points: raw,
                 triangles,
                 inward,
-            } = &*self.faces;
+            } = &self.faces;
             let mut normals: Vec<[f64; 3]> = Vec::with_capacity(triangles.len());
             for t in triangles.iter() {
-                let [a, b, c] = t.map(|i| raw[i as usize]);
+                let [a, b, c] = t.map(|i| raw.get(i as usize));
                 // Inward triangles are read rewound, [a, c, b]: the same arithmetic, so the
                 // same bits (a negated cross product would differ in the sign of zeros).
                 let (u, v) = if *inward {
@@ -474,6 +575,68 @@ mod tests {
         let unmarked = Hull::with_faces(mirrored, triangles, false).expect("hull");
         for (n, m) in unmarked.normals().iter().zip(outward.normals()) {
             assert_abs_diff_eq!(dot(*n, *m), -1.0, epsilon = 1e-12);
+        }
+    }
+
+    /// A part placed by [`Hull::placed`] (its points placed into scratch space, placed again
+    /// when the normals are asked for) is, bit for bit, the hull of the same points placed
+    /// one by one and kept ([`Hull::with_faces`]): centre, points, bounds, normals, for a
+    /// plain and a mirroring placement, with the scratch reused. Control: a placement turned
+    /// by another angle gives other normals (the comparison sees a difference).
+    #[test]
+    fn a_placed_part_is_the_hull_of_its_placed_points_to_the_bit() {
+        let mesh = crate::mesh::TriMesh::cuboid([0.2, 0.1, 0.05]);
+        let part: Arc<[[f64; 3]]> = mesh
+            .positions
+            .iter()
+            .map(|p| {
+                [
+                    f64::from(p[0]) + 0.013,
+                    f64::from(p[1]),
+                    f64::from(p[2]) * 1.7,
+                ]
+            })
+            .collect();
+        let triangles: Arc<[[u32; 3]]> = mesh.triangles.clone().into();
+        let bits3 =
+            |v: &[[f64; 3]]| -> Vec<[u64; 3]> { v.iter().map(|n| n.map(f64::to_bits)).collect() };
+        let of_hull = |h: &Hull| {
+            (
+                h.center.map(f64::to_bits),
+                bits3(&h.points()),
+                bits3(&[h.bounds.min, h.bounds.max]),
+                bits3(h.normals()),
+            )
+        };
+        let mut scratch = Vec::new();
+        let q = 0.3f64;
+        for (rotation, scale) in [
+            ([0.0, 0.0, q.sin(), q.cos()], [1.3, 0.7, 2.1]),
+            ([0.1, -0.2, 0.3, 0.9], [-1.1, 0.9, 1.4]),
+        ] {
+            let placement = Arc::new(Placement::new([0.4, -0.25, 0.8], rotation, scale));
+            let placed = Hull::placed(&part, &triangles, &placement, &mut scratch).expect("hull");
+            // The placement written out: scale, turn, move.
+            let (m, t) = (crate::mesh::quat_to_matrix(rotation), [0.4, -0.25, 0.8]);
+            let one_by_one: Vec<[f64; 3]> = part
+                .iter()
+                .map(|p| {
+                    let q = [p[0] * scale[0], p[1] * scale[1], p[2] * scale[2]];
+                    std::array::from_fn(|r| t[r] + m[r][0] * q[0] + m[r][1] * q[1] + m[r][2] * q[2])
+                })
+                .collect();
+            let inward = scale[0] * scale[1] * scale[2] < 0.0;
+            let kept = Hull::with_faces(one_by_one, triangles.clone(), inward).expect("hull");
+            assert_eq!(placed.normals().len(), 6);
+            assert_eq!(of_hull(&placed), of_hull(&kept), "{rotation:?} {scale:?}");
+
+            let turned = Arc::new(Placement::new(
+                [0.4, -0.25, 0.8],
+                [0.0, 0.0, 0.0, 1.0],
+                scale,
+            ));
+            let other = Hull::placed(&part, &triangles, &turned, &mut scratch).expect("hull");
+            assert_ne!(bits3(other.normals()), bits3(placed.normals()), "control");
         }
     }
 

@@ -20,9 +20,8 @@ use std::sync::{Arc, OnceLock};
 use mesa_schemas::artifacts::{AssetGeometry, ShapesArtifact};
 use mesa_schemas::LayoutObject;
 
-use super::geometry::{convex_hull, Bounds, Hull};
+use super::geometry::{convex_hull, Bounds, Hull, Placement};
 use super::solid::{AssetMesh, Solid, SolidAt};
-use crate::mesh::quat_to_matrix;
 
 /// Parts that may reach outside their mesh by more than this at a layout's scale make their
 /// object *loose*: judged on its mesh ([`super::solid`]). A quarter of the default penetration
@@ -71,7 +70,7 @@ pub type HullMesh = (Vec<[f64; 3]>, Vec<[u32; 3]>);
 
 /// A convex part of a shape: its vertices and triangles, the triangles shared by every
 /// placement of the part.
-pub type PartMesh = (Vec<[f64; 3]>, Arc<[[u32; 3]]>);
+pub type PartMesh = (Arc<[[f64; 3]]>, Arc<[[u32; 3]]>);
 
 /// An asset's convex parts, relative to the centre of its bounding box.
 #[derive(Debug, Clone, PartialEq)]
@@ -154,7 +153,7 @@ impl AssetShape {
                 .map(|p| [p[0] - c[0], p[1] - c[1], p[2] - c[2]])
                 .collect();
             let (points, triangles) = convex_hull(&centred);
-            parts.push((points, triangles.into()));
+            parts.push((points.into(), triangles.into()));
         }
         let d = &shapes.decomposition;
         let reach_m = d
@@ -179,7 +178,7 @@ impl AssetShape {
                 .iter()
                 .map(|p| {
                     let (points, triangles) = convex_hull(p);
-                    (points, triangles.into())
+                    (points.into(), triangles.into())
                 })
                 .collect(),
             size_m,
@@ -239,25 +238,16 @@ impl AssetShape {
 
     /// The parts placed in the table frame.
     pub fn place(&self, pose: &Pose) -> Vec<Hull> {
-        let m = quat_to_matrix(pose.rotation_xyzw);
-        let s = pose.scale;
-        let t = pose.position_m;
+        let placement = Arc::new(Placement::new(
+            pose.position_m,
+            pose.rotation_xyzw,
+            pose.scale,
+        ));
+        let mut scratch = Vec::new();
         self.parts
             .iter()
             .filter_map(|(points, triangles)| {
-                let placed: Vec<[f64; 3]> = points
-                    .iter()
-                    .map(|p| {
-                        // Scale in the asset's frame, then turn, then move.
-                        let q = [p[0] * s[0], p[1] * s[1], p[2] * s[2]];
-                        std::array::from_fn(|r| {
-                            t[r] + m[r][0] * q[0] + m[r][1] * q[1] + m[r][2] * q[2]
-                        })
-                    })
-                    .collect();
-                // A mirroring scale turns the faces inside out.
-                let inward = s[0] * s[1] * s[2] < 0.0;
-                Hull::with_faces(placed, Arc::clone(triangles), inward)
+                Hull::placed(points, triangles, &placement, &mut scratch)
             })
             .collect()
     }

@@ -22,9 +22,8 @@
 //! need one closed manifold surface (asset meshes are often several overlapping pieces), and
 //! has no vertical-ray walk over the triangles that answers "every hit below this point".
 
-use super::geometry::Bounds;
+use super::geometry::{Bounds, Placement};
 use crate::assets::reach::closest_point_triangle;
-use crate::mesh::quat_to_matrix;
 use crate::tri_tree::{self, Node, Stack};
 
 /// Surface samples taken on a mesh besides its vertices (area-uniform, deterministic).
@@ -80,13 +79,8 @@ impl AssetMesh {
     /// The mesh scaled by `scale` along the asset's axes, turned by `rotation_xyzw`, moved to
     /// `position_m` (as a layout places the parts: [`super::shapes::Pose`]).
     pub fn place(&self, position_m: [f64; 3], rotation_xyzw: [f64; 4], scale: [f64; 3]) -> Solid {
-        let m = quat_to_matrix(rotation_xyzw);
-        let s = scale;
-        let t = position_m;
-        let map = |p: &[f64; 3]| -> [f64; 3] {
-            let q = [p[0] * s[0], p[1] * s[1], p[2] * s[2]];
-            std::array::from_fn(|r| t[r] + m[r][0] * q[0] + m[r][1] * q[1] + m[r][2] * q[2])
-        };
+        let placement = Placement::new(position_m, rotation_xyzw, scale);
+        let map = |p: &[f64; 3]| placement.apply(*p);
         let positions: Vec<[f64; 3]> = self.positions_m.iter().map(map).collect();
         let corners: Vec<[[f64; 3]; 3]> = self
             .triangles

@@ -394,7 +394,7 @@ fn the_reach_of_parts_grows_with_the_scale_a_layout_applies() {
     let with_mesh = AssetShape::clone(&cuboid([0.175, 0.0075, 0.0075])).with_reach_m(0.0005);
     let without_mesh = AssetShape::from_parts(
         "pencil",
-        with_mesh.parts().iter().map(|(p, _)| p.clone()).collect(),
+        with_mesh.parts().iter().map(|(p, _)| p.to_vec()).collect(),
         with_mesh.size_m,
     )
     .with_reach_m(0.0005);
@@ -648,7 +648,7 @@ fn bulging_box(size: [f64; 3], bulge: f64, with_mesh: bool) -> Arc<AssetShape> {
         "pencil",
         part.parts()
             .iter()
-            .map(|(points, _)| points.clone())
+            .map(|(points, _)| points.to_vec())
             .collect(),
         size,
     )
@@ -798,7 +798,7 @@ fn a_steep_contact_is_judged_on_the_meshes() {
         ball_with_mesh
             .parts()
             .iter()
-            .map(|(p, _)| p.clone())
+            .map(|(p, _)| p.to_vec())
             .collect(),
         ball_with_mesh.size_m,
     ));

@@ -415,7 +415,7 @@ pub fn body_model(object: &ExportObject<'_>, config: &ExportConfig) -> (BodyMode
             .shape
             .parts()
             .iter()
-            .map(|(points, _)| points.clone())
+            .map(|(points, _)| points.to_vec())
             .collect(),
         Colliders::Hull => vec![object
             .shape
