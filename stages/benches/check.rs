@@ -17,11 +17,6 @@
 
 mod common;
 
-/// The allocator of the `mesa` executable (pipeline/src/main.rs), so that the figures are the
-/// ones `mesa check` gets: placing a scene allocates each part's points.
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 use std::collections::BTreeMap;
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
@@ -34,6 +29,11 @@ use mesa_stages::check::solid::AssetMesh;
 use mesa_stages::check::{check_scene, collisions_of, AssetShape, PhysicsScene, Tolerances};
 use mesa_stages::export::VisualMesh;
 use mesa_stages::glb_read::read_glb;
+
+/// The allocator of the `mesa` executable (pipeline/src/main.rs), so that the figures are the
+/// ones `mesa check` gets: placing a scene allocates each part's points.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 /// Shapes from a dataset's asset index.
 fn indexed_shapes(dataset: &Path) -> BTreeMap<String, Arc<AssetShape>> {
@@ -90,11 +90,10 @@ fn bench(c: &mut Criterion) {
     group.bench_function("collisions", |b| {
         b.iter(|| black_box(collisions_of(&place(), tolerances.penetration_m)))
     });
-    // The query alone, on parts placed beforehand (each iteration a freshly placed scene, so
-    // that what a placed part works out only when a query needs it is timed with the query;
-    // the scene is dropped untimed, as FCL's trees are):
-    // the counterpart of FCL's query on trees built and scaled beforehand
-    // (`bench/check_vs_fcl.py`).
+    // The query alone on parts placed beforehand: the counterpart of FCL's query on trees
+    // built and scaled beforehand (`bench/check_vs_fcl.py`). Each iteration gets a freshly
+    // placed scene, so what a part works out only when a query needs it is timed with the
+    // query; the scene is dropped untimed, as FCL's trees are.
     group.bench_function("collisions_placed", |b| {
         b.iter_batched_ref(
             place,

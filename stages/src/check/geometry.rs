@@ -209,7 +209,12 @@ impl SupportMap for PointsRef<'_> {
 impl Hull {
     /// The hull of `points` (table frame, metres); `None` without points.
     pub fn new(points: &[[f64; 3]]) -> Option<Self> {
-        Self::with_faces(points.to_vec(), Arc::new([]), false)
+        let faces = Faces {
+            points: GivenPoints::Kept(Arc::new([])),
+            triangles: Arc::new([]),
+            inward: false,
+        };
+        Self::of_points(points, bounds_of(points), faces)
     }
 
     /// The hull of `points` whose faces are `triangles` (indices into `points`), which make
