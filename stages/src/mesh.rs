@@ -9,6 +9,7 @@
 //! - Triangles are counter-clockwise seen from the side their normal points to (glTF's front
 //!   faces).
 
+use std::collections::HashMap;
 use std::f64::consts::{PI, TAU};
 
 use thiserror::Error;
@@ -993,11 +994,163 @@ impl TriMesh {
     }
 }
 
+/// Positions closer than this, metres, are one vertex for [`closed_outward`]: a lathe's seam
+/// computed as `sin(2π) · r` lands about 1e-18 m from its start, while distinct vertices of a
+/// mesh in metres are farther apart than a nanometre.
+const WELD_M: f64 = 1e-9;
+
+/// Whether `meshes` together bound solids, wound counter-clockwise seen from outside: with the
+/// vertices at one position taken as one (meshes split their vertices at seams, creases and
+/// materials), every edge is walked once each way, and every connected piece encloses a
+/// volume (at least `1e-9` of the cube of its bounding diagonal, which leaves out
+/// back-to-back sheets). Positions are welded on a grid of [`WELD_M`]. Seen from outside such a surface, the first triangle a ray meets
+/// faces the ray, so a triangle facing away is never what a picture shows: a rasterizer may
+/// skip it ([`crate::raster::DrawItem::closed_within`]). Triangles with a repeated corner are
+/// left out; a non-finite position makes the answer `false`.
+pub fn closed_outward<'a>(meshes: impl IntoIterator<Item = &'a TriMesh>) -> bool {
+    let mut ids: HashMap<[i64; 3], u32> = HashMap::new();
+    let mut points: Vec<[f64; 3]> = Vec::new();
+    let mut triangles: Vec<[u32; 3]> = Vec::new();
+    for mesh in meshes {
+        let mut welded = Vec::with_capacity(mesh.positions.len());
+        for p in &mesh.positions {
+            if !p.iter().all(|c| c.is_finite()) {
+                return false;
+            }
+            let key = p.map(|c| (f64::from(c) / WELD_M).round() as i64);
+            let next = points.len() as u32;
+            let id = *ids.entry(key).or_insert(next);
+            if id == next {
+                points.push(to_f64(*p));
+            }
+            welded.push(id);
+        }
+        triangles.extend(
+            mesh.triangles
+                .iter()
+                .map(|t| t.map(|i| welded[i as usize]))
+                .filter(|[a, b, c]| a != b && b != c && a != c),
+        );
+    }
+    if triangles.is_empty() {
+        return false;
+    }
+    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(triangles.len() * 3);
+    for t in &triangles {
+        for k in 0..3 {
+            *edges.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
+        }
+    }
+    if edges
+        .iter()
+        .any(|(&(a, b), &n)| n != 1 || edges.get(&(b, a)) != Some(&1))
+    {
+        return false;
+    }
+    // Connected pieces (union-find over the welded vertices), each with its signed volume
+    // (the sum of the tetrahedra from the origin) and bounds.
+    let mut parent: Vec<u32> = (0..points.len() as u32).collect();
+    fn root(parent: &mut [u32], mut i: u32) -> u32 {
+        while parent[i as usize] != i {
+            let up = parent[parent[i as usize] as usize];
+            parent[i as usize] = up;
+            i = up;
+        }
+        i
+    }
+    for t in &triangles {
+        for k in 1..3 {
+            let (a, b) = (root(&mut parent, t[0]), root(&mut parent, t[k]));
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+    }
+    let mut pieces: HashMap<u32, (f64, Aabb)> = HashMap::new();
+    for t in &triangles {
+        let [a, b, c] = t.map(|i| points[i as usize]);
+        let piece = pieces
+            .entry(root(&mut parent, t[0]))
+            .or_insert((0.0, Aabb::from_point(a)));
+        piece.0 += dot3(a, cross3(b, c)) / 6.0;
+        for p in [a, b, c] {
+            piece.1.extend(p);
+        }
+    }
+    pieces.values().all(|(volume, bounds)| {
+        let d = norm3(sub3(bounds.max, bounds.min));
+        *volume > 1e-9 * d * d * d
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use approx::assert_abs_diff_eq;
     use proptest::prelude::*;
+
+    #[test]
+    fn closed_outward_takes_solids_and_leaves_out_holes_flips_and_sheets() {
+        // A cuboid splits its vertices per face, a cup (lathe) per crease, with its seam a
+        // hair (sin 2π · r) from its start, a sphere has poles: all bound solids.
+        let cuboid = TriMesh::cuboid([0.3, 0.2, 0.1]);
+        let sphere = TriMesh::uv_sphere(0.05, 24, 12);
+        let cup = TriMesh::lathe(
+            &[
+                [0.0, 0.0],
+                [0.04, 0.0],
+                [0.04, 0.09],
+                [0.035, 0.09],
+                [0.035, 0.005],
+                [0.0, 0.005],
+            ],
+            LatheOptions::default().with_segments(32),
+        );
+        for (name, mesh) in [("cuboid", &cuboid), ("sphere", &sphere), ("cup", &cup)] {
+            assert!(closed_outward([mesh]), "{name}");
+        }
+        // Two solids, one split over two meshes (an asset's parts, one per material).
+        let far = cuboid.transformed(&Affine3::from_translation([1.0, 0.0, 0.0]));
+        let (top, bottom) = (
+            TriMesh {
+                triangles: far.triangles[..6].to_vec(),
+                ..far.clone()
+            },
+            TriMesh {
+                triangles: far.triangles[6..].to_vec(),
+                ..far.clone()
+            },
+        );
+        assert!(closed_outward([&sphere, &top, &bottom]));
+        // Controls: half of it alone, a face missing, a triangle flipped, the solid turned
+        // inside out (beside one that is not), two triangles back to back, no triangles.
+        assert!(!closed_outward([&sphere, &top]));
+        let mut holed = cuboid.clone();
+        holed.triangles.truncate(10);
+        assert!(!closed_outward([&holed]));
+        let mut flipped = cuboid.clone();
+        flipped.triangles[3].swap(1, 2);
+        assert!(!closed_outward([&flipped]));
+        let mut inside_out = far.clone();
+        for t in &mut inside_out.triangles {
+            t.swap(1, 2);
+        }
+        assert!(!closed_outward([&inside_out]));
+        assert!(!closed_outward([&sphere, &inside_out]));
+        let sheet = TriMesh {
+            positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            normals: vec![[0.0, 0.0, 1.0]; 3],
+            uvs: Vec::new(),
+            triangles: vec![[0, 1, 2], [0, 2, 1]],
+        };
+        assert!(!closed_outward([&sheet]));
+        assert!(!closed_outward([&TriMesh::default()]));
+        // Welding is on a nanometre grid: a seam a micrometre open is a hole.
+        let mut cracked = cup.clone();
+        let last = cracked.positions.len() - 1;
+        cracked.positions[last][0] += 1e-6;
+        assert!(!closed_outward([&cracked]));
+    }
 
     fn assert_outward(mesh: &TriMesh) {
         // Every triangle's geometric normal agrees with its vertex normals.

@@ -183,6 +183,14 @@ pub struct DrawItem<'a> {
     /// Linear RGB colours multiplied with the material's, one per mesh vertex (glTF
     /// `COLOR_0`); `None` for none.
     pub vertex_colors: Option<&'a [[f32; 3]]>,
+    /// `Some(bounds)` when the mesh is part of a surface that bounds solids, wound
+    /// counter-clockwise seen from outside ([`crate::mesh::closed_outward`], the other parts
+    /// drawn too), with the bounds of that whole surface in the mesh's frame. Its triangles
+    /// that face away are then skipped whenever the surface is seen from outside (always from
+    /// a light; from a camera when the bounds lie wholly in front of its near plane): the
+    /// first surface seen there faces the eye, so the picture is the one drawing them gives.
+    /// `None`: every triangle is drawn.
+    pub closed_within: Option<Aabb>,
 }
 
 /// A light infinitely far away.
@@ -592,6 +600,7 @@ fn rasterize_into<S: Samples>(
             continue;
         }
         let frame_from_mesh = frame_from_world.mul(&item.world_from_mesh);
+        let back = back_facing_sign(item, &frame_from_mesh, perspective);
         points.clear();
         points.extend(
             item.mesh
@@ -622,6 +631,7 @@ fn rasterize_into<S: Samples>(
                     buffer,
                     samples,
                     perspective,
+                    back,
                     &corners,
                     item_index as u32,
                     t as u32,
@@ -643,6 +653,7 @@ fn rasterize_into<S: Samples>(
                     buffer,
                     samples,
                     perspective,
+                    back,
                     &fan,
                     item_index as u32,
                     t as u32,
@@ -654,11 +665,43 @@ fn rasterize_into<S: Samples>(
     }
 }
 
+/// The sign of the picture area of `item`'s triangles that face away from the eye (the
+/// rasterizer skips those), or 0 to draw them all: `item` is not closed
+/// ([`DrawItem::closed_within`]), or a perspective eye may be inside it (its surface's bounds
+/// reach past the near plane).
+///
+/// In the picture (x right, y down, depth away from the eye), a triangle wound
+/// counter-clockwise seen from the eye has a negative area `(s1 - s0) × (s2 - s0)`; a map
+/// from the mesh that mirrors (negative determinant) swaps the two.
+fn back_facing_sign(item: &DrawItem<'_>, frame_from_mesh: &Affine3, perspective: bool) -> f64 {
+    let Some(bounds) = &item.closed_within else {
+        return 0.0;
+    };
+    // Every corner in front of the near plane (a NaN corner is not).
+    if perspective
+        && !bounds
+            .corners()
+            .iter()
+            .all(|&c| frame_from_mesh.apply_point(c)[2] >= NEAR_M)
+    {
+        return 0.0;
+    }
+    let det = frame_from_mesh.determinant();
+    if det > 0.0 {
+        1.0
+    } else if det < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 fn raster_triangle<S: Samples>(
     buffer: &mut VisibilityBuffer,
     samples: &S,
     perspective: bool,
+    back: f64,
     corners: &[Corner; 3],
     item: u32,
     triangle: u32,
@@ -669,7 +712,9 @@ fn raster_triangle<S: Samples>(
     let v: [ClipVertex; 3] = corners.map(|c| c.v);
     let area = (screen[1][0] - screen[0][0]) * (screen[2][1] - screen[0][1])
         - (screen[1][1] - screen[0][1]) * (screen[2][0] - screen[0][0]);
-    if area.abs() < 1e-12 || !area.is_finite() {
+    // Degenerate, or facing away from the eye on a closed surface (`back`: the sign of such
+    // areas, 0 for none).
+    if area.abs() < 1e-12 || !area.is_finite() || area * back > 0.0 {
         return;
     }
     let min_x = screen.iter().map(|s| s[0]).fold(f64::INFINITY, f64::min);
@@ -1294,6 +1339,7 @@ mod tests {
             instance: 7,
             casts_shadow: false,
             vertex_colors: None,
+            closed_within: None,
         }];
         let vis = visibility(&camera(), &Affine3::IDENTITY, &items);
         let ids = vis.instance_ids(&items);
@@ -1327,6 +1373,7 @@ mod tests {
             instance: 1,
             casts_shadow: false,
             vertex_colors: None,
+            closed_within: None,
         }];
         let cam = camera();
         let vis = visibility(&cam, &Affine3::IDENTITY, &items);
@@ -1337,6 +1384,83 @@ mod tests {
                 assert_abs_diff_eq!(p[2], 2.0 + 0.5 * p[0], epsilon = 1e-5);
             }
         }
+    }
+
+    /// In how many pixels skipping the back faces of `mesh` (told it is closed within
+    /// `bounds`, by default its own) changes what `camera_from_world` sees of it, placed by
+    /// `world_from_mesh`, in depth or item.
+    fn culling_changes_within(
+        mesh: &TriMesh,
+        bounds: Option<Aabb>,
+        world_from_mesh: Affine3,
+        camera_from_world: &Affine3,
+    ) -> usize {
+        let material = SurfaceMaterial::plain([0.5; 3], 0.5);
+        let draw = |closed_within: Option<Aabb>| {
+            let item = DrawItem {
+                mesh,
+                world_from_mesh,
+                material: &material,
+                instance: 1,
+                casts_shadow: true,
+                vertex_colors: None,
+                closed_within,
+            };
+            visibility(&camera(), camera_from_world, &[item])
+        };
+        let (all, culled) = (draw(None), draw(bounds.or(mesh.bounds())));
+        assert!(
+            all.item.iter().any(|&i| i != u32::MAX),
+            "the mesh is in view"
+        );
+        (0..all.depth_m.len())
+            .filter(|&p| all.item[p] != culled.item[p] || all.depth_m[p] != culled.depth_m[p])
+            .count()
+    }
+
+    fn culling_changes(mesh: &TriMesh, world_from_mesh: Affine3, camera: &Affine3) -> usize {
+        culling_changes_within(mesh, None, world_from_mesh, camera)
+    }
+
+    #[test]
+    fn skipping_back_faces_of_closed_meshes_changes_no_pixel() {
+        let sphere = TriMesh::uv_sphere(0.4, 24, 12);
+        let cuboid = TriMesh::cuboid([0.6, 0.5, 0.4]);
+        let turned = Affine3::from_trs([0.1, -0.05, 0.0], [0.3, 0.2, 0.1, 0.927], [1.0; 3]);
+        let eye = |p: [f64; 3]| {
+            crate::render::camera::look_at(p, [0.0; 3])
+                .inverse()
+                .expect("a pose")
+        };
+        let views = [[0.0, -2.0, 0.5], [1.5, 1.0, 1.2], [0.2, 0.1, -1.8]].map(eye);
+        for view in &views {
+            for (name, mesh) in [("sphere", &sphere), ("cuboid", &cuboid)] {
+                assert_eq!(culling_changes(mesh, turned, view), 0, "{name}");
+                // Mirrored: the winding seen from outside flips with it.
+                let mirror = turned.mul(&Affine3::from_scale([-1.0, 1.0, 1.0]));
+                assert_eq!(culling_changes(mesh, mirror, view), 0, "{name} mirrored");
+            }
+        }
+        // The eye inside the cuboid (its bounds reach past the near plane): nothing skipped,
+        // it sees the inside of the walls.
+        let inside = eye([0.05, 0.0, 0.02]);
+        assert_eq!(culling_changes(&cuboid, Affine3::IDENTITY, &inside), 0);
+        // Controls: a box without its top, seen from above, shows the inside of its walls
+        // and floor, all facing away; told it is closed, they go. So does the inside of the
+        // cuboid when the near-plane guard is fooled (bounds given wholly in front of the eye).
+        let mut open_box = cuboid.clone();
+        open_box.triangles.retain(|t| {
+            !t.iter()
+                .all(|&i| (f64::from(open_box.positions[i as usize][2]) - 0.2).abs() < 1e-6)
+        });
+        assert_eq!(open_box.triangles.len(), 10);
+        let above = eye([0.3, -0.2, 2.0]);
+        assert!(culling_changes(&open_box, Affine3::IDENTITY, &above) > 100);
+        let ahead = Aabb {
+            min: [-0.2, -0.1, -0.1],
+            max: [-0.1, 0.1, 0.1],
+        };
+        assert!(culling_changes_within(&cuboid, Some(ahead), Affine3::IDENTITY, &inside) > 100);
     }
 
     #[test]
@@ -1355,6 +1479,7 @@ mod tests {
                 instance: 1,
                 casts_shadow: true,
                 vertex_colors: None,
+                closed_within: None,
             },
             DrawItem {
                 mesh: &near,
@@ -1363,6 +1488,7 @@ mod tests {
                 instance: 2,
                 casts_shadow: true,
                 vertex_colors: None,
+                closed_within: None,
             },
         ];
         let cam = camera();
@@ -1397,6 +1523,7 @@ mod tests {
                 instance: 1,
                 casts_shadow: true,
                 vertex_colors: None,
+                closed_within: None,
             },
             DrawItem {
                 mesh: &block,
@@ -1405,6 +1532,7 @@ mod tests {
                 instance: 2,
                 casts_shadow: true,
                 vertex_colors: None,
+                closed_within: None,
             },
         ];
         let lighting = Lighting {

@@ -429,6 +429,7 @@ fn draw_items<'a>(
                 instance: i as u32 + 1,
                 casts_shadow: true,
                 vertex_colors: None,
+                closed_within: None,
             });
         }
     }
@@ -440,6 +441,7 @@ fn draw_items<'a>(
             instance: if part.is_table { TABLE_ITEM } else { 0 },
             casts_shadow: part.is_table,
             vertex_colors: None,
+            closed_within: None,
         });
     }
     items

@@ -10,7 +10,7 @@ use thiserror::Error;
 
 use crate::assets::table_aligned_from_gltf;
 use crate::glb_read::{read_glb_surface, AlphaMode, GlbError, GlbSurface};
-use crate::mesh::{Aabb, TriMesh};
+use crate::mesh::{closed_outward, Aabb, TriMesh};
 use crate::raster::{SurfaceMaterial, Texture};
 
 /// One material's triangles of an asset.
@@ -34,6 +34,10 @@ pub struct RenderAsset {
     pub bounds: Aabb,
     /// Triangles in all.
     pub triangles: usize,
+    /// Whether its parts together bound solids, wound counter-clockwise seen from outside
+    /// ([`closed_outward`]): a view from outside never shows a triangle facing away, and the
+    /// rasterizer skips those.
+    pub closed: bool,
     /// Things drawn differently from a full glTF viewer (alpha ignored, an image that could
     /// not be decoded), and the reader's warnings.
     pub warnings: Vec<String>,
@@ -179,6 +183,7 @@ pub fn load_render_asset(
     parts.retain(|p| !p.mesh.triangles.is_empty());
     Ok(RenderAsset {
         triangles: parts.iter().map(|p| p.mesh.triangles.len()).sum(),
+        closed: closed_outward(parts.iter().map(|p| &p.mesh)),
         parts,
         bounds,
         warnings,

@@ -405,6 +405,7 @@ pub fn draw_items<'a>(
                 instance: i as u32 + 1,
                 casts_shadow: true,
                 vertex_colors: part.vertex_colors.as_deref(),
+                closed_within: object.asset.closed.then_some(object.asset.bounds),
             });
         }
     }
@@ -416,6 +417,7 @@ pub fn draw_items<'a>(
             instance: 0,
             casts_shadow: table.slab_casts_shadow,
             vertex_colors: None,
+            closed_within: None,
         });
         if let Some(sink) = &table.sink {
             items.push(DrawItem {
@@ -425,6 +427,7 @@ pub fn draw_items<'a>(
                 instance: 0,
                 casts_shadow: false,
                 vertex_colors: None,
+                closed_within: None,
             });
         }
     }
@@ -1131,6 +1134,7 @@ mod tests {
                     instance: i as u32 + 1,
                     casts_shadow: true,
                     vertex_colors: None,
+                    closed_within: None,
                 })
                 .collect();
             items.extend(draw_items(&[], Some(table)));
@@ -1222,6 +1226,7 @@ mod tests {
                 instance: i as u32 + 1,
                 casts_shadow: true,
                 vertex_colors: None,
+                closed_within: None,
             })
             .collect();
         items.push(DrawItem {
@@ -1231,6 +1236,7 @@ mod tests {
             instance: 0,
             casts_shadow: false,
             vertex_colors: None,
+            closed_within: None,
         });
         let frame = camera::scene_box([0.0, 1.0, 0.0, 0.6], 0.35);
         let region = Aabb {
@@ -1298,6 +1304,7 @@ mod tests {
             instance: 9,
             casts_shadow: true,
             vertex_colors: None,
+            closed_within: None,
         });
         for view in SceneView::ALL {
             let cam = camera::scene_camera(view, &frame, w, h, 39.6, 1.5);
