@@ -8,11 +8,16 @@
 //!   local `mesa run` and `mesa release` byte for byte (job logs, run summaries under
 //!   `.mesa/runs/`, the resolved configuration `mesa run` records and the remembered input
 //!   digests of `.mesa/digests/`, which hold file identities, are left out).
-//! - Preemption: an array task of `lift` cancelled (`scancel`) after the first of its scenes,
+//! - Preemption: an array task of `render` cancelled (`scancel`) after the first of its scenes,
 //!   the chain going on without it, then the same submission again: done scenes are skipped and
 //!   the tree is the same.
-//! - Requeue: an array task of `lift` requeued (`scontrol requeue`, what a preemption does to
+//! - Requeue: an array task of `render` requeued (`scontrol requeue`, what a preemption does to
 //!   a `--requeue` job) after its first scene runs again and skips it.
+//!
+//! The cancelled stage must still be working on its second scene when the cancel lands (the
+//! test polls every 50 ms for the first scene's marker, then cancels): `render` is the slowest
+//! stage a scene, and the demo's pictures are drawn at 1536 × 1536 here (in every run, so the
+//! trees compare), about 2 s a scene. `lift` (70 ms a scene) finished both scenes first.
 //!
 //! Without root, slurm-wlm or munge the test says SKIPPED, and fails instead when
 //! `MESA_REQUIRE_TOOLS` is set, as in CI (`.ci/run` installs the packages).
@@ -231,8 +236,11 @@ fn scenes(dataset: &Path) -> Vec<(String, String)> {
     out
 }
 
-fn lift_marker(dataset: &Path, (table, id): &(String, String)) -> PathBuf {
-    dataset.join(format!(".mesa/markers/lift/{table}/{id}.json"))
+/// The stage whose array task is cancelled and requeued: the slowest a scene.
+const CUT: &str = "render";
+
+fn cut_marker(dataset: &Path, (table, id): &(String, String)) -> PathBuf {
+    dataset.join(format!(".mesa/markers/{CUT}/{table}/{id}.json"))
 }
 
 #[test]
@@ -259,6 +267,11 @@ fn the_demo_through_a_real_slurm_cluster_writes_the_tree_of_a_local_run() {
         .output()
         .expect("mesa demo");
     assert!(out.status.success());
+    // Pictures of 1536 × 1536 in every run: render, the stage cut short, takes about 2 s a
+    // scene, longer than the cancel takes to land.
+    let mut toml = std::fs::read_to_string(demo.join("mesa.toml")).expect("mesa.toml");
+    toml.push_str("\n[render]\nwidth_px = 1536\nheight_px = 1536\n");
+    std::fs::write(demo.join("mesa.toml"), toml).expect("mesa.toml");
 
     // The reference: one local run, and the release.
     let started = Instant::now();
@@ -317,7 +330,7 @@ fn the_demo_through_a_real_slurm_cluster_writes_the_tree_of_a_local_run() {
         started.elapsed().as_secs_f64()
     );
 
-    // Preemption: lift's task 0 is cancelled after the first of its two scenes (the asset
+    // Preemption: render's task 0 is cancelled after the first of its two scenes (the asset
     // index is copied from the local run: the assets array finds every asset unchanged).
     let started = Instant::now();
     let preempted = dir.path().join("preempted");
@@ -331,18 +344,18 @@ fn the_demo_through_a_real_slurm_cluster_writes_the_tree_of_a_local_run() {
     let keys = scenes(&preempted);
     // Task 0 of 3 owns scenes 0 and 3 of the sorted list.
     let (first, second) = (
-        lift_marker(&preempted, &keys[0]),
-        lift_marker(&preempted, &keys[3]),
+        cut_marker(&preempted, &keys[0]),
+        cut_marker(&preempted, &keys[3]),
     );
     let waited = Instant::now();
     while !first.exists() && !second.exists() {
         assert!(
             waited.elapsed() < Duration::from_secs(600),
-            "lift's task 0 wrote no marker in 10 minutes"
+            "{CUT}'s task 0 wrote no marker in 10 minutes"
         );
         std::thread::sleep(Duration::from_millis(50));
     }
-    let task = format!("{}_0", jobs["lift"]);
+    let task = format!("{}_0", jobs[CUT]);
     let out = cluster
         .command("scancel")
         .arg(&task)
@@ -354,10 +367,10 @@ fn the_demo_through_a_real_slurm_cluster_writes_the_tree_of_a_local_run() {
         String::from_utf8_lossy(&out.stderr)
     );
     // Give the cancel time to land, then make sure it did: one of the two scenes is not done.
-    cluster.wait(std::slice::from_ref(&jobs["lift"]));
+    cluster.wait(std::slice::from_ref(&jobs[CUT]));
     assert!(
         !(first.exists() && second.exists()),
-        "lift's task 0 finished both scenes before scancel landed"
+        "{CUT}'s task 0 finished both scenes before scancel landed"
     );
     cluster.wait(&all);
     // The control: the cancelled task's scene is missing from the tree.
@@ -371,18 +384,18 @@ fn the_demo_through_a_real_slurm_cluster_writes_the_tree_of_a_local_run() {
     let (stdout, ok) = cluster.run_all(&preempted, &logs_again, &["--wait"]);
     assert!(ok, "{stdout}");
     let again = job_ids(&stdout);
-    let lift_logs: Vec<String> = (0..3)
+    let cut_logs: Vec<String> = (0..3)
         .map(|k| {
-            std::fs::read_to_string(logs_again.join(format!("mesa-lift-{}_{k}.out", again["lift"])))
-                .expect("lift log")
+            std::fs::read_to_string(logs_again.join(format!("mesa-{CUT}-{}_{k}.out", again[CUT])))
+                .expect("log")
         })
         .collect();
     assert!(
-        lift_logs[0].contains("2 scenes: 1 done, 1 skipped"),
+        cut_logs[0].contains("2 scenes: 1 done, 1 skipped"),
         "{}",
-        lift_logs[0]
+        cut_logs[0]
     );
-    for log in &lift_logs[1..] {
+    for log in &cut_logs[1..] {
         assert!(log.contains("2 scenes: 0 done, 2 skipped"), "{log}");
     }
     let got = tree(&preempted);
@@ -397,11 +410,16 @@ fn the_demo_through_a_real_slurm_cluster_writes_the_tree_of_a_local_run() {
     );
 
     // Requeue (what Slurm does to a preempted task of a `--requeue` job): `scontrol requeue`
-    // of lift's task 0 after its first scene; the task runs again by itself and skips it.
+    // of render's task 0 after its first scene; the task runs again by itself and skips it.
+    // The local run's tree without its pictures is the start.
     let started = Instant::now();
     let requeued = dir.path().join("requeued");
-    copy_tree(&demo, &requeued);
-    copy_tree(&local.join("assets/index"), &requeued.join("assets/index"));
+    copy_tree(&local, &requeued);
+    std::fs::remove_dir_all(requeued.join(format!(".mesa/markers/{CUT}"))).expect("markers");
+    for (table, id) in &keys {
+        std::fs::remove_dir_all(requeued.join(format!("scenes/{table}/{id}/render")))
+            .expect("pictures");
+    }
     let logs = dir.path().join("logs-requeued");
     let out = cluster
         .command("bash")
@@ -409,27 +427,27 @@ fn the_demo_through_a_real_slurm_cluster_writes_the_tree_of_a_local_run() {
         .args(["--cpus", "1", "--mem", "1G", "--time", "00:30:00", "--logs"])
         .arg(&logs)
         .arg(&requeued)
-        .args(["3", "lift"])
+        .args(["3", CUT])
         .output()
         .expect("run_all.sh");
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(out.status.success(), "{stdout}");
-    let lift = job_ids(&stdout)["lift"].clone();
+    let job = job_ids(&stdout)[CUT].clone();
     let (first, second) = (
-        lift_marker(&requeued, &keys[0]),
-        lift_marker(&requeued, &keys[3]),
+        cut_marker(&requeued, &keys[0]),
+        cut_marker(&requeued, &keys[3]),
     );
     let waited = Instant::now();
     while !first.exists() && !second.exists() {
         assert!(
             waited.elapsed() < Duration::from_secs(600),
-            "lift's task 0 wrote no marker in 10 minutes"
+            "{CUT}'s task 0 wrote no marker in 10 minutes"
         );
         std::thread::sleep(Duration::from_millis(50));
     }
     let out = cluster
         .command("scontrol")
-        .args(["requeue", &format!("{lift}_0")])
+        .args(["requeue", &format!("{job}_0")])
         .output()
         .expect("scontrol");
     assert!(
@@ -438,14 +456,15 @@ fn the_demo_through_a_real_slurm_cluster_writes_the_tree_of_a_local_run() {
         String::from_utf8_lossy(&out.stderr)
     );
     let caught = !(first.exists() && second.exists());
-    cluster.wait(std::slice::from_ref(&lift));
+    cluster.wait(std::slice::from_ref(&job));
     let record: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(requeued.join(".mesa/runs/lift/shard-0-of-3.json")).expect("record"),
+        &std::fs::read(requeued.join(format!(".mesa/runs/{CUT}/shard-0-of-3.json")))
+            .expect("record"),
     )
     .expect("json");
     assert!(
         caught,
-        "lift's task 0 finished both scenes before the requeue landed"
+        "{CUT}'s task 0 finished both scenes before the requeue landed"
     );
     // The requeued run of task 0 (its record replaced the first run's) skipped the done scene.
     assert_eq!(
@@ -454,18 +473,21 @@ fn the_demo_through_a_real_slurm_cluster_writes_the_tree_of_a_local_run() {
         "{record}"
     );
     for key in &keys {
-        let marker = std::fs::read_to_string(lift_marker(&requeued, key)).expect("marker");
+        let marker = std::fs::read_to_string(cut_marker(&requeued, key)).expect("marker");
         assert!(marker.contains("\"done\""), "{key:?}: {marker}");
     }
-    let lifted = |dataset: &Path| {
+    let pictures = |dataset: &Path| {
         tree(dataset)
             .into_iter()
-            .filter(|(k, _)| k.contains("/coarse/lift.json") || k.contains("/points/"))
+            .filter(|(k, _)| k.contains("/render/"))
             .collect::<BTreeMap<_, _>>()
     };
-    let expected_lift = lifted(&local);
-    assert!(!expected_lift.is_empty());
-    assert!(lifted(&requeued) == expected_lift, "requeued lift differs");
+    let expected_pictures = pictures(&local);
+    assert!(!expected_pictures.is_empty());
+    assert!(
+        pictures(&requeued) == expected_pictures,
+        "requeued pictures differ"
+    );
     eprintln!("requeue: {:.1} s", started.elapsed().as_secs_f64());
     drop(cluster);
 }
