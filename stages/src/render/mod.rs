@@ -39,7 +39,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::image_io::{encode_rgb8, encode_rgba8, ImageError};
-use crate::mesh::{normalize3, Aabb, Affine3, TriMesh};
+use crate::mesh::{closed_outward, normalize3, Aabb, Affine3, TriMesh};
 use crate::raster::{
     linear_to_srgb_u8, srgb_u8_to_linear, visibility, visibility_items, visibility_of_selected,
     DirectionalLight, DrawItem, Lighting, PinholeCamera, SampleMask, Shader, ShadowMap,
@@ -352,6 +352,9 @@ pub struct TableGeometry {
     slab_casts_shadow: bool,
     sink: Option<TriMesh>,
     sink_material: SurfaceMaterial,
+    /// The bounds of the slab and of the sink when they are closed (boxes are: their faces
+    /// turned away are skipped, [`DrawItem::closed_within`]).
+    closed_within: [Option<Aabb>; 2],
 }
 
 fn srgb(c: [u8; 3]) -> [f32; 3] {
@@ -371,13 +374,17 @@ impl TableGeometry {
                 ]),
             )
         };
+        let slab = box_of(zone_cm, -TABLE_THICKNESS_M, 0.0);
+        let sink = restricted_cm.map(|z| box_of(z, -0.0005, 0.0005));
+        let closed = |mesh: &TriMesh| closed_outward([mesh]).then(|| mesh.bounds()).flatten();
         Self {
-            slab: box_of(zone_cm, -TABLE_THICKNESS_M, 0.0),
+            closed_within: [closed(&slab), sink.as_ref().and_then(closed)],
+            slab,
             slab_casts_shadow: true,
             slab_material: SurfaceMaterial::plain(srgb([178, 136, 96]), 0.7),
             // Half a millimetre proud of the top: drawn over it, and far below any contact
             // tolerance.
-            sink: restricted_cm.map(|z| box_of(z, -0.0005, 0.0005)),
+            sink,
             sink_material: SurfaceMaterial::plain(srgb([78, 98, 140]), 0.4),
         }
     }
@@ -417,7 +424,7 @@ pub fn draw_items<'a>(
             instance: 0,
             casts_shadow: table.slab_casts_shadow,
             vertex_colors: None,
-            closed_within: None,
+            closed_within: table.closed_within[0],
         });
         if let Some(sink) = &table.sink {
             items.push(DrawItem {
@@ -427,7 +434,7 @@ pub fn draw_items<'a>(
                 instance: 0,
                 casts_shadow: false,
                 vertex_colors: None,
-                closed_within: None,
+                closed_within: table.closed_within[1],
             });
         }
     }
