@@ -999,14 +999,20 @@ impl TriMesh {
 /// mesh in metres are farther apart than a nanometre.
 const WELD_M: f64 = 1e-9;
 
+/// How far from the origin [`closed_outward`] welds positions, metres (a thousand kilometres:
+/// 1e15 grid steps, well inside an `i64`).
+const WELD_REACH_M: f32 = 1e6;
+
 /// Whether `meshes` together bound solids, wound counter-clockwise seen from outside: with the
 /// vertices at one position taken as one (meshes split their vertices at seams, creases and
-/// materials), every edge is walked once each way, and every connected piece encloses a
-/// volume (at least `1e-9` of the cube of its bounding diagonal, which leaves out
-/// back-to-back sheets). Positions are welded on a grid of [`WELD_M`]. Seen from outside such a surface, the first triangle a ray meets
-/// faces the ray, so a triangle facing away is never what a picture shows: a rasterizer may
-/// skip it ([`crate::raster::DrawItem::closed_within`]). Triangles with a repeated corner are
-/// left out; a non-finite position makes the answer `false`.
+/// materials; positions are welded on a grid of [`WELD_M`]), every edge is walked once each
+/// way, and every connected piece encloses a volume (at least `1e-9` of the cube of its
+/// bounding diagonal, which leaves out back-to-back sheets). Seen from outside such a surface,
+/// the first triangle a ray meets faces the ray, so a triangle facing away is never what a
+/// picture shows: a rasterizer may skip it ([`crate::raster::DrawItem::closed_within`]).
+/// Triangles with a repeated corner are left out; a position that is not finite or lies
+/// farther than [`WELD_REACH_M`] from the origin (where the grid would not hold it) makes the
+/// answer `false`.
 pub fn closed_outward<'a>(meshes: impl IntoIterator<Item = &'a TriMesh>) -> bool {
     let mut ids: HashMap<[i64; 3], u32> = HashMap::new();
     let mut points: Vec<[f64; 3]> = Vec::new();
@@ -1014,7 +1020,7 @@ pub fn closed_outward<'a>(meshes: impl IntoIterator<Item = &'a TriMesh>) -> bool
     for mesh in meshes {
         let mut welded = Vec::with_capacity(mesh.positions.len());
         for p in &mesh.positions {
-            if !p.iter().all(|c| c.is_finite()) {
+            if !p.iter().all(|c| c.abs() <= WELD_REACH_M) {
                 return false;
             }
             let key = p.map(|c| (f64::from(c) / WELD_M).round() as i64);
@@ -1150,6 +1156,17 @@ mod tests {
         let last = cracked.positions.len() - 1;
         cracked.positions[last][0] += 1e-6;
         assert!(!closed_outward([&cracked]));
+        // Out of the grid's reach, or not finite: not taken as closed (a kilometre box is,
+        // but not two thousand kilometres away).
+        let big = TriMesh::cuboid([1e3, 1e3, 1e3]);
+        assert!(closed_outward([&big]));
+        let far = big.transformed(&Affine3::from_translation([2e6, 0.0, 0.0]));
+        assert!(!closed_outward([&far]));
+        for bad in [f32::NAN, f32::INFINITY] {
+            let mut moved = cuboid.clone();
+            moved.positions[0][1] = bad;
+            assert!(!closed_outward([&moved]), "{bad}");
+        }
     }
 
     fn assert_outward(mesh: &TriMesh) {
