@@ -9,7 +9,6 @@
 //! - Triangles are counter-clockwise seen from the side their normal points to (glTF's front
 //!   faces).
 
-use std::collections::HashMap;
 use std::f64::consts::{PI, TAU};
 
 use thiserror::Error;
@@ -1014,42 +1013,59 @@ const WELD_REACH_M: f32 = 1e6;
 /// farther than [`WELD_REACH_M`] from the origin (where the grid would not hold it) makes the
 /// answer `false`.
 pub fn closed_outward<'a>(meshes: impl IntoIterator<Item = &'a TriMesh>) -> bool {
-    let mut ids: HashMap<[i64; 3], u32> = HashMap::new();
-    let mut points: Vec<[f64; 3]> = Vec::new();
-    let mut triangles: Vec<[u32; 3]> = Vec::new();
-    for mesh in meshes {
-        let mut welded = Vec::with_capacity(mesh.positions.len());
+    // Sorting, not hashing, finds the shared positions and edges: a 121,000-triangle asset
+    // takes a few milliseconds instead of a hundred (std's SipHash over 360,000 edges).
+    let meshes: Vec<&TriMesh> = meshes.into_iter().collect();
+    let mut keys: Vec<([i64; 3], u32)> = Vec::new();
+    for mesh in &meshes {
         for p in &mesh.positions {
             if !p.iter().all(|c| c.abs() <= WELD_REACH_M) {
                 return false;
             }
             let key = p.map(|c| (f64::from(c) / WELD_M).round() as i64);
-            let next = points.len() as u32;
-            let id = *ids.entry(key).or_insert(next);
-            if id == next {
-                points.push(to_f64(*p));
-            }
-            welded.push(id);
+            keys.push((key, keys.len() as u32));
         }
+    }
+    keys.sort_unstable();
+    // Welded id of every vertex (meshes one after another), and each id's position.
+    let mut welded = vec![0u32; keys.len()];
+    let mut points: Vec<[f64; 3]> = Vec::new();
+    let flat: Vec<[f32; 3]> = meshes
+        .iter()
+        .flat_map(|m| m.positions.iter().copied())
+        .collect();
+    for (k, &(key, vertex)) in keys.iter().enumerate() {
+        if k == 0 || keys[k - 1].0 != key {
+            points.push(to_f64(flat[vertex as usize]));
+        }
+        welded[vertex as usize] = points.len() as u32 - 1;
+    }
+    let mut triangles: Vec<[u32; 3]> = Vec::new();
+    let mut base = 0usize;
+    for mesh in &meshes {
         triangles.extend(
             mesh.triangles
                 .iter()
-                .map(|t| t.map(|i| welded[i as usize]))
+                .map(|t| t.map(|i| welded[base + i as usize]))
                 .filter(|[a, b, c]| a != b && b != c && a != c),
         );
+        base += mesh.positions.len();
     }
     if triangles.is_empty() {
         return false;
     }
-    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(triangles.len() * 3);
-    for t in &triangles {
-        for k in 0..3 {
-            *edges.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
-        }
-    }
-    if edges
+    // Every edge, as its two ends (lower first) and whether it is walked from the higher: each
+    // must come exactly twice, once each way.
+    let mut edges: Vec<(u64, bool)> = triangles
         .iter()
-        .any(|(&(a, b), &n)| n != 1 || edges.get(&(b, a)) != Some(&1))
+        .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+        .map(|(a, b)| ((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), a > b))
+        .collect();
+    edges.sort_unstable();
+    if edges.len() % 2 != 0
+        || edges
+            .chunks_exact(2)
+            .any(|pair| pair[0].0 != pair[1].0 || pair[0].1 == pair[1].1)
     {
         return false;
     }
@@ -1072,18 +1088,17 @@ pub fn closed_outward<'a>(meshes: impl IntoIterator<Item = &'a TriMesh>) -> bool
             }
         }
     }
-    let mut pieces: HashMap<u32, (f64, Aabb)> = HashMap::new();
+    let mut pieces: Vec<Option<(f64, Aabb)>> = vec![None; points.len()];
     for t in &triangles {
         let [a, b, c] = t.map(|i| points[i as usize]);
-        let piece = pieces
-            .entry(root(&mut parent, t[0]))
-            .or_insert((0.0, Aabb::from_point(a)));
+        let piece =
+            pieces[root(&mut parent, t[0]) as usize].get_or_insert((0.0, Aabb::from_point(a)));
         piece.0 += dot3(a, cross3(b, c)) / 6.0;
         for p in [a, b, c] {
             piece.1.extend(p);
         }
     }
-    pieces.values().all(|(volume, bounds)| {
+    pieces.iter().flatten().all(|(volume, bounds)| {
         let d = norm3(sub3(bounds.max, bounds.min));
         *volume > 1e-9 * d * d * d
     })
