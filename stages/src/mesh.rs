@@ -993,115 +993,213 @@ impl TriMesh {
     }
 }
 
-/// Positions closer than this, metres, are one vertex for [`closed_outward`]: a lathe's seam
-/// computed as `sin(2π) · r` lands about 1e-18 m from its start, while distinct vertices of a
-/// mesh in metres are farther apart than a nanometre.
-const WELD_M: f64 = 1e-9;
+/// Grid steps a metre at which [`closed_outward`] welds positions: positions closer than a
+/// nanometre are one vertex (a lathe's seam computed as `sin(2π) · r` lands about 1e-18 m
+/// from its start, while distinct vertices of a mesh in metres are farther apart than that).
+const CLOSED_WELD_PER_M: f64 = 1e9;
 
-/// How far from the origin [`closed_outward`] welds positions, metres (a thousand kilometres:
-/// 1e15 grid steps, well inside an `i64`).
-const WELD_REACH_M: f32 = 1e6;
+/// How far from the origin [`weld`] takes positions, metres (a thousand kilometres: at a
+/// nanometre grid, 1e15 steps, well inside an `i64`).
+pub const WELD_REACH_M: f64 = 1e6;
 
-/// Whether `meshes` together bound solids, wound counter-clockwise seen from outside: with the
-/// vertices at one position taken as one (meshes split their vertices at seams, creases and
-/// materials; positions are welded on a grid of [`WELD_M`]), every edge is walked once each
-/// way, and every connected piece encloses a volume (at least `1e-9` of the cube of its
-/// bounding diagonal, which leaves out back-to-back sheets). Seen from outside such a surface,
-/// the first triangle a ray meets faces the ray, so a triangle facing away is never what a
-/// picture shows: a rasterizer may skip it ([`crate::raster::DrawItem::closed_within`]).
-/// Triangles with a repeated corner are left out; a position that is not finite or lies
-/// farther than [`WELD_REACH_M`] from the origin (where the grid would not hold it) makes the
-/// answer `false`.
-pub fn closed_outward<'a>(meshes: impl IntoIterator<Item = &'a TriMesh>) -> bool {
-    // Sorting, not hashing, finds the shared positions and edges: a 121,000-triangle asset
-    // takes a few milliseconds instead of a hundred (std's SipHash over 360,000 edges).
-    let meshes: Vec<&TriMesh> = meshes.into_iter().collect();
-    let mut keys: Vec<([i64; 3], u32)> = Vec::new();
-    for mesh in &meshes {
-        for p in &mesh.positions {
-            if !p.iter().all(|c| c.abs() <= WELD_REACH_M) {
-                return false;
-            }
-            let key = p.map(|c| (f64::from(c) / WELD_M).round() as i64);
-            keys.push((key, keys.len() as u32));
+/// A triangle soup with the vertices at one position taken as one ([`weld`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Welded {
+    /// One position per welded vertex, that of its first vertex, in order of first appearance.
+    pub positions: Vec<[f64; 3]>,
+    /// The triangles over the welded vertices, in their order; those with a repeated corner
+    /// are left out.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Welds the vertices of a triangle soup: positions that round to one point of a grid of
+/// `per_m` steps a metre are one vertex. Meshes split their vertices at seams, creases and
+/// materials; edges and pieces are only found after welding. `None` when a position is not
+/// finite or lies farther than [`WELD_REACH_M`] from the origin (where the grid would not hold
+/// it). Every triangle index must be below `positions.len()`.
+///
+/// Shared positions are found by sorting, not hashing: std's SipHash over a 121,000-triangle
+/// asset took a hundred milliseconds, sorting a few.
+pub fn weld(
+    positions: &[[f64; 3]],
+    triangles: impl IntoIterator<Item = [u32; 3]>,
+    per_m: f64,
+) -> Option<Welded> {
+    let mut keys: Vec<([i64; 3], u32)> = Vec::with_capacity(positions.len());
+    for (i, p) in positions.iter().enumerate() {
+        if !p.iter().all(|c| c.abs() <= WELD_REACH_M) {
+            return None;
         }
+        keys.push((p.map(|c| (c * per_m).round() as i64), i as u32));
     }
     keys.sort_unstable();
-    // Welded id of every vertex (meshes one after another), and each id's position.
-    let mut welded = vec![0u32; keys.len()];
-    let mut points: Vec<[f64; 3]> = Vec::new();
-    let flat: Vec<[f32; 3]> = meshes
-        .iter()
-        .flat_map(|m| m.positions.iter().copied())
-        .collect();
-    for (k, &(key, vertex)) in keys.iter().enumerate() {
-        if k == 0 || keys[k - 1].0 != key {
-            points.push(to_f64(flat[vertex as usize]));
+    // Each vertex's first vertex at its grid point (lower indices sort first), then ids in
+    // order of first appearance.
+    let mut first = vec![0u32; positions.len()];
+    for group in keys.chunk_by(|a, b| a.0 == b.0) {
+        for &(_, i) in group {
+            first[i as usize] = group[0].1;
         }
-        welded[vertex as usize] = points.len() as u32 - 1;
     }
-    let mut triangles: Vec<[u32; 3]> = Vec::new();
-    let mut base = 0usize;
-    for mesh in &meshes {
-        triangles.extend(
-            mesh.triangles
-                .iter()
-                .map(|t| t.map(|i| welded[base + i as usize]))
-                .filter(|[a, b, c]| a != b && b != c && a != c),
-        );
-        base += mesh.positions.len();
+    let mut id = vec![0u32; positions.len()];
+    let mut welded = Vec::new();
+    for (i, p) in positions.iter().enumerate() {
+        id[i] = if first[i] as usize == i {
+            welded.push(*p);
+            welded.len() as u32 - 1
+        } else {
+            id[first[i] as usize]
+        };
     }
-    if triangles.is_empty() {
-        return false;
-    }
-    // Every edge, as its two ends (lower first) and whether it is walked from the higher: each
-    // must come exactly twice, once each way.
-    let mut edges: Vec<(u64, bool)> = triangles
-        .iter()
-        .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
-        .map(|(a, b)| ((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), a > b))
+    let triangles = triangles
+        .into_iter()
+        .map(|t| t.map(|i| id[i as usize]))
+        .filter(|[a, b, c]| a != b && b != c && a != c)
         .collect();
+    Some(Welded {
+        positions: welded,
+        triangles,
+    })
+}
+
+/// A connected piece of a welded triangle soup ([`pieces`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Piece {
+    /// Its triangles, ascending.
+    pub triangles: Vec<u32>,
+    /// Whether it is closed and consistently oriented: each edge of its triangles is walked
+    /// exactly once each way by them.
+    pub closed: bool,
+}
+
+/// The pieces of a welded triangle soup: triangles joined across manifold edges (an edge
+/// walked exactly once each way). Two closed boxes sharing an edge or a corner stay two
+/// pieces. In order of their first triangle.
+pub fn pieces(triangles: &[[u32; 3]]) -> Vec<Piece> {
+    assert!(triangles.len() < 1 << 31, "pieces: 2^31 triangles or more");
+    // Every edge as its two ends (lower first, packed in a u64) and (walked from the higher
+    // end, triangle) packed in a u32, sorted: the entries of one edge are adjacent, the way
+    // from the lower end first. Plain integers sort twice as fast as a tuple of four.
+    const BACKWARD: u32 = 1 << 31;
+    let mut edges: Vec<(u64, u32)> = Vec::with_capacity(3 * triangles.len());
+    for (t, c) in triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (c[k], c[(k + 1) % 3]);
+            let ends = (u64::from(a.min(b)) << 32) | u64::from(a.max(b));
+            edges.push((ends, t as u32 | if a > b { BACKWARD } else { 0 }));
+        }
+    }
     edges.sort_unstable();
-    if edges.len() % 2 != 0
-        || edges
-            .chunks_exact(2)
-            .any(|pair| pair[0].0 != pair[1].0 || pair[0].1 == pair[1].1)
-    {
-        return false;
-    }
-    // Connected pieces (union-find over the welded vertices), each with its signed volume
-    // (the sum of the tetrahedra from the origin) and bounds.
-    let mut parent: Vec<u32> = (0..points.len() as u32).collect();
-    fn root(parent: &mut [u32], mut i: u32) -> u32 {
-        while parent[i as usize] != i {
-            let up = parent[parent[i as usize] as usize];
-            parent[i as usize] = up;
-            i = up;
+    let manifold = |edge: &[(u64, u32)]| matches!(*edge, [(_, s), (_, t)] if s & BACKWARD == 0 && t & BACKWARD != 0);
+    let mut parent: Vec<u32> = (0..triangles.len() as u32).collect();
+    fn root(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            parent[x as usize] = parent[parent[x as usize] as usize];
+            x = parent[x as usize];
         }
-        i
+        x
     }
-    for t in &triangles {
-        for k in 1..3 {
-            let (a, b) = (root(&mut parent, t[0]), root(&mut parent, t[k]));
+    for edge in edges.chunk_by(|a, b| a.0 == b.0) {
+        if manifold(edge) {
+            let (a, b) = (
+                root(&mut parent, edge[0].1 & !BACKWARD),
+                root(&mut parent, edge[1].1 & !BACKWARD),
+            );
             if a != b {
                 parent[a.max(b) as usize] = a.min(b);
             }
         }
     }
-    let mut pieces: Vec<Option<(f64, Aabb)>> = vec![None; points.len()];
-    for t in &triangles {
-        let [a, b, c] = t.map(|i| points[i as usize]);
-        let piece =
-            pieces[root(&mut parent, t[0]) as usize].get_or_insert((0.0, Aabb::from_point(a)));
-        piece.0 += dot3(a, cross3(b, c)) / 6.0;
-        for p in [a, b, c] {
-            piece.1.extend(p);
+    // The pieces, numbered in order of their first triangle.
+    let mut piece_of_root = vec![u32::MAX; triangles.len()];
+    let mut out: Vec<Piece> = Vec::new();
+    let mut piece_of = Vec::with_capacity(triangles.len());
+    for t in 0..triangles.len() as u32 {
+        let r = root(&mut parent, t) as usize;
+        if piece_of_root[r] == u32::MAX {
+            piece_of_root[r] = out.len() as u32;
+            out.push(Piece {
+                triangles: Vec::new(),
+                closed: true,
+            });
+        }
+        out[piece_of_root[r] as usize].triangles.push(t);
+        piece_of.push(piece_of_root[r]);
+    }
+    // A piece is closed when, for every edge of its triangles, its own entries are exactly one
+    // each way. An edge joined above is so; the others are sorted out per piece.
+    let mut local: Vec<(u32, bool)> = Vec::new();
+    for edge in edges.chunk_by(|a, b| a.0 == b.0) {
+        if manifold(edge) {
+            continue;
+        }
+        local.clear();
+        local.extend(
+            edge.iter()
+                .map(|&(_, e)| (piece_of[(e & !BACKWARD) as usize], e & BACKWARD != 0)),
+        );
+        local.sort_unstable();
+        for own in local.chunk_by(|a, b| a.0 == b.0) {
+            if !matches!(*own, [(_, false), (_, true)]) {
+                out[own[0].0 as usize].closed = false;
+            }
         }
     }
-    pieces.iter().flatten().all(|(volume, bounds)| {
-        let d = norm3(sub3(bounds.max, bounds.min));
-        *volume > 1e-9 * d * d * d
-    })
+    out
+}
+
+/// The signed volume bounded by `triangles` over `points` (the sum of the tetrahedra from the
+/// origin): positive for a closed surface wound counter-clockwise seen from outside.
+pub fn signed_volume_of(points: &[[f64; 3]], triangles: impl IntoIterator<Item = [u32; 3]>) -> f64 {
+    let mut six_v = 0.0;
+    for t in triangles {
+        let [a, b, c] = t.map(|i| points[i as usize]);
+        six_v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+            + a[2] * (b[0] * c[1] - b[1] * c[0]);
+    }
+    six_v / 6.0
+}
+
+/// Whether `meshes` together bound solids, wound counter-clockwise seen from outside: with the
+/// vertices at one position taken as one ([`weld`], on a nanometre grid), every piece
+/// ([`pieces`]) is closed, and encloses a volume (at least `1e-9` of the cube of its bounding
+/// diagonal, which leaves out back-to-back sheets and inside-out pieces). Seen from outside
+/// such a surface, the first triangle a ray meets faces the ray, so a triangle facing away is
+/// never what a picture shows: a rasterizer may skip it
+/// ([`crate::raster::DrawItem::closed_within`]). Triangles with a repeated corner are left
+/// out; a position that is not finite or lies farther than [`WELD_REACH_M`] from the origin
+/// makes the answer `false`.
+pub fn closed_outward<'a>(meshes: impl IntoIterator<Item = &'a TriMesh>) -> bool {
+    let meshes: Vec<&TriMesh> = meshes.into_iter().collect();
+    let positions: Vec<[f64; 3]> = meshes
+        .iter()
+        .flat_map(|m| m.positions.iter().map(|p| to_f64(*p)))
+        .collect();
+    let mut base = 0u32;
+    let mut triangles = Vec::new();
+    for mesh in &meshes {
+        triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| base + i)));
+        base += mesh.positions.len() as u32;
+    }
+    let Some(welded) = weld(&positions, triangles, CLOSED_WELD_PER_M) else {
+        return false;
+    };
+    let pieces = pieces(&welded.triangles);
+    !pieces.is_empty()
+        && pieces.iter().all(|piece| {
+            let corners = piece
+                .triangles
+                .iter()
+                .map(|&t| welded.triangles[t as usize]);
+            let mut bounds = Aabb::from_point(
+                welded.positions[welded.triangles[piece.triangles[0] as usize][0] as usize],
+            );
+            for p in corners.clone().flatten() {
+                bounds.extend(welded.positions[p as usize]);
+            }
+            let d = norm3(sub3(bounds.max, bounds.min));
+            piece.closed && signed_volume_of(&welded.positions, corners) > 1e-9 * d * d * d
+        })
 }
 
 #[cfg(test)]
@@ -1182,6 +1280,93 @@ mod tests {
             moved.positions[0][1] = bad;
             assert!(!closed_outward([&moved]), "{bad}");
         }
+    }
+
+    #[test]
+    fn an_inside_out_solid_touching_a_good_one_is_not_closed() {
+        // A big box and a small box turned inside out, sharing one corner: every edge is
+        // walked once each way and the summed volume is positive, but the small box's faces
+        // point inward, so a picture may show its back faces.
+        let big = TriMesh::cuboid([0.2, 0.2, 0.2])
+            .transformed(&Affine3::from_translation([0.1, 0.1, 0.1]));
+        let small = TriMesh::cuboid([0.05, 0.05, 0.05])
+            .transformed(&Affine3::from_translation([-0.025, -0.025, -0.025]));
+        assert!(closed_outward([&big, &small]), "both outward: closed");
+        let mut inverted = small.clone();
+        for t in &mut inverted.triangles {
+            t.swap(1, 2);
+        }
+        assert!(!closed_outward([&big, &inverted]));
+    }
+
+    #[test]
+    fn weld_keeps_first_seen_order_and_refuses_what_the_grid_cannot_hold() {
+        let positions = [
+            [0.3, 0.0, 0.0],
+            [0.0, 0.0, 0.0],
+            [0.3 + 4e-8, 0.0, 0.0], // within half a step of 0.1 µm: vertex 0
+            [0.0, 0.2, 0.0],
+            [0.0, 0.0, 1e-7], // a whole step away: its own vertex
+        ];
+        let welded = weld(
+            &positions,
+            [[0, 1, 3], [2, 3, 1], [0, 2, 4], [1, 4, 3]],
+            1e7,
+        )
+        .expect("all within reach");
+        assert_eq!(
+            welded.positions,
+            vec![positions[0], positions[1], positions[3], positions[4]]
+        );
+        // The third triangle has a repeated corner once welded: left out.
+        assert_eq!(welded.triangles, vec![[0, 1, 2], [0, 2, 1], [1, 3, 2]]);
+        for bad in [f64::NAN, f64::NEG_INFINITY, 2e6] {
+            let mut moved = positions;
+            moved[3][2] = bad;
+            assert_eq!(weld(&moved, [[0, 1, 3]], 1e7), None, "{bad}");
+        }
+        assert!(weld(&[[-9e5, 9e5, 0.0]], [], 1e9).is_some());
+    }
+
+    #[test]
+    fn pieces_join_across_manifold_edges_only() {
+        // Two tetrahedra sharing an edge (2–3), and a lone triangle hanging on a corner.
+        let a = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+        let b = [[4, 3, 2], [4, 2, 5], [4, 5, 3], [5, 2, 3]];
+        let mut triangles: Vec<[u32; 3]> = a.iter().chain(&b).copied().collect();
+        triangles.push([0, 6, 7]);
+        let found = pieces(&triangles);
+        assert_eq!(
+            found,
+            vec![
+                Piece {
+                    triangles: vec![0, 1, 2, 3],
+                    closed: true
+                },
+                Piece {
+                    triangles: vec![4, 5, 6, 7],
+                    closed: true
+                },
+                Piece {
+                    triangles: vec![8],
+                    closed: false
+                },
+            ]
+        );
+        // Controls: a triangle of the first flipped cuts it off its neighbours and opens the
+        // rest; a missing triangle opens its piece.
+        let mut flipped = triangles.clone();
+        flipped[1].swap(1, 2);
+        let found = pieces(&flipped);
+        assert!(found
+            .iter()
+            .filter(|p| p.triangles.contains(&1))
+            .all(|p| !p.closed));
+        assert!(found
+            .iter()
+            .any(|p| p.triangles == vec![4, 5, 6, 7] && p.closed));
+        let found = pieces(&triangles[1..]);
+        assert!(!found[0].closed && found[1].closed);
     }
 
     fn assert_outward(mesh: &TriMesh) {

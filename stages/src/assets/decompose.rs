@@ -42,6 +42,7 @@ use parry3d::shape::{TriMesh, TriMeshFlags};
 use parry3d::transformation::try_convex_hull;
 
 use super::near::NearTest;
+use crate::mesh;
 
 /// The limits of a decomposition.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -140,104 +141,31 @@ struct Welded {
     solids: Vec<Vec<u32>>,
 }
 
-/// The pieces of a triangle soup: triangles joined across manifold edges (an edge used once in
-/// each direction). Two closed boxes sharing an edge or a corner stay two pieces. In order of
-/// their first triangle.
-fn pieces(triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
-    let mut uses: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
-    for (i, t) in triangles.iter().enumerate() {
-        for (u, v) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-            uses.entry((u, v)).or_default().push(i as u32);
-        }
-    }
-    let mut parent: Vec<u32> = (0..triangles.len() as u32).collect();
-    fn find(parent: &mut [u32], mut x: u32) -> u32 {
-        while parent[x as usize] != x {
-            parent[x as usize] = parent[parent[x as usize] as usize];
-            x = parent[x as usize];
-        }
-        x
-    }
-    for ((u, v), forward) in &uses {
-        if u > v || forward.len() != 1 {
-            continue;
-        }
-        if let Some(backward) = uses.get(&(*v, *u)).filter(|b| b.len() == 1) {
-            let (a, b) = (
-                find(&mut parent, forward[0]),
-                find(&mut parent, backward[0]),
-            );
-            if a != b {
-                parent[a.max(b) as usize] = a.min(b);
-            }
-        }
-    }
-    let mut index: HashMap<u32, usize> = HashMap::new();
-    let mut out: Vec<Vec<u32>> = Vec::new();
-    for i in 0..triangles.len() as u32 {
-        let root = find(&mut parent, i);
-        let k = *index.entry(root).or_insert_with(|| {
-            out.push(Vec::new());
-            out.len() - 1
-        });
-        out[k].push(i);
-    }
-    out
-}
-
-fn weld(positions: &[[f64; 3]], triangles: &[[u32; 3]]) -> Welded {
-    // Seams split vertices that share a position: weld them (to 0.1 µm).
-    let mut ids: HashMap<[i64; 3], u32> = HashMap::new();
-    let mut welded = Vec::new();
-    let remap: Vec<u32> = positions
-        .iter()
-        .map(|p| {
-            let key = p.map(|v| (v * 1e7).round() as i64);
-            *ids.entry(key).or_insert_with(|| {
-                welded.push(*p);
-                (welded.len() - 1) as u32
-            })
-        })
-        .collect();
-    let mut tris: Vec<[u32; 3]> = triangles
-        .iter()
-        .map(|t| t.map(|i| remap[i as usize]))
-        .filter(|[a, b, c]| a != b && b != c && a != c)
-        .collect();
+/// The mesh welded (to 0.1 µm), each closed piece a solid, turned outward; `None` for a
+/// position that is not finite or beyond [`mesh::WELD_REACH_M`].
+fn weld(positions: &[[f64; 3]], triangles: &[[u32; 3]]) -> Option<Welded> {
+    let mesh::Welded {
+        positions,
+        mut triangles,
+    } = mesh::weld(positions, triangles.iter().copied(), 1e7)?;
     let mut solids = Vec::new();
-    for piece in pieces(&tris) {
-        // Closed and consistently oriented: every directed edge once, and its reverse once.
-        let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
-        for &t in &piece {
-            let t = tris[t as usize];
-            for (u, v) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                *directed.entry((u, v)).or_default() += 1;
-            }
-        }
-        let closed = directed
-            .iter()
-            .all(|((u, v), n)| *n == 1 && directed.get(&(*v, *u)) == Some(&1));
-        if !closed {
+    for piece in mesh::pieces(&triangles) {
+        if !piece.closed {
             continue;
         }
-        let mut six_v = 0.0;
-        for &t in &piece {
-            let [a, b, c] = tris[t as usize].map(|i| welded[i as usize]);
-            six_v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-                + a[2] * (b[0] * c[1] - b[1] * c[0]);
-        }
-        if six_v < 0.0 {
-            for &t in &piece {
-                tris[t as usize].swap(1, 2);
+        let corners = piece.triangles.iter().map(|&t| triangles[t as usize]);
+        if mesh::signed_volume_of(&positions, corners) < 0.0 {
+            for &t in &piece.triangles {
+                triangles[t as usize].swap(1, 2);
             }
         }
-        solids.push(piece);
+        solids.push(piece.triangles);
     }
-    Welded {
-        positions: welded,
-        triangles: tris,
+    Some(Welded {
+        positions,
+        triangles,
         solids,
-    }
+    })
 }
 
 /// An axis-aligned box.
@@ -687,23 +615,18 @@ fn measured_deviation(mesh: &Mesh, c: &Candidate, spacing_m: f64) -> f64 {
 
 /// The volume of a closed hull, cubic metres.
 fn hull_volume(points: &[[f64; 3]], triangles: &[[u32; 3]]) -> f64 {
-    let mut six_v = 0.0;
-    for t in triangles {
-        let [a, b, c] = t.map(|i| points[i as usize]);
-        six_v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-            + a[2] * (b[0] * c[1] - b[1] * c[0]);
-    }
-    (six_v / 6.0).abs()
+    mesh::signed_volume_of(points, triangles.iter().copied()).abs()
 }
 
 /// Decomposes a triangle mesh (metres) into convex parts within `params.tolerance_m` of it;
-/// `None` when the mesh has no triangle.
+/// `None` when the mesh has no triangle, or a position is not finite or beyond
+/// [`mesh::WELD_REACH_M`].
 pub fn decompose(
     positions: &[[f64; 3]],
     triangles: &[[u32; 3]],
     params: &AdaptiveParams,
 ) -> Option<Decomposed> {
-    let welded = weld(positions, triangles);
+    let welded = weld(positions, triangles)?;
     if welded.triangles.is_empty() {
         return None;
     }

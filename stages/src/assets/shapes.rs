@@ -68,37 +68,18 @@ pub fn round_m(v: f64, precision_m: f64) -> f64 {
 /// by exactly two triangles); `None` for an open mesh, whose divergence-theorem volume means
 /// nothing (a single-surface bowl would look as full as its hull).
 pub fn closed_volume(positions_m: &[[f64; 3]], triangles: &[[u32; 3]]) -> Option<f64> {
-    use std::collections::HashMap;
     // Seams split vertices that share a position: weld them (to 0.1 µm).
-    let mut welded: HashMap<[i64; 3], u32> = HashMap::new();
-    let ids: Vec<u32> = positions_m
+    let welded = crate::mesh::weld(positions_m, triangles.iter().copied(), 1e7)?;
+    let mut edges: Vec<(u32, u32)> = welded
+        .triangles
         .iter()
-        .map(|p| {
-            let key = p.map(|v| (v * 1e7).round() as i64);
-            let next = welded.len() as u32;
-            *welded.entry(key).or_insert(next)
-        })
+        .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
         .collect();
-    let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
-    for t in triangles {
-        let [a, b, c] = t.map(|i| ids[i as usize]);
-        if a == b || b == c || a == c {
-            continue;
-        }
-        for (u, v) in [(a, b), (b, c), (c, a)] {
-            *edges.entry((u.min(v), u.max(v))).or_default() += 1;
-        }
-    }
-    if edges.is_empty() || edges.values().any(|n| *n != 2) {
+    edges.sort_unstable();
+    if edges.is_empty() || edges.chunk_by(|a, b| a == b).any(|edge| edge.len() != 2) {
         return None;
     }
-    let mut six_v = 0.0;
-    for t in triangles {
-        let [a, b, c] = t.map(|i| positions_m[i as usize]);
-        six_v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-            + a[2] * (b[0] * c[1] - b[1] * c[0]);
-    }
-    Some((six_v / 6.0).abs())
+    Some(crate::mesh::signed_volume_of(positions_m, triangles.iter().copied()).abs())
 }
 
 /// A closed mesh filling at least this fraction of its hull is taken as convex: its hull is
