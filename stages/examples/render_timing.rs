@@ -2,7 +2,8 @@
 //! of `mesa demo --seed 7`, 15 objects, 512×512, 2×2 samples at silhouettes, shadows, PNG
 //! encoded, assets loaded), the mesa side of `bench/compare_blender.sh`: one warm-up, then
 //! `--repeat` views timed one by one on one thread, each with its scene's shadow map (as
-//! Blender's render call pays for its shadows). Prints one JSON line: the seconds of each.
+//! Blender's render call pays for its shadows), with the `mesa` executable's allocator
+//! (mimalloc, as `mesa render` runs). Prints one JSON line: the seconds of each.
 //!
 //! With `--parts`, prints the minimum over the runs of each part of a view instead: the
 //! shadow map, one visibility pass, the picture with the shadow map built beforehand, the
@@ -23,6 +24,11 @@ use mesa_stages::render::{
     camera, draw_items, load_render_asset, place_layout, render_picture_shadowed, LayoutScene,
     RenderConfig, SceneView,
 };
+
+/// The allocator of the `mesa` executable (pipeline/src/main.rs), so that the figure is the
+/// one the `render` stage gets.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn min_ms(repeat: usize, mut f: impl FnMut()) -> f64 {
     (0..repeat)

@@ -458,15 +458,13 @@ impl SampleMask {
         }
     }
 
-    /// Where sample `(dx, dy)` of picture pixel `(x, y)` is stored, `None` when the pixel is
-    /// not selected.
-    pub fn sample(&self, x: u32, y: u32, dx: u32, dy: u32) -> Option<usize> {
-        let p = y as usize * self.width as usize + x as usize;
+    /// Where the samples of picture pixel `p` (row-major) are stored, `factor²` of them from
+    /// the one returned on, row by row (sample `(dx, dy)` at `dy · factor + dx` past it);
+    /// `None` when the pixel is not selected.
+    #[inline(always)]
+    pub fn samples_of(&self, p: usize) -> Option<usize> {
         let k = self.before[p];
-        (self.before[p + 1] > k).then(|| {
-            let f = self.factor as usize;
-            k as usize * f * f + dy as usize * f + dx as usize
-        })
+        (self.before[p + 1] > k).then(|| k as usize * (self.factor * self.factor) as usize)
     }
 }
 

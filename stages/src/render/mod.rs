@@ -701,30 +701,25 @@ fn render_selected(
         items,
         &mask,
     );
-    let f = f as usize;
+    let per_pixel = (f * f) as usize;
     // (drawn item, sample index, samples) of the pixel being resolved.
-    let mut hits: Vec<(u32, usize, usize)> = Vec::with_capacity(f * f);
-    for y in 0..h {
-        for x in 0..w {
-            let p = y * w + x;
-            if mask.sample(x as u32, y as u32, 0, 0).is_none() {
-                let item = first.item[p];
-                if item != u32::MAX {
-                    put(
-                        p,
-                        shader.shade(item, first.triangle[p], first.barycentric[p]),
-                        255,
-                    );
-                }
-                continue;
+    let mut hits: Vec<(u32, usize, usize)> = Vec::with_capacity(per_pixel);
+    for p in 0..w * h {
+        let Some(at) = mask.samples_of(p) else {
+            let item = first.item[p];
+            if item != u32::MAX {
+                put(
+                    p,
+                    shader.shade(item, first.triangle[p], first.barycentric[p]),
+                    255,
+                );
             }
-            let pixel = (0..f * f).map(|j| {
-                mask.sample(x as u32, y as u32, (j % f) as u32, (j / f) as u32)
-                    .expect("a selected pixel")
-            });
-            if let Some((color, alpha)) = resolve(&shader, &samples, pixel, f * f, &mut hits) {
-                put(p, color, alpha);
-            }
+            continue;
+        };
+        if let Some((color, alpha)) =
+            resolve(&shader, &samples, at..at + per_pixel, per_pixel, &mut hits)
+        {
+            put(p, color, alpha);
         }
     }
     Picture {
