@@ -1372,6 +1372,20 @@ mod tests {
     use super::*;
     use approx::assert_abs_diff_eq;
 
+    /// `mesh` drawn where it is, casting shadows, with no vertex colours and not taken as
+    /// closed.
+    fn plain<'a>(mesh: &'a TriMesh, material: &'a SurfaceMaterial, instance: u32) -> DrawItem<'a> {
+        DrawItem {
+            mesh,
+            world_from_mesh: Affine3::IDENTITY,
+            material,
+            instance,
+            casts_shadow: true,
+            vertex_colors: None,
+            closed_within: None,
+        }
+    }
+
     fn camera() -> PinholeCamera {
         PinholeCamera {
             width: 64,
@@ -1390,13 +1404,8 @@ mod tests {
         quad = quad.transformed(&Affine3::from_translation([0.0, 0.0, 1.5]));
         let material = SurfaceMaterial::plain([0.5; 3], 0.5);
         let items = [DrawItem {
-            mesh: &quad,
-            world_from_mesh: Affine3::IDENTITY,
-            material: &material,
-            instance: 7,
             casts_shadow: false,
-            vertex_colors: None,
-            closed_within: None,
+            ..plain(&quad, &material, 7)
         }];
         let vis = visibility(&camera(), &Affine3::IDENTITY, &items);
         let ids = vis.instance_ids(&items);
@@ -1424,13 +1433,8 @@ mod tests {
         plane.triangles = vec![[0, 1, 2], [0, 2, 3]];
         let material = SurfaceMaterial::plain([0.5; 3], 0.5);
         let items = [DrawItem {
-            mesh: &plane,
-            world_from_mesh: Affine3::IDENTITY,
-            material: &material,
-            instance: 1,
             casts_shadow: false,
-            vertex_colors: None,
-            closed_within: None,
+            ..plain(&plane, &material, 1)
         }];
         let cam = camera();
         let vis = visibility(&cam, &Affine3::IDENTITY, &items);
@@ -1528,26 +1532,7 @@ mod tests {
         let floor = TriMesh::cuboid([10.0, 0.01, 10.0])
             .transformed(&Affine3::from_translation([0.0, 0.5, 0.0]));
         let material = SurfaceMaterial::plain([0.5; 3], 0.5);
-        let items = [
-            DrawItem {
-                mesh: &floor,
-                world_from_mesh: Affine3::IDENTITY,
-                material: &material,
-                instance: 1,
-                casts_shadow: true,
-                vertex_colors: None,
-                closed_within: None,
-            },
-            DrawItem {
-                mesh: &near,
-                world_from_mesh: Affine3::IDENTITY,
-                material: &material,
-                instance: 2,
-                casts_shadow: true,
-                vertex_colors: None,
-                closed_within: None,
-            },
-        ];
+        let items = [plain(&floor, &material, 1), plain(&near, &material, 2)];
         let cam = camera();
         let vis = visibility(&cam, &Affine3::IDENTITY, &items);
         let ids = vis.instance_ids(&items);
@@ -1572,26 +1557,7 @@ mod tests {
         let block = TriMesh::cuboid([0.3, 0.3, 0.2])
             .transformed(&Affine3::from_translation([0.0, 0.0, 1.9]));
         let material = SurfaceMaterial::plain([0.6; 3], 0.8);
-        let items = [
-            DrawItem {
-                mesh: &wall,
-                world_from_mesh: Affine3::IDENTITY,
-                material: &material,
-                instance: 1,
-                casts_shadow: true,
-                vertex_colors: None,
-                closed_within: None,
-            },
-            DrawItem {
-                mesh: &block,
-                world_from_mesh: Affine3::IDENTITY,
-                material: &material,
-                instance: 2,
-                casts_shadow: true,
-                vertex_colors: None,
-                closed_within: None,
-            },
-        ];
+        let items = [plain(&wall, &material, 1), plain(&block, &material, 2)];
         let lighting = Lighting {
             up_world: [0.0, 0.0, -1.0],
             lights: vec![DirectionalLight {
@@ -1634,16 +1600,7 @@ mod tests {
         let floor = TriMesh::cuboid([2.0, 2.0, 0.01])
             .transformed(&Affine3::from_translation([0.0, 0.0, 2.0]));
         let material = SurfaceMaterial::plain([0.6; 3], 0.8);
-        let item = |mesh| DrawItem {
-            mesh,
-            world_from_mesh: Affine3::IDENTITY,
-            material: &material,
-            instance: 1,
-            casts_shadow: true,
-            vertex_colors: None,
-            closed_within: None,
-        };
-        let items = [item(&floor), item(&block)];
+        let items = [plain(&floor, &material, 1), plain(&block, &material, 2)];
         for size in [8u32, 37, 64, 101] {
             let lighting = Lighting {
                 lights: vec![DirectionalLight {
