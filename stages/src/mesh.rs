@@ -1090,7 +1090,11 @@ pub fn pieces(triangles: &[[u32; 3]]) -> Vec<Piece> {
         }
     }
     edges.sort_unstable();
-    let manifold = |edge: &[(u64, u32)]| matches!(*edge, [(_, s), (_, t)] if s & BACKWARD == 0 && t & BACKWARD != 0);
+    // An edge walked exactly once each way (the forward entry sorts first).
+    let manifold = |edge: &[(u64, u32)]| match *edge {
+        [(_, s), (_, t)] => s & BACKWARD == 0 && t & BACKWARD != 0,
+        _ => false,
+    };
     let mut parent: Vec<u32> = (0..triangles.len() as u32).collect();
     fn root(parent: &mut [u32], mut x: u32) -> u32 {
         while parent[x as usize] != x {
