@@ -1195,13 +1195,11 @@ pub fn closed_outward<'a>(meshes: impl IntoIterator<Item = &'a TriMesh>) -> bool
                 .triangles
                 .iter()
                 .map(|&t| welded.triangles[t as usize]);
-            let mut bounds = Aabb::from_point(
-                welded.positions[welded.triangles[piece.triangles[0] as usize][0] as usize],
-            );
-            for p in corners.clone().flatten() {
-                bounds.extend(welded.positions[p as usize]);
-            }
-            let d = norm3(sub3(bounds.max, bounds.min));
+            let points = corners
+                .clone()
+                .flatten()
+                .map(|i| welded.positions[i as usize]);
+            let d = Aabb::from_points(points).map_or(0.0, |b| norm3(sub3(b.max, b.min)));
             piece.closed && signed_volume_of(&welded.positions, corners) > 1e-9 * d * d * d
         })
 }

@@ -1055,7 +1055,7 @@ impl ShadowMap {
         let q = self.light_from_world.apply_point(p);
         let sx = (q[0] - self.x0) / self.texel - 0.5;
         let sy = (q[1] - self.y0) / self.texel - 0.5;
-        let size = self.buffer.width as i64;
+        let size = self.tiles.size;
         let (x0, y0) = (floor_i64(sx), floor_i64(sy));
         if x0 < 0 || y0 < 0 || x0 + 1 >= size || y0 + 1 >= size {
             return 1.0;
