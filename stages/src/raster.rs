@@ -289,7 +289,7 @@ impl VisibilityBuffer {
     }
 }
 
-#[derive(Clone, Copy)]
+#[derive(Debug, Clone, Copy)]
 enum Projection {
     Perspective(PinholeCamera),
     /// `sx = (x - x0) / texel`, `sy = (y - y0) / texel`, depth = z.
@@ -975,10 +975,12 @@ pub fn visibility_of_selected(
 /// one scene can share it ([`Shader::with_shadow_map`]).
 #[derive(Debug, Clone)]
 pub struct ShadowMap {
-    light_from_world: Affine3,
-    x0: f64,
-    y0: f64,
-    texel: f64,
+    /// The map's frame, for the tests that draw it again row by row.
+    #[cfg(test)]
+    frame: (Affine3, Projection),
+    /// World point to texel coordinates and biased light depth, in single precision for the
+    /// shader ([`ShadowLookup`]).
+    lookup: ShadowLookup,
     /// The light's depth per texel, stored in tiles ([`Tiled`]).
     buffer: VisibilityBuffer,
     tiles: Tiled,
@@ -1037,11 +1039,19 @@ impl ShadowMap {
             items,
             true,
         );
+        // A texel's centre is at its coordinate + 0.5; the lookup wants the texel below-left.
+        let row =
+            |axis: [f64; 3], offset: f64| [axis[0], axis[1], axis[2], offset].map(|v| v as f32);
+        let lookup = ShadowLookup {
+            to_x: row(scale3(x, 1.0 / texel), -x0 / texel - 0.5),
+            to_y: row(scale3(y, 1.0 / texel), -y0 / texel - 0.5),
+            to_depth: row(z, -(2.0 * texel + 1e-3)),
+            normal_offset: (1.5 * texel) as f32,
+        };
         Self {
-            light_from_world,
-            x0,
-            y0,
-            texel,
+            #[cfg(test)]
+            frame: (light_from_world, Projection::Orthographic { x0, y0, texel }),
+            lookup,
             buffer,
             tiles,
         }
@@ -1049,20 +1059,26 @@ impl ShadowMap {
 
     /// Fraction of light reaching `p_world` (percentage-closer filtering over the 2×2 texels
     /// around it, bilinearly weighted).
-    fn light_fraction(&self, p_world: [f64; 3], normal_world: [f64; 3]) -> f32 {
+    #[inline(always)]
+    fn light_fraction(&self, p_world: [f32; 3], normal_world: [f32; 3]) -> f32 {
+        let ShadowLookup {
+            to_x,
+            to_y,
+            to_depth,
+            normal_offset,
+        } = &self.lookup;
         // Offset along the normal and a depth bias keep surfaces from shadowing themselves.
-        let p = add3(p_world, scale3(normal_world, 1.5 * self.texel));
-        let q = self.light_from_world.apply_point(p);
-        let sx = (q[0] - self.x0) / self.texel - 0.5;
-        let sy = (q[1] - self.y0) / self.texel - 0.5;
+        let p = add3f(p_world, scale3f(normal_world, *normal_offset));
+        let affine = |r: &[f32; 4]| r[0] * p[0] + r[1] * p[1] + r[2] * p[2] + r[3];
+        let (sx, sy) = (affine(to_x), affine(to_y));
         let size = self.tiles.size;
-        let (x0, y0) = (floor_i64(sx), floor_i64(sy));
-        if x0 < 0 || y0 < 0 || x0 + 1 >= size || y0 + 1 >= size {
+        // Outside the map (NaN included): lit. Past this test the truncation is the floor.
+        if !(sx >= 0.0 && sy >= 0.0 && sx < (size - 1) as f32 && sy < (size - 1) as f32) {
             return 1.0;
         }
-        let (fx, fy) = ((sx - x0 as f64) as f32, (sy - y0 as f64) as f32);
-        let bias = (2.0 * self.texel + 1e-3) as f32;
-        let depth = q[2] as f32 - bias;
+        let (x0, y0) = (sx as i64, sy as i64);
+        let (fx, fy) = (sx - x0 as f32, sy - y0 as f32);
+        let depth = affine(to_depth);
         let lit = |x: i64, y: i64| -> f32 {
             if depth <= self.buffer.depth_m[self.tiles.index(x, y)] {
                 1.0
@@ -1074,6 +1090,50 @@ impl ShadowMap {
         let bottom = lit(x0, y0 + 1) * (1.0 - fx) + lit(x0 + 1, y0 + 1) * fx;
         top * (1.0 - fy) + bottom * fy
     }
+}
+
+/// Where the shader looks a world point up in a [`ShadowMap`]: each row `r` maps a point `p` to
+/// `r[0]·p.x + r[1]·p.y + r[2]·p.z + r[3]` (texel coordinates whose integer part is the texel
+/// below and left of the point, and the light depth less the bias). Single precision: a map
+/// spans metres in a thousand texels, and a float's 24 bits hold a point to a ten-thousandth
+/// of a texel there.
+#[derive(Debug, Clone)]
+struct ShadowLookup {
+    to_x: [f32; 4],
+    to_y: [f32; 4],
+    to_depth: [f32; 4],
+    /// How far along its normal a point moves before the lookup (1.5 texels).
+    normal_offset: f32,
+}
+
+fn add3f(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+fn sub3f(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn scale3f(a: [f32; 3], s: f32) -> [f32; 3] {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+fn dot3f(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// `a` scaled to length one (a zero vector stays zero).
+fn normalize3f(a: [f32; 3]) -> [f32; 3] {
+    let n = dot3f(a, a).sqrt();
+    if n > 0.0 {
+        scale3f(a, 1.0 / n)
+    } else {
+        a
+    }
+}
+
+fn to_f32(a: [f64; 3]) -> [f32; 3] {
+    a.map(|v| v as f32)
 }
 
 fn srgb_to_linear_lut() -> &'static [f32; 256] {
@@ -1125,7 +1185,7 @@ pub struct ShadedRender {
 }
 
 /// An item's (positions, normals) in the world frame.
-type WorldVertices = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+type WorldVertices = (Vec<[f32; 3]>, Vec<[f32; 3]>);
 
 /// Shades visible samples: the per-item world-frame vertices and normals, the shadow map and
 /// the lights of one render, computed once.
@@ -1136,9 +1196,11 @@ pub struct Shader<'s, 'a> {
     world: Vec<WorldVertices>,
     shadow: Option<Cow<'s, ShadowMap>>,
     shadow_light: Option<usize>,
-    camera_center_world: [f64; 3],
+    camera_center_world: [f32; 3],
+    /// The lighting's up vector.
+    up_world: [f32; 3],
     /// Per light, its direction normalised (once, not per pixel).
-    toward_lights: Vec<[f64; 3]>,
+    toward_lights: Vec<[f32; 3]>,
     /// Per item, its Blinn-Phong exponent and specular strength (from the roughness).
     specular: Vec<(f32, f32)>,
 }
@@ -1178,7 +1240,7 @@ impl<'s, 'a> Shader<'s, 'a> {
         shadow: Option<Cow<'s, ShadowMap>>,
     ) -> Self {
         let world_from_camera = camera_from_world.inverse().unwrap_or(Affine3::IDENTITY);
-        let camera_center_world = world_from_camera.translation;
+        let camera_center_world = to_f32(world_from_camera.translation);
         let shadow_light = lighting.lights.iter().position(|l| l.casts_shadow);
         let world = items
             .iter()
@@ -1189,7 +1251,7 @@ impl<'s, 'a> Shader<'s, 'a> {
                     .mesh
                     .positions
                     .iter()
-                    .map(|p| m.apply_point([p[0] as f64, p[1] as f64, p[2] as f64]))
+                    .map(|p| to_f32(m.apply_point([p[0] as f64, p[1] as f64, p[2] as f64])))
                     .collect();
                 let normals = item
                     .mesh
@@ -1197,7 +1259,7 @@ impl<'s, 'a> Shader<'s, 'a> {
                     .iter()
                     .map(|n| {
                         let n = [n[0] as f64, n[1] as f64, n[2] as f64];
-                        normalize3([dot3(nm[0], n), dot3(nm[1], n), dot3(nm[2], n)])
+                        to_f32(normalize3([dot3(nm[0], n), dot3(nm[1], n), dot3(nm[2], n)]))
                     })
                     .collect();
                 (positions, normals)
@@ -1220,10 +1282,11 @@ impl<'s, 'a> Shader<'s, 'a> {
             shadow,
             shadow_light,
             camera_center_world,
+            up_world: to_f32(lighting.up_world),
             toward_lights: lighting
                 .lights
                 .iter()
-                .map(|l| normalize3(l.toward_light_world))
+                .map(|l| to_f32(normalize3(l.toward_light_world)))
                 .collect(),
             specular,
         }
@@ -1236,28 +1299,24 @@ impl<'s, 'a> Shader<'s, 'a> {
         let item = &self.items[item_index as usize];
         let (positions, normals) = &self.world[item_index as usize];
         let tri = item.mesh.triangles[triangle as usize];
-        let [b1, b2] = barycentric.map(|b| b as f64);
-        let b0 = 1.0 - b1 - b2;
-        let weights = [b0, b1, b2];
-        let interp = |arr: &[[f64; 3]]| -> [f64; 3] {
-            std::array::from_fn(|k| {
-                (0..3)
-                    .map(|j| weights[j] * arr[tri[j] as usize][k])
-                    .sum::<f64>()
-            })
+        let [b1, b2] = barycentric;
+        let weights = [1.0 - b1 - b2, b1, b2];
+        let interp = |arr: &[[f32; 3]]| -> [f32; 3] {
+            let [a, b, c] = tri.map(|i| arr[i as usize]);
+            std::array::from_fn(|k| weights[0] * a[k] + weights[1] * b[k] + weights[2] * c[k])
         };
         let p = interp(positions);
-        let mut n = normalize3(interp(normals));
-        let to_eye = normalize3(sub3(self.camera_center_world, p));
-        if dot3(n, to_eye) < 0.0 {
-            n = scale3(n, -1.0);
+        let mut n = normalize3f(interp(normals));
+        let to_eye = normalize3f(sub3f(self.camera_center_world, p));
+        if dot3f(n, to_eye) < 0.0 {
+            n = scale3f(n, -1.0);
         }
         let material = item.material;
         let mut albedo = material.base_color;
         if let (Some(texture), true) = (&material.texture, item.mesh.has_uvs()) {
             let uv: [f32; 2] = std::array::from_fn(|k| {
                 (0..3)
-                    .map(|j| weights[j] as f32 * item.mesh.uvs[tri[j] as usize][k])
+                    .map(|j| weights[j] * item.mesh.uvs[tri[j] as usize][k])
                     .sum::<f32>()
             });
             let t = texture.sample_linear_rgb(uv);
@@ -1266,18 +1325,18 @@ impl<'s, 'a> Shader<'s, 'a> {
         if let Some(colors) = item.vertex_colors {
             for (k, a) in albedo.iter_mut().enumerate() {
                 *a *= (0..3)
-                    .map(|j| weights[j] as f32 * colors[tri[j] as usize][k])
+                    .map(|j| weights[j] * colors[tri[j] as usize][k])
                     .sum::<f32>();
             }
         }
-        let up = dot3(n, lighting.up_world) as f32;
+        let up = dot3f(n, self.up_world);
         let hemi = 0.5 + 0.5 * up;
         let mut color: [f32; 3] = std::array::from_fn(|k| {
             albedo[k] * (lighting.sky_color[k] * hemi + lighting.ground_color[k] * (1.0 - hemi))
         });
         let (shininess, specular_strength) = self.specular[item_index as usize];
         for (li, (light, &l)) in lighting.lights.iter().zip(&self.toward_lights).enumerate() {
-            let ndotl = dot3(n, l).max(0.0) as f32;
+            let ndotl = dot3f(n, l).max(0.0);
             if ndotl <= 0.0 {
                 continue;
             }
@@ -1288,9 +1347,9 @@ impl<'s, 'a> Shader<'s, 'a> {
             if visible <= 0.0 {
                 continue;
             }
-            let half = normalize3(add3(l, to_eye));
+            let half = normalize3f(add3f(l, to_eye));
             // Schlick's rational stand-in for x^n: cheap, and close where it matters.
-            let x = dot3(n, half).max(0.0) as f32;
+            let x = dot3f(n, half).max(0.0);
             let spec = x / (shininess - shininess * x + x) * specular_strength;
             for k in 0..3 {
                 color[k] += light.color[k] * visible * (albedo[k] * ndotl + spec * ndotl.sqrt());
@@ -1625,16 +1684,12 @@ mod tests {
                 width: i64::from(size),
                 height: i64::from(size),
             };
-            let projection = Projection::Orthographic {
-                x0: map.x0,
-                y0: map.y0,
-                texel: map.texel,
-            };
+            let (light_from_world, projection) = map.frame;
             rasterize_into(
                 &mut row_major,
                 &every,
                 projection,
-                &map.light_from_world,
+                &light_from_world,
                 &items,
                 true,
             );

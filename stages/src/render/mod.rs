@@ -41,9 +41,8 @@ use thiserror::Error;
 use crate::image_io::{encode_rgb8, encode_rgba8, ImageError};
 use crate::mesh::{closed_outward, normalize3, Aabb, Affine3, TriMesh};
 use crate::raster::{
-    linear_to_srgb_u8, srgb_u8_to_linear, visibility, visibility_items, visibility_of_selected,
-    DirectionalLight, DrawItem, Lighting, PinholeCamera, SampleMask, Shader, ShadowMap,
-    SurfaceMaterial, VisibilityBuffer,
+    linear_to_srgb_u8, srgb_u8_to_linear, visibility, visibility_of_selected, DirectionalLight,
+    DrawItem, Lighting, SampleMask, Shader, ShadowMap, SurfaceMaterial, VisibilityBuffer,
 };
 
 pub use asset::{load_render_asset, AssetPart, RenderAsset, RenderAssetError};
@@ -533,53 +532,41 @@ pub fn render_picture(
     render_picture_shadowed(items, camera, lighting, supersampling, shadow.as_ref())
 }
 
-/// The camera whose pixel `(x, y)` is the first sample, `(0, 0)`, of pixel `(x, y)` of
-/// `camera` sampled `factor × factor` ([`PinholeCamera::supersampled`]): that camera's
-/// intrinsics divided by the factor. For a factor that is a power of two the division is
-/// exact, and so is every sample: the same depth, triangle and barycentrics bit for bit.
-fn first_sample_camera(camera: &PinholeCamera, factor: u32) -> PinholeCamera {
-    let big = camera.supersampled(factor);
-    let k = factor as f64;
-    PinholeCamera {
-        width: camera.width,
-        height: camera.height,
-        fx: big.fx / k,
-        fy: big.fy / k,
-        cx: big.cx / k,
-        cy: big.cy / k,
-    }
-}
-
-/// Which pixels need all their samples: those where the first samples of the pixel and of its
-/// right, lower and lower-right neighbours (which enclose all its samples) or its centre see
-/// different items, grown by one pixel, so that a part thinner than a pixel between first
-/// samples is still found where a neighbour sees it. Everywhere else one item covers the
-/// pixel, and its first sample is the pixel.
-fn silhouette_pixels(first: &VisibilityBuffer, centres: &VisibilityBuffer) -> Vec<bool> {
-    let (w, h) = (first.width as usize, first.height as usize);
+/// Which pixels need all their samples: those whose centre sees another item than the centre of
+/// one of its eight neighbours (those nine centres enclose all its samples), and the pixels of
+/// the picture's border (their outer samples lie beyond every centre), grown by one pixel, so
+/// that a part thinner than a pixel between centres is still found where a neighbour's centre
+/// sees it. Everywhere else one item covers the pixel, and it is shaded at its centre.
+fn silhouette_pixels(centres: &VisibilityBuffer) -> Vec<bool> {
+    let (w, h) = (centres.width as usize, centres.height as usize);
     if w == 0 || h == 0 {
         return Vec::new();
     }
-    // Row by row: a pixel differs from its right neighbour, its lower one, its lower right one
-    // or its centre; past the last row or column the enclosing samples are unknown.
+    // Row by row: the 2×2 block of centres whose top left is (x, y) is not of one item. A
+    // pixel differs from a neighbour exactly when one of the four blocks holding it does.
+    let mut block = vec![false; w * h];
+    for y in 0..h - 1 {
+        let row = &centres.item[y * w..(y + 1) * w];
+        let below = &centres.item[(y + 1) * w..(y + 2) * w];
+        let out = &mut block[y * w..(y + 1) * w];
+        for x in 0..w - 1 {
+            let item = row[x];
+            out[x] = (row[x + 1] != item) | (below[x] != item) | (below[x + 1] != item);
+        }
+    }
     let mut differs = vec![false; w * h];
     for y in 0..h {
-        let row = &first.item[y * w..(y + 1) * w];
-        let centre = &centres.item[y * w..(y + 1) * w];
         let out = &mut differs[y * w..(y + 1) * w];
-        if y + 1 == h {
+        if y == 0 || y + 1 == h {
             out.fill(true);
             continue;
         }
-        let below = &first.item[(y + 1) * w..(y + 2) * w];
-        for (x, out) in out[..w - 1].iter_mut().enumerate() {
-            let item = row[x];
-            *out = (centre[x] != item)
-                | (row[x + 1] != item)
-                | (below[x] != item)
-                | (below[x + 1] != item);
-        }
+        let (above, here) = (&block[(y - 1) * w..y * w], &block[y * w..(y + 1) * w]);
+        out[0] = true;
         out[w - 1] = true;
+        for x in 1..w - 1 {
+            out[x] = above[x - 1] | above[x] | here[x - 1] | here[x];
+        }
     }
     // Grown by one pixel: a 3×3 dilation, done as a horizontal then a vertical pass.
     let mut wide = vec![false; w * h];
@@ -630,8 +617,8 @@ pub fn render_picture_shadowed(
     )
 }
 
-/// Which pixels are sampled fully, from the first samples and the centres.
-type Selection = fn(&VisibilityBuffer, &VisibilityBuffer) -> Vec<bool>;
+/// Which pixels are sampled fully, from what the centres see.
+type Selection = fn(&VisibilityBuffer) -> Vec<bool>;
 
 /// [`render_picture_shadowed`] with the pixels sampled fully chosen by `select`.
 fn render_selected(
@@ -651,14 +638,9 @@ fn render_selected(
     let shader = Shader::with_shadow_map(&camera_from_table, items, lighting, shadow);
     let (w, h) = (intrinsics.width as usize, intrinsics.height as usize);
     // What each pixel's centre (u, v) sees, as the camera files say pixels are sampled: the
-    // silhouettes of the picture in SPEC 2's convention, comparable with masks.
-    // Shading needs the triangles and barycentrics of the centres only without supersampling;
-    // with it, the silhouettes need the items alone.
-    let centres = if f == 1 {
-        visibility(&intrinsics, &camera_from_table, items)
-    } else {
-        visibility_items(&intrinsics, &camera_from_table, items)
-    };
+    // silhouettes of the picture in SPEC 2's convention, comparable with masks, the point
+    // where a pixel is shaded, and what chooses the pixels sampled fully.
+    let centres = visibility(&intrinsics, &camera_from_table, items);
     let instances: Vec<u32> = centres.instance_ids(items);
     let mut rgba = vec![0u8; w * h * 4];
     let mut put = |p: usize, color: [f32; 3], alpha: u8| {
@@ -684,17 +666,7 @@ fn render_selected(
             instances,
         };
     }
-    let first = visibility(
-        &first_sample_camera(&intrinsics, f),
-        &camera_from_table,
-        items,
-    );
-    let mask = SampleMask::new(
-        intrinsics.width,
-        intrinsics.height,
-        f,
-        &select(&first, &centres),
-    );
+    let mask = SampleMask::new(intrinsics.width, intrinsics.height, f, &select(&centres));
     let samples = visibility_of_selected(
         &intrinsics.supersampled(f),
         &camera_from_table,
@@ -706,19 +678,23 @@ fn render_selected(
     let mut hits: Vec<(u32, usize, usize)> = Vec::with_capacity(per_pixel);
     for p in 0..w * h {
         let Some(at) = mask.samples_of(p) else {
-            let item = first.item[p];
+            let item = centres.item[p];
             if item != u32::MAX {
                 put(
                     p,
-                    shader.shade(item, first.triangle[p], first.barycentric[p]),
+                    shader.shade(item, centres.triangle[p], centres.barycentric[p]),
                     255,
                 );
             }
             continue;
         };
-        if let Some((color, alpha)) =
-            resolve(&shader, &samples, at..at + per_pixel, per_pixel, &mut hits)
-        {
+        let samples = Pixel {
+            samples: &samples,
+            at: at..at + per_pixel,
+            centres: &centres,
+            p,
+        };
+        if let Some((color, alpha)) = resolve(&shader, samples, per_pixel, &mut hits) {
             put(p, color, alpha);
         }
     }
@@ -730,19 +706,33 @@ fn render_selected(
     }
 }
 
-/// The colour and alpha of a pixel from its `per_pixel` samples (`samples`: their indices in
-/// `buffer`, in order): each item hit is shaded once, at its first sample, and weighted by its
-/// samples; the mean is over the samples that hit something, alpha their fraction. `None`
+/// The samples of one pixel: their indices `at` in `samples`, in order, and the pixel's index
+/// `p` in `centres`.
+struct Pixel<'a, I> {
+    samples: &'a VisibilityBuffer,
+    at: I,
+    centres: &'a VisibilityBuffer,
+    p: usize,
+}
+
+/// The colour and alpha of a pixel from its `per_pixel` samples: each item hit is shaded once
+/// (at the pixel's centre when the centre sees it, else at its first sample) and weighted by
+/// its samples; the mean is over the samples that hit something, alpha their fraction. `None`
 /// when no sample hits anything. `hits` is scratch space.
 fn resolve(
     shader: &Shader<'_, '_>,
-    buffer: &VisibilityBuffer,
-    samples: impl Iterator<Item = usize>,
+    pixel: Pixel<'_, impl Iterator<Item = usize>>,
     per_pixel: usize,
     hits: &mut Vec<(u32, usize, usize)>,
 ) -> Option<([f32; 3], u8)> {
+    let Pixel {
+        samples: buffer,
+        at,
+        centres,
+        p,
+    } = pixel;
     hits.clear();
-    for o in samples {
+    for o in at {
         let item = buffer.item[o];
         if item == u32::MAX {
             continue;
@@ -758,7 +748,11 @@ fn resolve(
     }
     let mut acc = [0f32; 3];
     for &(item, o, n) in hits.iter() {
-        let c = shader.shade(item, buffer.triangle[o], buffer.barycentric[o]);
+        let c = if centres.item[p] == item {
+            shader.shade(item, centres.triangle[p], centres.barycentric[p])
+        } else {
+            shader.shade(item, buffer.triangle[o], buffer.barycentric[o])
+        };
         for k in 0..3 {
             acc[k] += c[k] * n as f32;
         }
@@ -982,6 +976,7 @@ mod tests {
         let big = intrinsics.supersampled(f as u32);
         let camera_from_table = camera.table_from_camera.inverse().expect("pose");
         let vis = visibility(&big, &camera_from_table, items);
+        let centres = visibility(&intrinsics, &camera_from_table, items);
         let shader = Shader::new(&camera_from_table, items, lighting);
         let (w, h, bw) = (
             intrinsics.width as usize,
@@ -992,9 +987,14 @@ mod tests {
         let mut hits = Vec::new();
         for y in 0..h {
             for x in 0..w {
-                let pixel = (0..f * f).map(|j| (y * f + j / f) * bw + x * f + j % f);
-                if let Some((color, alpha)) = resolve(&shader, &vis, pixel, f * f, &mut hits) {
-                    let p = y * w + x;
+                let p = y * w + x;
+                let pixel = Pixel {
+                    samples: &vis,
+                    at: (0..f * f).map(|j| (y * f + j / f) * bw + x * f + j % f),
+                    centres: &centres,
+                    p,
+                };
+                if let Some((color, alpha)) = resolve(&shader, pixel, f * f, &mut hits) {
                     for k in 0..3 {
                         rgba[p * 4 + k] = linear_to_srgb_u8(color[k]);
                     }
@@ -1005,25 +1005,25 @@ mod tests {
         rgba
     }
 
-    /// The silhouette test, written row by row with a separable dilation, against its
-    /// definition pixel by pixel, on random item buffers (runs of items so that both sparse
-    /// and dense silhouettes occur). Control: the definition without the growth by one pixel
-    /// selects fewer pixels, and the comparison sees it.
+    /// The silhouette test, written row by row with blocks and a separable dilation, against
+    /// its definition pixel by pixel, on random item buffers (runs of items so that both sparse
+    /// and dense silhouettes occur). Controls: the definition without the growth by one pixel,
+    /// or with four neighbours instead of eight, selects fewer pixels, and the comparison sees
+    /// it.
     #[test]
     fn silhouette_pixels_follow_their_definition() {
-        fn by_definition(
-            first: &VisibilityBuffer,
-            centres: &VisibilityBuffer,
-            grow: bool,
-        ) -> Vec<bool> {
-            let (w, h) = (first.width as usize, first.height as usize);
+        fn by_definition(centres: &VisibilityBuffer, grow: bool, diagonals: bool) -> Vec<bool> {
+            let (w, h) = (centres.width as usize, centres.height as usize);
             let differs = |x: usize, y: usize| {
-                let item = first.item[y * w + x];
-                let at = |xx: usize, yy: usize| (xx < w && yy < h).then(|| first.item[yy * w + xx]);
-                centres.item[y * w + x] != item
-                    || [at(x + 1, y), at(x, y + 1), at(x + 1, y + 1)]
-                        .iter()
-                        .any(|other| *other != Some(item))
+                let item = centres.item[y * w + x];
+                let border = x == 0 || y == 0 || x + 1 == w || y + 1 == h;
+                border
+                    || (-1i64..=1).any(|dy| {
+                        (-1i64..=1).any(|dx| {
+                            let near = (x as i64 + dx) as usize + (y as i64 + dy) as usize * w;
+                            (diagonals || dx == 0 || dy == 0) && centres.item[near] != item
+                        })
+                    })
             };
             let mut selected = vec![false; w * h];
             for y in 0..h {
@@ -1045,45 +1045,38 @@ mod tests {
             state ^= state << 17;
             state
         };
-        let mut fewer = 0;
+        let (mut fewer, mut fewer_without_diagonals) = (0, 0);
         for (w, h) in [(1, 1), (1, 7), (9, 1), (17, 13), (64, 48)] {
-            for _ in 0..4 {
-                let mut buffer = |run: u64| {
-                    let mut item = 0u32;
-                    let mut items = Vec::with_capacity(w * h);
-                    for _ in 0..w * h {
-                        if next() % run == 0 {
-                            item = match next() % 4 {
-                                0 => u32::MAX,
-                                k => k as u32,
-                            };
-                        }
-                        items.push(item);
+            for run in [12, 40, 200] {
+                let mut item = 0u32;
+                let mut items = Vec::with_capacity(w * h);
+                for _ in 0..w * h {
+                    if next() % run == 0 {
+                        item = match next() % 4 {
+                            0 => u32::MAX,
+                            k => k as u32,
+                        };
                     }
-                    VisibilityBuffer {
-                        width: w as u32,
-                        height: h as u32,
-                        depth_m: vec![1.0; w * h],
-                        item: items,
-                        triangle: vec![0; w * h],
-                        barycentric: vec![[0.0; 2]; w * h],
-                    }
-                };
-                let first = buffer(12);
+                    items.push(item);
+                }
                 let centres = VisibilityBuffer {
-                    item: first
-                        .item
-                        .iter()
-                        .map(|&i| if next() % 40 == 0 { 7 } else { i })
-                        .collect(),
-                    ..first.clone()
+                    width: w as u32,
+                    height: h as u32,
+                    depth_m: vec![1.0; w * h],
+                    item: items,
+                    triangle: vec![0; w * h],
+                    barycentric: vec![[0.0; 2]; w * h],
                 };
-                let expected = by_definition(&first, &centres, true);
-                assert_eq!(silhouette_pixels(&first, &centres), expected, "{w}×{h}");
-                fewer += usize::from(by_definition(&first, &centres, false) != expected);
+                let expected = by_definition(&centres, true, true);
+                assert_eq!(silhouette_pixels(&centres), expected, "{w}×{h}");
+                fewer += usize::from(by_definition(&centres, false, true) != expected);
+                fewer_without_diagonals += usize::from(
+                    by_definition(&centres, false, false) != by_definition(&centres, false, true),
+                );
             }
         }
         assert!(fewer > 0);
+        assert!(fewer_without_diagonals > 0);
     }
 
     /// The slab is left out of the shadow map when every object stands on the table: the
@@ -1260,14 +1253,14 @@ mod tests {
             assert_eq!(differing, 0, "{view:?}: {differing} pixels differ");
             // Every pixel selected: the sparse pass is the full one.
             let shadow = ShadowMap::of_lighting(&light, &items);
-            let all = render_selected(&items, &cam, &light, 2, shadow.as_ref(), |f, _| {
-                vec![true; f.item.len()]
+            let all = render_selected(&items, &cam, &light, 2, shadow.as_ref(), |c| {
+                vec![true; c.item.len()]
             });
             assert_eq!(all.rgba, reference, "{view:?}");
-            // Control: no pixel selected (each shaded once, fully covered, at its first
-            // sample) loses the anti-aliased edges, and the comparison sees it.
-            let none = render_selected(&items, &cam, &light, 2, shadow.as_ref(), |f, _| {
-                vec![false; f.item.len()]
+            // Control: no pixel selected (each shaded once, fully covered, at its centre)
+            // loses the anti-aliased edges, and the comparison sees it.
+            let none = render_selected(&items, &cam, &light, 2, shadow.as_ref(), |c| {
+                vec![false; c.item.len()]
             });
             let lost = reference
                 .chunks_exact(4)
@@ -1275,17 +1268,12 @@ mod tests {
                 .filter(|(a, b)| a != b)
                 .count();
             assert!(lost > 100, "{view:?}: {lost}");
-            let first = visibility(
-                &first_sample_camera(&cam.intrinsics, 2),
-                &cam.table_from_camera.inverse().expect("pose"),
-                &items,
-            );
             let centres = visibility(
                 &cam.intrinsics,
                 &cam.table_from_camera.inverse().expect("pose"),
                 &items,
             );
-            let chosen = silhouette_pixels(&first, &centres);
+            let chosen = silhouette_pixels(&centres);
             selected_share.push(chosen.iter().filter(|&&c| c).count() as f64 / (w * h) as f64);
         }
         // Silhouette sampling samples a minority of the pixels fully.
