@@ -853,18 +853,17 @@ fn raster_triangle<S: Samples>(
                 return;
             }
             // Perspective: the corners' weights over their depths, whose sum is 1 / depth.
-            let (depth, q, sum) = if perspective {
+            let (depth, q) = if perspective {
                 let q = [l0 * inv_z[0], l1 * inv_z[1], l2 * inv_z[2]];
                 let sum = q[0] + q[1] + q[2];
                 if sum <= 0.0 {
                     return;
                 }
-                (1.0 / sum, q, sum)
+                (1.0 / sum, q)
             } else {
                 (
                     l0 * v[0].p[2] + l1 * v[1].p[2] + l2 * v[2].p[2],
                     [l0, l1, l2],
-                    1.0,
                 )
             };
             let depth32 = depth as f32;
@@ -874,8 +873,9 @@ fn raster_triangle<S: Samples>(
                     items[o] = item;
                 }
                 if with_attributes {
+                    // The corners' perspective-correct weights: q / sum, as q times the depth.
                     let mu = if perspective {
-                        [q[0] / sum, q[1] / sum, q[2] / sum]
+                        [q[0] * depth, q[1] * depth, q[2] * depth]
                     } else {
                         q
                     };
