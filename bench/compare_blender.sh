@@ -13,6 +13,7 @@
 # each, the load average and the CPU.
 #
 #   bench/compare_blender.sh [OUT_DIR]
+#   RENDER_TIMING=/path/to/render_timing bench/compare_blender.sh [OUT_DIR]   (another build's)
 #
 # Needs: a release build (cargo build --release), Blender as a Python module in a virtualenv
 # (python3 -m venv .venv-blender && .venv-blender/bin/pip install "bpy==4.3.0" "numpy<2"; or
@@ -33,10 +34,15 @@ ws="$out/demo"
 cp "$ws/$scene_rel/render/front.png" "$out/mesa_front.png"
 
 repeat="${REPEAT:-5}"
-(cd "$root" && cargo build --release -q -p mesa-stages --example render_timing)
+# RENDER_TIMING: a render_timing binary built elsewhere (an older commit's, copied aside), to
+# compare two versions against the same Blender on one machine; by default this tree's.
+timing="${RENDER_TIMING:-}"
+if [ -z "$timing" ]; then
+  (cd "$root" && cargo build --release -q -p mesa-stages --example render_timing)
+  timing="$root/target/release/examples/render_timing"
+fi
 load_before="$(cut -d' ' -f1 /proc/loadavg)"
-RAYON_NUM_THREADS=1 "$root/target/release/examples/render_timing" --repeat "$repeat" \
-  > "$out/mesa.json"
+RAYON_NUM_THREADS=1 "$timing" --repeat "$repeat" > "$out/mesa.json"
 OMP_NUM_THREADS=1 LP_NUM_THREADS=1 "$python" "$root/bench/render_blender.py" "$ws/$scene_rel" \
   "$ws/assets/library" truth/layout.json "$out/blender_front.png" --engine "$engine" \
   --repeat "$repeat" 2>/dev/null | grep '^{' > "$out/blender.json"

@@ -807,8 +807,8 @@ fn raster_triangle<S: Samples>(
     // Per edge, -1 / a: each row's span bound is a product, not a division (the span is only
     // a guess with a pixel of slack; the exact test decides).
     let minus_inv_a = edges.map(|(a, _, _)| if a != 0.0 { -1.0 / a } else { 0.0 });
-    // What the buffer keeps besides depth: nothing (a shadow map), the item (a picture's
-    // silhouettes), or the item, triangle and barycentrics (what is shaded).
+    // What the buffer keeps besides depth: nothing (a shadow map), the item alone (a buffer
+    // made without the other planes), or the item, triangle and barycentrics (what is shaded).
     let with_items = !buffer.item.is_empty();
     let with_attributes = !buffer.barycentric.is_empty();
     let VisibilityBuffer {
@@ -919,26 +919,6 @@ fn draw_every_pixel(
         false,
     );
     buffer
-}
-
-/// [`visibility`] with only the depth and the item of each pixel: `triangle` and `barycentric`
-/// are left empty (for a picture's silhouettes, which need no shading; the items and depths
-/// are those [`visibility`] finds).
-pub fn visibility_items(
-    camera: &PinholeCamera,
-    camera_from_world: &Affine3,
-    items: &[DrawItem<'_>],
-) -> VisibilityBuffer {
-    let n = camera.width as usize * camera.height as usize;
-    let buffer = VisibilityBuffer {
-        width: camera.width,
-        height: camera.height,
-        depth_m: vec![f32::INFINITY; n],
-        item: vec![u32::MAX; n],
-        triangle: Vec::new(),
-        barycentric: Vec::new(),
-    };
-    draw_every_pixel(buffer, camera, camera_from_world, items)
 }
 
 /// The visibility of the samples of the pixels `mask` selects, seen by `camera` (the picture's

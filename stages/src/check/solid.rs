@@ -24,6 +24,7 @@
 
 use super::geometry::{Bounds, Placement};
 use crate::assets::reach::closest_point_triangle;
+use crate::mesh::{add3, cross3, dot3, norm3, scale3, sub3};
 use crate::tri_tree::{self, Node, Stack};
 
 /// Surface samples taken on a mesh besides its vertices (area-uniform, deterministic).
@@ -110,7 +111,7 @@ fn surface_samples(positions: &[[f64; 3]], triangles: &[[u32; 3]], count: usize)
         .iter()
         .map(|t| {
             let [a, b, c] = t.map(|i| positions[i as usize]);
-            0.5 * norm(cross(sub(b, a), sub(c, a)))
+            0.5 * norm3(cross3(sub3(b, a), sub3(c, a)))
         })
         .collect();
     let total: f64 = areas.iter().sum();
@@ -246,8 +247,8 @@ impl Solid {
                 let range = node.triangles();
                 for t in &self.triangles[range] {
                     let q = closest_point_triangle(p, t[0], t[1], t[2]);
-                    let d = sub(p, q);
-                    let d2 = dot(d, d);
+                    let d = sub3(p, q);
+                    let d2 = dot3(d, d);
                     if d2 < best2 {
                         best2 = d2;
                         best = q;
@@ -344,11 +345,11 @@ impl SolidAt<'_> {
     }
 
     fn local(&self, p: [f64; 3]) -> [f64; 3] {
-        sub(p, self.offset)
+        sub3(p, self.offset)
     }
 
     fn points(&self) -> impl Iterator<Item = [f64; 3]> + '_ {
-        self.solid.points.iter().map(|p| add(*p, self.offset))
+        self.solid.points.iter().map(|p| add3(*p, self.offset))
     }
 
     /// Whether `p` (table frame) lies inside.
@@ -380,7 +381,7 @@ pub fn deepest(a: SolidAt<'_>, b: SolidAt<'_>, floor_m: f64) -> f64 {
     if !a.bounds().overlaps(&bb, 0.0) {
         return 0.0;
     }
-    let local_box = bb.translated(scale(a.offset, -1.0));
+    let local_box = bb.translated(scale3(a.offset, -1.0));
     let mut best = 0.0f64;
     let mut measured = 0usize;
     // Each piece with the most it could hold; the most promising is split first, so the search
@@ -390,8 +391,8 @@ pub fn deepest(a: SolidAt<'_>, b: SolidAt<'_>, floor_m: f64) -> f64 {
                    best: &mut f64,
                    measured: &mut usize,
                    open: &mut std::collections::BinaryHeap<Piece>| {
-        let c = scale(add(add(t[0], t[1]), t[2]), 1.0 / 3.0);
-        let r = t.iter().map(|p| norm(sub(*p, c))).fold(0.0, f64::max);
+        let c = scale3(add3(add3(t[0], t[1]), t[2]), 1.0 / 3.0);
+        let r = t.iter().map(|p| norm3(sub3(*p, c))).fold(0.0, f64::max);
         let q = b.local(c);
         let (distance, surface) = b.solid.nearest(q);
         *measured += 1;
@@ -405,7 +406,7 @@ pub fn deepest(a: SolidAt<'_>, b: SolidAt<'_>, floor_m: f64) -> f64 {
             // where the piece lies parallel to the surface).
             let farthest = t
                 .iter()
-                .map(|p| norm(sub(b.local(*p), surface)))
+                .map(|p| norm3(sub3(b.local(*p), surface)))
                 .fold(0.0, f64::max);
             (distance, farthest)
         } else {
@@ -418,7 +419,7 @@ pub fn deepest(a: SolidAt<'_>, b: SolidAt<'_>, floor_m: f64) -> f64 {
     };
     let mut first = Vec::new();
     a.solid
-        .in_box(&local_box, |t| first.push(t.map(|p| add(p, a.offset))));
+        .in_box(&local_box, |t| first.push(t.map(|p| add3(p, a.offset))));
     for t in first {
         measure(t, &mut best, &mut measured, &mut open);
     }
@@ -435,8 +436,8 @@ pub fn deepest(a: SolidAt<'_>, b: SolidAt<'_>, floor_m: f64) -> f64 {
         let t = piece.t;
         let k = (0..3)
             .max_by(|&i, &j| {
-                let li = norm(sub(t[(i + 1) % 3], t[i]));
-                let lj = norm(sub(t[(j + 1) % 3], t[j]));
+                let li = norm3(sub3(t[(i + 1) % 3], t[i]));
+                let lj = norm3(sub3(t[(j + 1) % 3], t[j]));
                 li.total_cmp(&lj).then(j.cmp(&i))
             })
             .unwrap_or(0);
@@ -476,7 +477,7 @@ impl Ord for Piece {
 }
 
 fn mid(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    scale(add(a, b), 0.5)
+    scale3(add3(a, b), 0.5)
 }
 
 /// How far `moving` could fall straight down onto `fixed`, metres, if `fixed` is under it
@@ -596,34 +597,6 @@ fn cover(
     Some((sign, at))
 }
 
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-
 fn sub2(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
     [a[0] - b[0], a[1] - b[1]]
 }
@@ -651,7 +624,7 @@ mod tests {
         });
         let c = b.center();
         AssetMesh::new(
-            aligned.iter().map(|p| sub(*p, c)).collect(),
+            aligned.iter().map(|p| sub3(*p, c)).collect(),
             mesh.triangles.clone(),
         )
     }
