@@ -512,7 +512,8 @@ impl LatheOptions {
     }
 }
 
-fn to_f32(p: [f64; 3]) -> [f32; 3] {
+/// `p` in single precision.
+pub(crate) fn to_f32(p: [f64; 3]) -> [f32; 3] {
     [p[0] as f32, p[1] as f32, p[2] as f32]
 }
 

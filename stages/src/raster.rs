@@ -14,7 +14,7 @@
 use std::borrow::Cow;
 use std::sync::Arc;
 
-use crate::mesh::{add3, cross3, dot3, normalize3, scale3, sub3, Aabb, Affine3, TriMesh};
+use crate::mesh::{add3, cross3, dot3, normalize3, scale3, sub3, to_f32, Aabb, Affine3, TriMesh};
 
 /// Pinhole intrinsics in pixels (OpenCV convention).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -807,10 +807,9 @@ fn raster_triangle<S: Samples>(
     // Per edge, -1 / a: each row's span bound is a product, not a division (the span is only
     // a guess with a pixel of slack; the exact test decides).
     let minus_inv_a = edges.map(|(a, _, _)| if a != 0.0 { -1.0 / a } else { 0.0 });
-    // What the buffer keeps besides depth: nothing (a shadow map), the item alone (a buffer
-    // made without the other planes), or the item, triangle and barycentrics (what is shaded).
-    let with_items = !buffer.item.is_empty();
-    let with_attributes = !buffer.barycentric.is_empty();
+    // What the buffer keeps besides depth: nothing (a shadow map), or the item, triangle and
+    // barycentrics (what is shaded).
+    let with_attributes = !buffer.item.is_empty();
     let VisibilityBuffer {
         depth_m,
         item: items,
@@ -869,10 +868,8 @@ fn raster_triangle<S: Samples>(
             let depth32 = depth as f32;
             if depth32 < depth_m[o] {
                 depth_m[o] = depth32;
-                if with_items {
-                    items[o] = item;
-                }
                 if with_attributes {
+                    items[o] = item;
                     // The corners' perspective-correct weights: q / sum, as q times the depth.
                     let mu = if perspective {
                         [q[0] * depth, q[1] * depth, q[2] * depth]
@@ -1112,10 +1109,6 @@ fn normalize3f(a: [f32; 3]) -> [f32; 3] {
     }
 }
 
-fn to_f32(a: [f64; 3]) -> [f32; 3] {
-    a.map(|v| v as f32)
-}
-
 fn srgb_to_linear_lut() -> &'static [f32; 256] {
     static LUT: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
     LUT.get_or_init(|| {
@@ -1272,6 +1265,11 @@ impl<'s, 'a> Shader<'s, 'a> {
         }
     }
 
+    /// The linear RGB colour of what sample `o` of `buffer` sees (which must be an item).
+    pub fn shade_at(&self, buffer: &VisibilityBuffer, o: usize) -> [f32; 3] {
+        self.shade(buffer.item[o], buffer.triangle[o], buffer.barycentric[o])
+    }
+
     /// The linear RGB colour of triangle `triangle` of item `item_index` at perspective-correct
     /// barycentrics `(b1, b2)`.
     pub fn shade(&self, item_index: u32, triangle: u32, barycentric: [f32; 2]) -> [f32; 3] {
@@ -1355,11 +1353,7 @@ pub fn render_shaded(
             rgb[o * 3..o * 3 + 3].copy_from_slice(&bg);
             continue;
         }
-        let color = shader.shade(
-            item_index,
-            visibility.triangle[o],
-            visibility.barycentric[o],
-        );
+        let color = shader.shade_at(&visibility, o);
         for k in 0..3 {
             rgb[o * 3 + k] = linear_to_srgb_u8(color[k]);
         }

@@ -652,11 +652,7 @@ fn render_selected(
     if f == 1 {
         for (p, &item) in centres.item.iter().enumerate() {
             if item != u32::MAX {
-                put(
-                    p,
-                    shader.shade(item, centres.triangle[p], centres.barycentric[p]),
-                    255,
-                );
+                put(p, shader.shade_at(&centres, p), 255);
             }
         }
         return Picture {
@@ -680,21 +676,17 @@ fn render_selected(
         let Some(at) = mask.samples_of(p) else {
             let item = centres.item[p];
             if item != u32::MAX {
-                put(
-                    p,
-                    shader.shade(item, centres.triangle[p], centres.barycentric[p]),
-                    255,
-                );
+                put(p, shader.shade_at(&centres, p), 255);
             }
             continue;
         };
-        let samples = Pixel {
+        let pixel = Pixel {
             samples: &samples,
             at: at..at + per_pixel,
             centres: &centres,
             p,
         };
-        if let Some((color, alpha)) = resolve(&shader, samples, per_pixel, &mut hits) {
+        if let Some((color, alpha)) = resolve(&shader, pixel, per_pixel, &mut hits) {
             put(p, color, alpha);
         }
     }
@@ -749,9 +741,9 @@ fn resolve(
     let mut acc = [0f32; 3];
     for &(item, o, n) in hits.iter() {
         let c = if centres.item[p] == item {
-            shader.shade(item, centres.triangle[p], centres.barycentric[p])
+            shader.shade_at(centres, p)
         } else {
-            shader.shade(item, buffer.triangle[o], buffer.barycentric[o])
+            shader.shade_at(buffer, o)
         };
         for k in 0..3 {
             acc[k] += c[k] * n as f32;
