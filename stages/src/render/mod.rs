@@ -30,6 +30,7 @@ pub mod asset;
 pub mod camera;
 
 use std::collections::BTreeMap;
+use std::ops::Range;
 use std::sync::OnceLock;
 
 use mesa_schemas::render::{RenderCameraArtifact, RENDER_CAMERA_SCHEMA};
@@ -42,7 +43,7 @@ use crate::image_io::{encode_rgb8, encode_rgba8, ImageError};
 use crate::mesh::{closed_outward, normalize3, Aabb, Affine3, TriMesh};
 use crate::raster::{
     linear_to_srgb_u8, srgb_u8_to_linear, visibility, visibility_of_selected, DirectionalLight,
-    DrawItem, Lighting, SampleMask, Shader, ShadowMap, SurfaceMaterial, VisibilityBuffer,
+    DrawItem, Hit, Lighting, SampleMask, Shader, ShadowMap, SurfaceMaterial, VisibilityBuffer,
 };
 
 pub use asset::{load_render_asset, AssetPart, RenderAsset, RenderAssetError};
@@ -649,46 +650,36 @@ fn render_selected(
         }
         rgba[p * 4 + 3] = alpha;
     };
-    if f == 1 {
-        for (p, &item) in centres.item.iter().enumerate() {
-            if item != u32::MAX {
-                put(p, shader.shade_at(&centres, p), 255);
-            }
-        }
-        return Picture {
-            width: intrinsics.width,
-            height: intrinsics.height,
-            rgba,
-            instances,
-        };
-    }
-    let mask = SampleMask::new(intrinsics.width, intrinsics.height, f, &select(&centres));
-    let samples = visibility_of_selected(
-        &intrinsics.supersampled(f),
-        &camera_from_table,
-        items,
-        &mask,
-    );
+    // The silhouettes' samples, when pixels have more than one.
+    let sampled = (f > 1).then(|| {
+        let mask = SampleMask::new(intrinsics.width, intrinsics.height, f, &select(&centres));
+        let samples = visibility_of_selected(
+            &intrinsics.supersampled(f),
+            &camera_from_table,
+            items,
+            &mask,
+        );
+        (mask, samples)
+    });
     let per_pixel = (f * f) as usize;
-    // (drawn item, sample index, samples) of the pixel being resolved.
-    let mut hits: Vec<(u32, usize, usize)> = Vec::with_capacity(per_pixel);
-    for p in 0..w * h {
-        let Some(at) = mask.samples_of(p) else {
-            let item = centres.item[p];
-            if item != u32::MAX {
-                put(p, shader.shade_at(&centres, p), 255);
+    // Row by row: the row's pixels planned, then shaded in one batch.
+    let mut batch = Batch::default();
+    for y in 0..h {
+        for p in y * w..(y + 1) * w {
+            let silhouette = sampled
+                .as_ref()
+                .and_then(|(mask, samples)| Some((mask.samples_of(p)?, samples)));
+            match silhouette {
+                Some((at, samples)) => batch.add_samples(Pixel {
+                    samples,
+                    at: at..at + per_pixel,
+                    centres: &centres,
+                    p,
+                }),
+                None => batch.add_centre(&centres, p),
             }
-            continue;
-        };
-        let pixel = Pixel {
-            samples: &samples,
-            at: at..at + per_pixel,
-            centres: &centres,
-            p,
-        };
-        if let Some((color, alpha)) = resolve(&shader, pixel, per_pixel, &mut hits) {
-            put(p, color, alpha);
         }
+        batch.finish(&shader, per_pixel, &mut put);
     }
     Picture {
         width: intrinsics.width,
@@ -707,52 +698,118 @@ struct Pixel<'a, I> {
     p: usize,
 }
 
-/// The colour and alpha of a pixel from its `per_pixel` samples: each item hit is shaded once
-/// (at the pixel's centre when the centre sees it, else at its first sample) and weighted by
-/// its samples; the mean is over the samples that hit something, alpha their fraction. `None`
-/// when no sample hits anything. `hits` is scratch space.
-fn resolve(
-    shader: &Shader<'_, '_>,
-    pixel: Pixel<'_, impl Iterator<Item = usize>>,
-    per_pixel: usize,
-    hits: &mut Vec<(u32, usize, usize)>,
-) -> Option<([f32; 3], u8)> {
-    let Pixel {
-        samples: buffer,
-        at,
-        centres,
-        p,
-    } = pixel;
-    hits.clear();
-    for o in at {
-        let item = buffer.item[o];
-        if item == u32::MAX {
-            continue;
-        }
-        match hits.iter_mut().find(|(i, _, _)| *i == item) {
-            Some((_, _, n)) => *n += 1,
-            None => hits.push((item, o, 1)),
+/// The shading of a run of pixels, planned pixel by pixel and then shaded in one batch
+/// ([`Shader::shade_hits`], whose lighting runs in SIMD over many hits).
+#[derive(Default)]
+struct Batch {
+    /// What is shaded.
+    hits: Vec<Hit>,
+    /// Per hit, how many of its pixel's samples it stands for.
+    weights: Vec<usize>,
+    /// The planned pixels, in order.
+    pixels: Vec<Planned>,
+    /// Per hit, its colour (scratch of [`Batch::finish`]).
+    colors: Vec<[f32; 3]>,
+    /// (item, first sample, samples) of the pixel being planned (scratch).
+    items: Vec<(u32, usize, usize)>,
+}
+
+/// A pixel of a [`Batch`].
+enum Planned {
+    /// Pixel `p` is the colour of hit `hit`, opaque.
+    Centre { p: usize, hit: usize },
+    /// Pixel `p` is the mean of hits `hits`, each weighted by its samples, over the `covered`
+    /// samples that hit something; alpha is the fraction of the pixel's samples covered.
+    Samples {
+        p: usize,
+        hits: Range<usize>,
+        covered: usize,
+    },
+}
+
+impl Batch {
+    /// Plans pixel `p`, one sample at its centre: what the centre sees, if anything.
+    fn add_centre(&mut self, centres: &VisibilityBuffer, p: usize) {
+        if centres.item[p] != u32::MAX {
+            self.pixels.push(Planned::Centre {
+                p,
+                hit: self.hits.len(),
+            });
+            self.hits.push(centres.hit(p));
+            self.weights.push(1);
         }
     }
-    let covered: usize = hits.iter().map(|(_, _, n)| n).sum();
-    if covered == 0 {
-        return None;
-    }
-    let mut acc = [0f32; 3];
-    for &(item, o, n) in hits.iter() {
-        let c = if centres.item[p] == item {
-            shader.shade_at(centres, p)
-        } else {
-            shader.shade_at(buffer, o)
-        };
-        for k in 0..3 {
-            acc[k] += c[k] * n as f32;
+
+    /// Plans a pixel from its samples: each item they hit is shaded once (at the pixel's
+    /// centre when the centre sees it, else at its first sample) and weighted by its samples.
+    /// Nothing when no sample hits anything.
+    fn add_samples(&mut self, pixel: Pixel<'_, impl Iterator<Item = usize>>) {
+        let Pixel {
+            samples,
+            at,
+            centres,
+            p,
+        } = pixel;
+        self.items.clear();
+        for o in at {
+            let item = samples.item[o];
+            if item == u32::MAX {
+                continue;
+            }
+            match self.items.iter_mut().find(|(i, _, _)| *i == item) {
+                Some((_, _, n)) => *n += 1,
+                None => self.items.push((item, o, 1)),
+            }
         }
+        let covered: usize = self.items.iter().map(|(_, _, n)| n).sum();
+        if covered == 0 {
+            return;
+        }
+        let first = self.hits.len();
+        for &(item, o, n) in &self.items {
+            self.hits.push(if centres.item[p] == item {
+                centres.hit(p)
+            } else {
+                samples.hit(o)
+            });
+            self.weights.push(n);
+        }
+        self.pixels.push(Planned::Samples {
+            p,
+            hits: first..self.hits.len(),
+            covered,
+        });
     }
-    Some((
-        acc.map(|a| a / covered as f32),
-        ((covered * 255 + per_pixel / 2) / per_pixel) as u8,
-    ))
+
+    /// Shades the planned hits and gives `put` each planned pixel's colour and alpha (of
+    /// `per_pixel` samples a pixel), in order; the batch is then empty.
+    fn finish(
+        &mut self,
+        shader: &Shader<'_, '_>,
+        per_pixel: usize,
+        mut put: impl FnMut(usize, [f32; 3], u8),
+    ) {
+        self.colors.resize(self.hits.len(), [0.0; 3]);
+        shader.shade_hits(&self.hits, &mut self.colors);
+        for pixel in self.pixels.drain(..) {
+            match pixel {
+                Planned::Centre { p, hit } => put(p, self.colors[hit], 255),
+                Planned::Samples { p, hits, covered } => {
+                    let mut acc = [0f32; 3];
+                    for h in hits {
+                        let (c, n) = (self.colors[h], self.weights[h]);
+                        for k in 0..3 {
+                            acc[k] += c[k] * n as f32;
+                        }
+                    }
+                    let alpha = ((covered * 255 + per_pixel / 2) / per_pixel) as u8;
+                    put(p, acc.map(|a| a / covered as f32), alpha);
+                }
+            }
+        }
+        self.hits.clear();
+        self.weights.clear();
+    }
 }
 
 /// One rendered view: its picture (PNG) and camera file.
@@ -976,23 +1033,22 @@ mod tests {
             big.width as usize,
         );
         let mut rgba = vec![0u8; w * h * 4];
-        let mut hits = Vec::new();
+        let mut batch = Batch::default();
         for y in 0..h {
             for x in 0..w {
-                let p = y * w + x;
-                let pixel = Pixel {
+                batch.add_samples(Pixel {
                     samples: &vis,
                     at: (0..f * f).map(|j| (y * f + j / f) * bw + x * f + j % f),
                     centres: &centres,
-                    p,
-                };
-                if let Some((color, alpha)) = resolve(&shader, pixel, f * f, &mut hits) {
-                    for k in 0..3 {
-                        rgba[p * 4 + k] = linear_to_srgb_u8(color[k]);
-                    }
-                    rgba[p * 4 + 3] = alpha;
-                }
+                    p: y * w + x,
+                });
             }
+            batch.finish(&shader, f * f, |p, color, alpha| {
+                for k in 0..3 {
+                    rgba[p * 4 + k] = linear_to_srgb_u8(color[k]);
+                }
+                rgba[p * 4 + 3] = alpha;
+            });
         }
         rgba
     }

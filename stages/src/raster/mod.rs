@@ -11,10 +11,14 @@
 //! correct barycentrics) and shades only what is visible. It is single-threaded and
 //! deterministic: ties in depth keep the item drawn first.
 
-use std::borrow::Cow;
 use std::sync::Arc;
 
-use crate::mesh::{add3, cross3, dot3, normalize3, scale3, sub3, to_f32, Aabb, Affine3, TriMesh};
+use crate::mesh::{add3, cross3, normalize3, scale3, sub3, Aabb, Affine3, TriMesh};
+
+mod shade;
+
+use shade::{add3f, scale3f};
+pub use shade::{Hit, Shader, SHADE_BATCH};
 
 /// Pinhole intrinsics in pixels (OpenCV convention).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -271,6 +275,15 @@ impl VisibilityBuffer {
             item: vec![u32::MAX; n],
             triangle: vec![0; n],
             barycentric: vec![[0.0; 2]; n],
+        }
+    }
+
+    /// What sample `o` sees (meaningful where an item is drawn).
+    pub fn hit(&self, o: usize) -> Hit {
+        Hit {
+            item: self.item[o],
+            triangle: self.triangle[o],
+            barycentric: self.barycentric[o],
         }
     }
 
@@ -1083,32 +1096,6 @@ struct ShadowLookup {
     normal_offset: f32,
 }
 
-fn add3f(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-fn sub3f(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn scale3f(a: [f32; 3], s: f32) -> [f32; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-fn dot3f(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// `a` scaled to length one (a zero vector stays zero).
-fn normalize3f(a: [f32; 3]) -> [f32; 3] {
-    let n = dot3f(a, a).sqrt();
-    if n > 0.0 {
-        scale3f(a, 1.0 / n)
-    } else {
-        a
-    }
-}
-
 fn srgb_to_linear_lut() -> &'static [f32; 256] {
     static LUT: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
     LUT.get_or_init(|| {
@@ -1156,187 +1143,6 @@ pub struct ShadedRender {
     /// Row-major sRGB RGB bytes.
     pub rgb: Vec<u8>,
 }
-
-/// An item's (positions, normals) in the world frame.
-type WorldVertices = (Vec<[f32; 3]>, Vec<[f32; 3]>);
-
-/// Shades visible samples: the per-item world-frame vertices and normals, the shadow map and
-/// the lights of one render, computed once.
-pub struct Shader<'s, 'a> {
-    items: &'s [DrawItem<'a>],
-    lighting: &'s Lighting,
-    /// Per item, in the world frame.
-    world: Vec<WorldVertices>,
-    shadow: Option<Cow<'s, ShadowMap>>,
-    shadow_light: Option<usize>,
-    camera_center_world: [f32; 3],
-    /// The lighting's up vector.
-    up_world: [f32; 3],
-    /// Per light, its direction normalised (once, not per pixel).
-    toward_lights: Vec<[f32; 3]>,
-    /// Per item, its Blinn-Phong exponent and specular strength (from the roughness).
-    specular: Vec<(f32, f32)>,
-}
-
-impl<'s, 'a> Shader<'s, 'a> {
-    /// Prepares shading `items` seen from a camera at `camera_from_world` under `lighting`
-    /// (builds the shadow map of the first shadowed light when a shadow region is set).
-    pub fn new(
-        camera_from_world: &Affine3,
-        items: &'s [DrawItem<'a>],
-        lighting: &'s Lighting,
-    ) -> Self {
-        let shadow = ShadowMap::of_lighting(lighting, items).map(Cow::Owned);
-        Self::with(camera_from_world, items, lighting, shadow)
-    }
-
-    /// As [`Shader::new`], with the shadow map built beforehand: `shadow` must be
-    /// [`ShadowMap::of_lighting`] of the same `lighting` and `items`.
-    pub fn with_shadow_map(
-        camera_from_world: &Affine3,
-        items: &'s [DrawItem<'a>],
-        lighting: &'s Lighting,
-        shadow: Option<&'s ShadowMap>,
-    ) -> Self {
-        Self::with(
-            camera_from_world,
-            items,
-            lighting,
-            shadow.map(Cow::Borrowed),
-        )
-    }
-
-    fn with(
-        camera_from_world: &Affine3,
-        items: &'s [DrawItem<'a>],
-        lighting: &'s Lighting,
-        shadow: Option<Cow<'s, ShadowMap>>,
-    ) -> Self {
-        let world_from_camera = camera_from_world.inverse().unwrap_or(Affine3::IDENTITY);
-        let camera_center_world = to_f32(world_from_camera.translation);
-        let shadow_light = lighting.lights.iter().position(|l| l.casts_shadow);
-        let world = items
-            .iter()
-            .map(|item| {
-                let m = &item.world_from_mesh;
-                let nm = m.normal_matrix().unwrap_or(m.linear);
-                let positions = item
-                    .mesh
-                    .positions
-                    .iter()
-                    .map(|p| to_f32(m.apply_point([p[0] as f64, p[1] as f64, p[2] as f64])))
-                    .collect();
-                let normals = item
-                    .mesh
-                    .normals
-                    .iter()
-                    .map(|n| {
-                        let n = [n[0] as f64, n[1] as f64, n[2] as f64];
-                        to_f32(normalize3([dot3(nm[0], n), dot3(nm[1], n), dot3(nm[2], n)]))
-                    })
-                    .collect();
-                (positions, normals)
-            })
-            .collect();
-        let specular = items
-            .iter()
-            .map(|item| {
-                let roughness = item.material.roughness;
-                (
-                    (2.0 / roughness.clamp(0.05, 1.0).powi(4) - 2.0).clamp(1.0, 4096.0),
-                    0.35 * (1.0 - roughness.clamp(0.0, 1.0)).powi(2),
-                )
-            })
-            .collect();
-        Self {
-            items,
-            lighting,
-            world,
-            shadow,
-            shadow_light,
-            camera_center_world,
-            up_world: to_f32(lighting.up_world),
-            toward_lights: lighting
-                .lights
-                .iter()
-                .map(|l| to_f32(normalize3(l.toward_light_world)))
-                .collect(),
-            specular,
-        }
-    }
-
-    /// The linear RGB colour of what sample `o` of `buffer` sees (which must be an item).
-    pub fn shade_at(&self, buffer: &VisibilityBuffer, o: usize) -> [f32; 3] {
-        self.shade(buffer.item[o], buffer.triangle[o], buffer.barycentric[o])
-    }
-
-    /// The linear RGB colour of triangle `triangle` of item `item_index` at perspective-correct
-    /// barycentrics `(b1, b2)`.
-    pub fn shade(&self, item_index: u32, triangle: u32, barycentric: [f32; 2]) -> [f32; 3] {
-        let lighting = self.lighting;
-        let item = &self.items[item_index as usize];
-        let (positions, normals) = &self.world[item_index as usize];
-        let tri = item.mesh.triangles[triangle as usize];
-        let [b1, b2] = barycentric;
-        let weights = [1.0 - b1 - b2, b1, b2];
-        let interp = |arr: &[[f32; 3]]| -> [f32; 3] {
-            let [a, b, c] = tri.map(|i| arr[i as usize]);
-            std::array::from_fn(|k| weights[0] * a[k] + weights[1] * b[k] + weights[2] * c[k])
-        };
-        let p = interp(positions);
-        let mut n = normalize3f(interp(normals));
-        let to_eye = normalize3f(sub3f(self.camera_center_world, p));
-        if dot3f(n, to_eye) < 0.0 {
-            n = scale3f(n, -1.0);
-        }
-        let material = item.material;
-        let mut albedo = material.base_color;
-        if let (Some(texture), true) = (&material.texture, item.mesh.has_uvs()) {
-            let uv: [f32; 2] = std::array::from_fn(|k| {
-                (0..3)
-                    .map(|j| weights[j] * item.mesh.uvs[tri[j] as usize][k])
-                    .sum::<f32>()
-            });
-            let t = texture.sample_linear_rgb(uv);
-            albedo = [albedo[0] * t[0], albedo[1] * t[1], albedo[2] * t[2]];
-        }
-        if let Some(colors) = item.vertex_colors {
-            for (k, a) in albedo.iter_mut().enumerate() {
-                *a *= (0..3)
-                    .map(|j| weights[j] * colors[tri[j] as usize][k])
-                    .sum::<f32>();
-            }
-        }
-        let up = dot3f(n, self.up_world);
-        let hemi = 0.5 + 0.5 * up;
-        let mut color: [f32; 3] = std::array::from_fn(|k| {
-            albedo[k] * (lighting.sky_color[k] * hemi + lighting.ground_color[k] * (1.0 - hemi))
-        });
-        let (shininess, specular_strength) = self.specular[item_index as usize];
-        for (li, (light, &l)) in lighting.lights.iter().zip(&self.toward_lights).enumerate() {
-            let ndotl = dot3f(n, l).max(0.0);
-            if ndotl <= 0.0 {
-                continue;
-            }
-            let visible = match (&self.shadow, self.shadow_light) {
-                (Some(map), Some(s)) if s == li => map.light_fraction(p, n),
-                _ => 1.0,
-            };
-            if visible <= 0.0 {
-                continue;
-            }
-            let half = normalize3f(add3f(l, to_eye));
-            // Schlick's rational stand-in for x^n: cheap, and close where it matters.
-            let x = dot3f(n, half).max(0.0);
-            let spec = x / (shininess - shininess * x + x) * specular_strength;
-            for k in 0..3 {
-                color[k] += light.color[k] * visible * (albedo[k] * ndotl + spec * ndotl.sqrt());
-            }
-        }
-        color
-    }
-}
-
 /// Renders a shaded colour image (and its visibility buffer) at the camera's resolution.
 pub fn render_shaded(
     camera: &PinholeCamera,
@@ -1347,15 +1153,29 @@ pub fn render_shaded(
     let visibility = visibility(camera, camera_from_world, items);
     let shader = Shader::new(camera_from_world, items, lighting);
     let bg = lighting.background_srgb;
-    let mut rgb = vec![0u8; camera.width as usize * camera.height as usize * 3];
-    for (o, &item_index) in visibility.item.iter().enumerate() {
-        if item_index == u32::MAX {
-            rgb[o * 3..o * 3 + 3].copy_from_slice(&bg);
-            continue;
+    let width = camera.width as usize;
+    let mut rgb = vec![0u8; width * camera.height as usize * 3];
+    // Row by row: the row's hits shaded in one batch.
+    let (mut drawn, mut hits, mut colors) = (Vec::new(), Vec::new(), Vec::new());
+    for y in 0..camera.height as usize {
+        let row = &mut rgb[y * width * 3..(y + 1) * width * 3];
+        drawn.clear();
+        hits.clear();
+        for x in 0..width {
+            let o = y * width + x;
+            if visibility.item[o] == u32::MAX {
+                row[x * 3..x * 3 + 3].copy_from_slice(&bg);
+            } else {
+                drawn.push(x);
+                hits.push(visibility.hit(o));
+            }
         }
-        let color = shader.shade_at(&visibility, o);
-        for k in 0..3 {
-            rgb[o * 3 + k] = linear_to_srgb_u8(color[k]);
+        colors.resize(hits.len(), [0.0; 3]);
+        shader.shade_hits(&hits, &mut colors);
+        for (&x, color) in drawn.iter().zip(&colors) {
+            for k in 0..3 {
+                row[x * 3 + k] = linear_to_srgb_u8(color[k]);
+            }
         }
     }
     ShadedRender { visibility, rgb }

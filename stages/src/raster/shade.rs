@@ -1,0 +1,581 @@
+//! The shader: what a visible sample looks like (base colour with texture and vertex colours,
+//! hemisphere ambient light, Lambert and Blinn-Phong directional lights, the shadow map).
+//!
+//! It shades many samples at once ([`Shader::shade_hits`]): each batch is first gathered
+//! sample by sample (vertex positions, normals and texture colours are found through the
+//! triangle's indices), then lit in loops over planes of single floats, one per quantity, that
+//! the compiler turns into SIMD instructions; the shadow lookups in between read the map sample
+//! by sample. The lighting is the same arithmetic in the same order for each sample, so a
+//! sample shaded alone ([`Shader::shade`]) or in any batch gets the same bits.
+
+use std::borrow::Cow;
+
+use wide::{f32x8, CmpGt, CmpLe, CmpLt};
+
+use super::{DrawItem, Lighting, ShadowMap, VisibilityBuffer};
+use crate::mesh::{dot3, normalize3, to_f32, Affine3};
+
+pub(super) fn add3f(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+pub(super) fn scale3f(a: [f32; 3], s: f32) -> [f32; 3] {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+fn dot3f(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// An item's (positions, normals) in the world frame.
+type WorldVertices = (Vec<[f32; 3]>, Vec<[f32; 3]>);
+
+/// Shades visible samples: the per-item world-frame vertices and normals, the shadow map and
+/// the lights of one render, computed once.
+pub struct Shader<'s, 'a> {
+    items: &'s [DrawItem<'a>],
+    lighting: &'s Lighting,
+    /// Per item, in the world frame.
+    world: Vec<WorldVertices>,
+    shadow: Option<Cow<'s, ShadowMap>>,
+    shadow_light: Option<usize>,
+    camera_center_world: [f32; 3],
+    /// The lighting's up vector.
+    up_world: [f32; 3],
+    /// Per light, its direction normalised (once, not per pixel).
+    toward_lights: Vec<[f32; 3]>,
+    /// Per item, its Blinn-Phong exponent and specular strength (from the roughness).
+    specular: Vec<(f32, f32)>,
+}
+
+impl<'s, 'a> Shader<'s, 'a> {
+    /// Prepares shading `items` seen from a camera at `camera_from_world` under `lighting`
+    /// (builds the shadow map of the first shadowed light when a shadow region is set).
+    pub fn new(
+        camera_from_world: &Affine3,
+        items: &'s [DrawItem<'a>],
+        lighting: &'s Lighting,
+    ) -> Self {
+        let shadow = ShadowMap::of_lighting(lighting, items).map(Cow::Owned);
+        Self::with(camera_from_world, items, lighting, shadow)
+    }
+
+    /// As [`Shader::new`], with the shadow map built beforehand: `shadow` must be
+    /// [`ShadowMap::of_lighting`] of the same `lighting` and `items`.
+    pub fn with_shadow_map(
+        camera_from_world: &Affine3,
+        items: &'s [DrawItem<'a>],
+        lighting: &'s Lighting,
+        shadow: Option<&'s ShadowMap>,
+    ) -> Self {
+        Self::with(
+            camera_from_world,
+            items,
+            lighting,
+            shadow.map(Cow::Borrowed),
+        )
+    }
+
+    fn with(
+        camera_from_world: &Affine3,
+        items: &'s [DrawItem<'a>],
+        lighting: &'s Lighting,
+        shadow: Option<Cow<'s, ShadowMap>>,
+    ) -> Self {
+        let world_from_camera = camera_from_world.inverse().unwrap_or(Affine3::IDENTITY);
+        let camera_center_world = to_f32(world_from_camera.translation);
+        let shadow_light = lighting.lights.iter().position(|l| l.casts_shadow);
+        let world = items
+            .iter()
+            .map(|item| {
+                let m = &item.world_from_mesh;
+                let nm = m.normal_matrix().unwrap_or(m.linear);
+                let positions = item
+                    .mesh
+                    .positions
+                    .iter()
+                    .map(|p| to_f32(m.apply_point([p[0] as f64, p[1] as f64, p[2] as f64])))
+                    .collect();
+                let normals = item
+                    .mesh
+                    .normals
+                    .iter()
+                    .map(|n| {
+                        let n = [n[0] as f64, n[1] as f64, n[2] as f64];
+                        to_f32(normalize3([dot3(nm[0], n), dot3(nm[1], n), dot3(nm[2], n)]))
+                    })
+                    .collect();
+                (positions, normals)
+            })
+            .collect();
+        let specular = items
+            .iter()
+            .map(|item| {
+                let roughness = item.material.roughness;
+                (
+                    (2.0 / roughness.clamp(0.05, 1.0).powi(4) - 2.0).clamp(1.0, 4096.0),
+                    0.35 * (1.0 - roughness.clamp(0.0, 1.0)).powi(2),
+                )
+            })
+            .collect();
+        Self {
+            items,
+            lighting,
+            world,
+            shadow,
+            shadow_light,
+            camera_center_world,
+            up_world: to_f32(lighting.up_world),
+            toward_lights: lighting
+                .lights
+                .iter()
+                .map(|l| to_f32(normalize3(l.toward_light_world)))
+                .collect(),
+            specular,
+        }
+    }
+
+    /// The linear RGB colour of what sample `o` of `buffer` sees (which must be an item).
+    pub fn shade_at(&self, buffer: &VisibilityBuffer, o: usize) -> [f32; 3] {
+        self.shade(buffer.hit(o))
+    }
+
+    /// The linear RGB colour of one hit ([`Shader::shade_hits`] of one).
+    pub fn shade(&self, hit: Hit) -> [f32; 3] {
+        let mut color = [[0.0; 3]];
+        self.shade_hits(&[hit], &mut color);
+        color[0]
+    }
+
+    /// The linear RGB colour of each hit, into `colors` (of the same length), [`SHADE_BATCH`]
+    /// hits at a time.
+    ///
+    /// # Panics
+    /// When `colors` is not as long as `hits`, or a hit names an item or triangle that is not
+    /// there.
+    pub fn shade_hits(&self, hits: &[Hit], colors: &mut [[f32; 3]]) {
+        assert_eq!(hits.len(), colors.len(), "one colour per hit");
+        let mut planes = Planes::default();
+        for (hits, colors) in hits.chunks(SHADE_BATCH).zip(colors.chunks_mut(SHADE_BATCH)) {
+            self.gather(hits, &mut planes);
+            self.light(&mut planes, hits.len());
+            for (i, color) in colors.iter_mut().enumerate() {
+                *color = get3(&planes.color, i);
+            }
+        }
+    }
+
+    /// Fills the planes' first `hits.len()` lanes with each hit's interpolated world position
+    /// and normal (not yet normalised), its albedo and its item's specular terms.
+    fn gather(&self, hits: &[Hit], planes: &mut Planes) {
+        for (i, hit) in hits.iter().enumerate() {
+            let item = &self.items[hit.item as usize];
+            let (positions, normals) = &self.world[hit.item as usize];
+            let tri = item.mesh.triangles[hit.triangle as usize];
+            let [b1, b2] = hit.barycentric;
+            let weights = [1.0 - b1 - b2, b1, b2];
+            let interp = |arr: &[[f32; 3]]| -> [f32; 3] {
+                let [a, b, c] = tri.map(|i| arr[i as usize]);
+                std::array::from_fn(|k| weights[0] * a[k] + weights[1] * b[k] + weights[2] * c[k])
+            };
+            let p = interp(positions);
+            let n = interp(normals);
+            let material = item.material;
+            let mut albedo = material.base_color;
+            if let (Some(texture), true) = (&material.texture, item.mesh.has_uvs()) {
+                let uv: [f32; 2] = std::array::from_fn(|k| {
+                    (0..3)
+                        .map(|j| weights[j] * item.mesh.uvs[tri[j] as usize][k])
+                        .sum::<f32>()
+                });
+                let t = texture.sample_linear_rgb(uv);
+                albedo = [albedo[0] * t[0], albedo[1] * t[1], albedo[2] * t[2]];
+            }
+            if let Some(colors) = item.vertex_colors {
+                for (k, a) in albedo.iter_mut().enumerate() {
+                    *a *= (0..3)
+                        .map(|j| weights[j] * colors[tri[j] as usize][k])
+                        .sum::<f32>();
+                }
+            }
+            let (shininess, strength) = self.specular[hit.item as usize];
+            set3(&mut planes.position, i, p);
+            set3(&mut planes.normal, i, n);
+            set3(&mut planes.albedo, i, albedo);
+            set(&mut planes.shininess, i, shininess);
+            set(&mut planes.strength, i, strength);
+        }
+    }
+
+    /// Lights the planes' lanes: all of them in the vector steps (lanes past the batch hold
+    /// the last batch's values or zeros, lit for nothing), the first `len` in the shadow
+    /// lookups.
+    fn light(&self, planes: &mut Planes, len: usize) {
+        let lighting = self.lighting;
+        let Planes {
+            position,
+            normal,
+            to_eye,
+            albedo,
+            shininess,
+            strength,
+            visible,
+            color,
+        } = planes;
+        let eye = self.camera_center_world.map(V::splat);
+        let up = self.up_world.map(V::splat);
+        for c in 0..CHUNKS {
+            let p = [position[0][c], position[1][c], position[2][c]];
+            let n = normalize(std::array::from_fn(|k| normal[k][c]));
+            let e = normalize(std::array::from_fn(|k| eye[k] - p[k]));
+            // Facing away from the eye: the other side of the surface is seen.
+            let flip = dot(n, e).cmp_lt(V::ZERO).blend(V::splat(-1.0), V::ONE);
+            let n = n.map(|x| x * flip);
+            let hemi = V::HALF + V::HALF * dot(n, up);
+            for k in 0..3 {
+                normal[k][c] = n[k];
+                to_eye[k][c] = e[k];
+                color[k][c] = albedo[k][c]
+                    * (V::splat(lighting.sky_color[k]) * hemi
+                        + V::splat(lighting.ground_color[k]) * (V::ONE - hemi));
+            }
+        }
+        for (li, (light, &l)) in lighting.lights.iter().zip(&self.toward_lights).enumerate() {
+            match (&self.shadow, self.shadow_light) {
+                (Some(map), Some(s)) if s == li => {
+                    for i in 0..len {
+                        let n = get3(normal, i);
+                        // Only where the light reaches the surface (the lookups are the
+                        // costly part).
+                        let v = if dot3f(n, l) > 0.0 {
+                            map.light_fraction(get3(position, i), n)
+                        } else {
+                            0.0
+                        };
+                        set(visible, i, v);
+                    }
+                }
+                _ => *visible = [V::ONE; CHUNKS],
+            }
+            let l = l.map(V::splat);
+            for c in 0..CHUNKS {
+                let n = [normal[0][c], normal[1][c], normal[2][c]];
+                let e = [to_eye[0][c], to_eye[1][c], to_eye[2][c]];
+                let ndotl = positive(dot(n, l));
+                let half = normalize(std::array::from_fn(|k| l[k] + e[k]));
+                // Schlick's rational stand-in for x^n: cheap, and close where it matters.
+                let x = positive(dot(n, half));
+                let (s, v) = (shininess[c], visible[c]);
+                let spec = x / (s - s * x + x) * strength[c];
+                // Unlit (facing away, or in shadow): nothing added, not even a zero.
+                let unlit = ndotl.cmp_le(V::ZERO) | v.cmp_le(V::ZERO);
+                for k in 0..3 {
+                    let was = color[k][c];
+                    let added = was
+                        + V::splat(light.color[k])
+                            * v
+                            * (albedo[k][c] * ndotl + spec * ndotl.sqrt());
+                    color[k][c] = unlit.blend(was, added);
+                }
+            }
+        }
+    }
+}
+
+/// What one sample sees: triangle `triangle` of item `item` at perspective-correct barycentrics
+/// `(b1, b2)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    /// Index of the item.
+    pub item: u32,
+    /// Index of the triangle within the item's mesh.
+    pub triangle: u32,
+    /// Perspective-correct barycentric coordinates (b1, b2) within that triangle.
+    pub barycentric: [f32; 2],
+}
+
+/// How many hits [`Shader::shade_hits`] lights at once: its planes (17 floats a hit) stay in
+/// the first-level cache.
+pub const SHADE_BATCH: usize = 64;
+
+/// The vector of the lighting steps: eight lanes (two SSE registers on the x86-64 baseline).
+type V = f32x8;
+
+/// Lanes of a [`V`].
+const LANES: usize = 8;
+
+/// Vectors of a plane.
+const CHUNKS: usize = SHADE_BATCH / LANES;
+
+/// One quantity of a batch, lane `i` of the batch at lane `i % LANES` of vector `i / LANES`.
+type Plane = [V; CHUNKS];
+
+fn set(plane: &mut Plane, i: usize, x: f32) {
+    plane[i / LANES].as_array_mut()[i % LANES] = x;
+}
+
+fn set3(planes: &mut [Plane; 3], i: usize, x: [f32; 3]) {
+    for (plane, x) in planes.iter_mut().zip(x) {
+        set(plane, i, x);
+    }
+}
+
+fn get3(planes: &[Plane; 3], i: usize) -> [f32; 3] {
+    planes
+        .each_ref()
+        .map(|plane| plane[i / LANES].as_array_ref()[i % LANES])
+}
+
+/// [`dot3f`] lane by lane (the same operations in the same order).
+#[inline(always)]
+fn dot(a: [V; 3], b: [V; 3]) -> V {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Each lane's vector scaled to length one; a zero vector stays zero (it is scaled by one,
+/// which keeps its bits).
+#[inline(always)]
+fn normalize(a: [V; 3]) -> [V; 3] {
+    let n = dot(a, a).sqrt();
+    let s = n.cmp_gt(V::ZERO).blend(V::ONE / n, V::ONE);
+    a.map(|x| x * s)
+}
+
+/// Each lane when above zero, else zero (NaN included).
+#[inline(always)]
+fn positive(x: V) -> V {
+    x.cmp_gt(V::ZERO).blend(x, V::ZERO)
+}
+
+/// A batch of hits being shaded, one plane per quantity (`[k]`: component `k`).
+struct Planes {
+    position: [Plane; 3],
+    normal: [Plane; 3],
+    to_eye: [Plane; 3],
+    albedo: [Plane; 3],
+    shininess: Plane,
+    strength: Plane,
+    visible: Plane,
+    color: [Plane; 3],
+}
+
+impl Default for Planes {
+    fn default() -> Self {
+        let zero = [V::ZERO; CHUNKS];
+        Self {
+            position: [zero; 3],
+            normal: [zero; 3],
+            to_eye: [zero; 3],
+            albedo: [zero; 3],
+            shininess: [V::ONE; CHUNKS],
+            strength: zero,
+            visible: zero,
+            color: [zero; 3],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+    use crate::mesh::{Aabb, TriMesh};
+    use crate::raster::{DirectionalLight, SurfaceMaterial, Texture};
+
+    /// The shader of one hit, sample by sample in scalar arithmetic: the shader as it was
+    /// before it shaded batches (kept as the reference). `flip` and `shadows` switch off the
+    /// turn of normals toward the eye and the shadow lookups (the controls).
+    fn scalar(shader: &Shader<'_, '_>, hit: Hit, flip: bool, shadows: bool) -> [f32; 3] {
+        let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        let normalize = |a: [f32; 3]| {
+            let n = dot3f(a, a).sqrt();
+            if n > 0.0 {
+                scale3f(a, 1.0 / n)
+            } else {
+                a
+            }
+        };
+        let lighting = shader.lighting;
+        let item = &shader.items[hit.item as usize];
+        let (positions, normals) = &shader.world[hit.item as usize];
+        let tri = item.mesh.triangles[hit.triangle as usize];
+        let [b1, b2] = hit.barycentric;
+        let weights = [1.0 - b1 - b2, b1, b2];
+        let interp = |arr: &[[f32; 3]]| -> [f32; 3] {
+            let [a, b, c] = tri.map(|i| arr[i as usize]);
+            std::array::from_fn(|k| weights[0] * a[k] + weights[1] * b[k] + weights[2] * c[k])
+        };
+        let p = interp(positions);
+        let mut n = normalize(interp(normals));
+        let to_eye = normalize(sub(shader.camera_center_world, p));
+        if flip && dot3f(n, to_eye) < 0.0 {
+            n = scale3f(n, -1.0);
+        }
+        let mut albedo = item.material.base_color;
+        if let Some(texture) = &item.material.texture {
+            let uv: [f32; 2] = std::array::from_fn(|k| {
+                (0..3)
+                    .map(|j| weights[j] * item.mesh.uvs[tri[j] as usize][k])
+                    .sum::<f32>()
+            });
+            let t = texture.sample_linear_rgb(uv);
+            albedo = [albedo[0] * t[0], albedo[1] * t[1], albedo[2] * t[2]];
+        }
+        if let Some(colors) = item.vertex_colors {
+            for (k, a) in albedo.iter_mut().enumerate() {
+                *a *= (0..3)
+                    .map(|j| weights[j] * colors[tri[j] as usize][k])
+                    .sum::<f32>();
+            }
+        }
+        let hemi = 0.5 + 0.5 * dot3f(n, shader.up_world);
+        let mut color: [f32; 3] = std::array::from_fn(|k| {
+            albedo[k] * (lighting.sky_color[k] * hemi + lighting.ground_color[k] * (1.0 - hemi))
+        });
+        let (shininess, strength) = shader.specular[hit.item as usize];
+        for (li, (light, &l)) in lighting
+            .lights
+            .iter()
+            .zip(&shader.toward_lights)
+            .enumerate()
+        {
+            let ndotl = dot3f(n, l).max(0.0);
+            if ndotl <= 0.0 {
+                continue;
+            }
+            let visible = match (&shader.shadow, shader.shadow_light) {
+                (Some(map), Some(s)) if s == li && shadows => map.light_fraction(p, n),
+                _ => 1.0,
+            };
+            if visible <= 0.0 {
+                continue;
+            }
+            let half = normalize(add3f(l, to_eye));
+            let x = dot3f(n, half).max(0.0);
+            let spec = x / (shininess - shininess * x + x) * strength;
+            for k in 0..3 {
+                color[k] += light.color[k] * visible * (albedo[k] * ndotl + spec * ndotl.sqrt());
+            }
+        }
+        color
+    }
+
+    /// Batches shade each hit to the bits of the scalar reference, whatever the batch: all
+    /// hits at once (several batches and a part-filled last one), one at a time, and in reverse
+    /// order. The scene has what the shader branches on: a texture, vertex colours, a shadow
+    /// map, two lights, normals facing away from the eye and a zero normal. Controls: the
+    /// reference without the turn of normals toward the eye, or without shadows, differs from
+    /// the batches at some hits.
+    #[test]
+    fn batches_shade_each_hit_as_the_scalar_reference() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let ball = TriMesh::uv_sphere(0.3, 24, 12);
+        let mut floor = TriMesh::cuboid([3.0, 3.0, 0.02])
+            .transformed(&Affine3::from_translation([0.0, 0.0, -0.32]));
+        floor.uvs = floor
+            .positions
+            .iter()
+            .map(|p| [p[0] * 1.7, p[1] * 2.3])
+            .collect();
+        // A zero normal: shaded as what it is, not a NaN.
+        floor.normals[0] = [0.0; 3];
+        let texels: Vec<u8> = (0..8 * 8 * 4).map(|_| rng.random()).collect();
+        let textured = SurfaceMaterial {
+            base_color: [0.9, 0.8, 0.7],
+            texture: Some(Arc::new(Texture {
+                width: 8,
+                height: 8,
+                rgba: texels,
+            })),
+            roughness: 0.3,
+        };
+        let plain = SurfaceMaterial::plain([0.4, 0.5, 0.6], 0.9);
+        let colors: Vec<[f32; 3]> = (0..ball.positions.len())
+            .map(|_| [rng.random(), rng.random(), rng.random()])
+            .collect();
+        let item = |mesh, material, vertex_colors| DrawItem {
+            mesh,
+            world_from_mesh: Affine3::IDENTITY,
+            material,
+            instance: 1,
+            casts_shadow: true,
+            vertex_colors,
+            closed_within: None,
+        };
+        let items = [
+            item(&floor, &textured, None),
+            item(&ball, &plain, Some(&colors[..])),
+        ];
+        let lighting = Lighting {
+            lights: vec![
+                DirectionalLight {
+                    toward_light_world: crate::mesh::normalize3([0.5, -0.4, 1.0]),
+                    color: [0.9, 0.85, 0.8],
+                    casts_shadow: true,
+                },
+                DirectionalLight {
+                    toward_light_world: crate::mesh::normalize3([-0.7, 0.2, 0.4]),
+                    color: [0.2, 0.2, 0.25],
+                    casts_shadow: false,
+                },
+            ],
+            shadow_region: Aabb::from_points([[-1.5, -1.5, -0.4], [1.5, 1.5, 0.4]]),
+            shadow_map_px: 256,
+            ..Default::default()
+        };
+        let camera_from_world = Affine3::from_translation([0.1, -0.2, 2.5]);
+        let shader = Shader::new(&camera_from_world, &items, &lighting);
+        let hits: Vec<Hit> = (0..1000)
+            .map(|_| {
+                let item = rng.random_range(0..2u32);
+                let b1: f32 = rng.random();
+                Hit {
+                    item,
+                    triangle: rng.random_range(0..items[item as usize].mesh.triangles.len()) as u32,
+                    barycentric: [b1, (1.0 - b1) * rng.random::<f32>()],
+                }
+            })
+            .chain([Hit {
+                item: 0,
+                triangle: floor
+                    .triangles
+                    .iter()
+                    .position(|t| t[0] == 0)
+                    .expect("vertex 0") as u32,
+                barycentric: [0.0, 0.0],
+            }])
+            .collect();
+        let bits = |c: [f32; 3]| c.map(f32::to_bits);
+        let reference: Vec<_> = hits
+            .iter()
+            .map(|&h| bits(scalar(&shader, h, true, true)))
+            .collect();
+        let mut all = vec![[0.0; 3]; hits.len()];
+        shader.shade_hits(&hits, &mut all);
+        assert_eq!(all.iter().map(|&c| bits(c)).collect::<Vec<_>>(), reference);
+        let alone: Vec<_> = hits.iter().map(|&h| bits(shader.shade(h))).collect();
+        assert_eq!(alone, reference);
+        let reversed: Vec<Hit> = hits.iter().rev().copied().collect();
+        let mut back = vec![[0.0; 3]; hits.len()];
+        shader.shade_hits(&reversed, &mut back);
+        back.reverse();
+        assert_eq!(back.iter().map(|&c| bits(c)).collect::<Vec<_>>(), reference);
+        // No NaN (the zero normal included); the controls show shadowed and back-facing hits.
+        assert!(all.iter().flatten().all(|c| c.is_finite()));
+        for (flip, shadows) in [(false, true), (true, false)] {
+            let control = hits
+                .iter()
+                .zip(&reference)
+                .filter(|&(&h, r)| bits(scalar(&shader, h, flip, shadows)) != *r)
+                .count();
+            assert!(
+                control > 10,
+                "flip {flip}, shadows {shadows}: {control} differ"
+            );
+        }
+    }
+}
