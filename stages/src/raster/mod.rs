@@ -805,21 +805,7 @@ fn raster_triangle<S: Samples>(
     }
     let inv_area = 1.0 / area;
     let inv_z: [f64; 3] = corners.map(|c| c.inv_z);
-    // Barycentric l_k(x, y) = (a_k x + b_k y + c_k) / area for the edge opposite corner k.
-    let coefficients = |p: [f64; 2], q: [f64; 2]| {
-        let a = -(q[1] - p[1]) * inv_area;
-        let b = (q[0] - p[0]) * inv_area;
-        let c = (-(q[0] - p[0]) * p[1] + (q[1] - p[1]) * p[0]) * inv_area;
-        (a, b, c)
-    };
-    let edges = [
-        coefficients(screen[1], screen[2]),
-        coefficients(screen[2], screen[0]),
-        coefficients(screen[0], screen[1]),
-    ];
-    // Per edge, -1 / a: each row's span bound is a product, not a division (the span is only
-    // a guess with a pixel of slack; the exact test decides).
-    let minus_inv_a = edges.map(|(a, _, _)| if a != 0.0 { -1.0 / a } else { 0.0 });
+    let (edges, minus_inv_a) = edge_functions(&screen, inv_area);
     // What the buffer keeps besides depth: nothing (a shadow map), or the item, triangle and
     // barycentrics (what is shaded).
     let with_attributes = !buffer.item.is_empty();
@@ -834,28 +820,10 @@ fn raster_triangle<S: Samples>(
         if !samples.any_in_row(y, x_start, x_end) {
             continue;
         }
-        let py = y as f64;
-        // The span of x where every barycentric is non-negative.
-        let (mut lo, mut hi) = (x_start as f64, x_end as f64);
-        let mut empty = false;
-        let mut row = [(0.0, 0.0); 3];
-        for (k, &(a, b, c)) in edges.iter().enumerate() {
-            let offset = b * py + c;
-            row[k] = (a, offset);
-            if a > 0.0 {
-                lo = lo.max(offset * minus_inv_a[k]);
-            } else if a < 0.0 {
-                hi = hi.min(offset * minus_inv_a[k]);
-            } else if offset < 0.0 {
-                empty = true;
-            }
-        }
-        if empty || lo > hi + 1.0 {
+        let Some((row, x_lo, x_hi)) = row_span(&edges, &minus_inv_a, y, (x_start, x_end), 1.0)
+        else {
             continue;
-        }
-        // One pixel of slack each side; the exact test below decides.
-        let x_lo = (ceil_i64(lo) - 1).max(x_start);
-        let x_hi = (floor_i64(hi) + 1).min(x_end);
+        };
         samples.visit_row(y, x_lo, x_hi, |x, o| {
             let px = x as f64;
             let l0 = row[0].0 * px + row[0].1;
@@ -898,6 +866,74 @@ fn raster_triangle<S: Samples>(
             }
         });
     }
+}
+
+/// The barycentric weights of a picture triangle as functions of the sample:
+/// `l_k(x, y) = a_k x + b_k y + c_k` for the edge opposite corner `k` (`(a_k, b_k, c_k)`,
+/// `inv_area` being one over the triangle's signed area), and per edge `-1 / a_k` (0 where
+/// `a_k` is): each row's span bound is a product, not a division.
+fn edge_functions(screen: &[[f64; 2]; 3], inv_area: f64) -> ([(f64, f64, f64); 3], [f64; 3]) {
+    let coefficients = |p: [f64; 2], q: [f64; 2]| {
+        let a = -(q[1] - p[1]) * inv_area;
+        let b = (q[0] - p[0]) * inv_area;
+        let c = (-(q[0] - p[0]) * p[1] + (q[1] - p[1]) * p[0]) * inv_area;
+        (a, b, c)
+    };
+    let edges = [
+        coefficients(screen[1], screen[2]),
+        coefficients(screen[2], screen[0]),
+        coefficients(screen[0], screen[1]),
+    ];
+    let minus_inv_a = edges.map(|(a, _, _)| if a != 0.0 { -1.0 / a } else { 0.0 });
+    (edges, minus_inv_a)
+}
+
+/// A triangle's weights along one row: per edge `(a_k, b_k y + c_k)`, the weight at `x` being
+/// `a_k x + (b_k y + c_k)`.
+type RowWeights = [(f64, f64); 3];
+
+/// The samples of row `y` to test against a triangle with edge functions
+/// `l_k(x, y) = a_k x + b_k y + c_k` (`edges[k] = (a_k, b_k, c_k)`, `minus_inv_a[k] = -1 / a_k`
+/// or 0): per edge `(a_k, b_k y + c_k)`, and the first and last `x` within
+/// `x_start..=x_end` where no `l_k` is negative, widened by `slack` times a millionth of a
+/// pixel plus a billionth of the bound each side; `None` when there is none.
+///
+/// The bounds are products with a rounded reciprocal, a few units in the last place from
+/// where the weights computed at each sample change sign, so `slack` 1 never leaves out a
+/// sample the exact test would keep (`row_spans_keep_every_sample_inside`), and adds one
+/// outside only where a bound is within a millionth of a pixel of an integer.
+fn row_span(
+    edges: &[(f64, f64, f64); 3],
+    minus_inv_a: &[f64; 3],
+    y: i64,
+    (x_start, x_end): (i64, i64),
+    slack: f64,
+) -> Option<(RowWeights, i64, i64)> {
+    let py = y as f64;
+    let (mut lo, mut hi) = (x_start as f64, x_end as f64);
+    let mut row = [(0.0, 0.0); 3];
+    for (k, &(a, b, c)) in edges.iter().enumerate() {
+        let offset = b * py + c;
+        row[k] = (a, offset);
+        if a > 0.0 {
+            lo = lo.max(offset * minus_inv_a[k]);
+        } else if a < 0.0 {
+            hi = hi.min(offset * minus_inv_a[k]);
+        } else if offset < 0.0 {
+            return None;
+        }
+    }
+    // An infinite bound (a reciprocal that overflowed) stays as it is.
+    let widen = |bound: f64, outward: f64| {
+        if bound.is_finite() {
+            bound + outward * slack * (1e-6 + 1e-9 * bound.abs())
+        } else {
+            bound
+        }
+    };
+    let x_lo = ceil_i64(widen(lo, -1.0)).max(x_start);
+    let x_hi = floor_i64(widen(hi, 1.0)).min(x_end);
+    (x_lo <= x_hi).then_some((row, x_lo, x_hi))
 }
 
 /// Fills a visibility buffer for a perspective camera at `camera_from_world`.
@@ -1574,6 +1610,62 @@ mod tests {
         assert!(values.iter().any(|&x| x == 0.0 && x.is_sign_negative()));
         assert!(values.iter().any(|&x| x as i64 != x.floor() as i64));
         assert!(values.iter().any(|&x| x as i64 != x.ceil() as i64));
+    }
+
+    /// Every sample whose weights, computed as the rasterizer computes them, are all
+    /// non-negative lies in its row's span, over random triangles whose corners fall on a
+    /// quarter-pixel grid (edges through samples, where a weight is exactly zero), anywhere, or
+    /// make slivers, with the picture clipping them. Control: without the slack the spans
+    /// leave out samples the exact test keeps.
+    #[test]
+    fn row_spans_keep_every_sample_inside() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let (w, h) = (32i64, 24i64);
+        let (mut kept, mut missed_without_slack) = (0usize, 0usize);
+        for trial in 0..20_000 {
+            let corner = |rng: &mut rand_chacha::ChaCha8Rng| -> [f64; 2] {
+                match trial % 3 {
+                    0 => [0, 1].map(|_| f64::from(rng.random_range(-20..160)) / 4.0),
+                    _ => [0, 1].map(|_| rng.random_range(-8.0..40.0)),
+                }
+            };
+            let mut screen = [corner(&mut rng), corner(&mut rng), corner(&mut rng)];
+            if trial % 3 == 2 {
+                // A sliver: the third corner a hair off the line through the other two.
+                let t: f64 = rng.random();
+                screen[2] = [0, 1].map(|k| {
+                    screen[0][k] + t * (screen[1][k] - screen[0][k]) + rng.random_range(-1e-3..1e-3)
+                });
+            }
+            let area = (screen[1][0] - screen[0][0]) * (screen[2][1] - screen[0][1])
+                - (screen[1][1] - screen[0][1]) * (screen[2][0] - screen[0][0]);
+            if area.abs() < 1e-12 {
+                continue;
+            }
+            let (edges, minus_inv_a) = edge_functions(&screen, 1.0 / area);
+            for y in 0..h {
+                let spans = [1.0, 0.0].map(|slack| {
+                    row_span(&edges, &minus_inv_a, y, (0, w - 1), slack).map(|(_, lo, hi)| lo..=hi)
+                });
+                let py = y as f64;
+                for x in 0..w {
+                    let px = x as f64;
+                    let inside = edges.iter().all(|&(a, b, c)| a * px + (b * py + c) >= 0.0);
+                    if !inside {
+                        continue;
+                    }
+                    kept += 1;
+                    let within = |span: &Option<std::ops::RangeInclusive<i64>>| {
+                        span.as_ref().is_some_and(|r| r.contains(&x))
+                    };
+                    assert!(within(&spans[0]), "{screen:?}: row {y} leaves out x = {x}");
+                    missed_without_slack += usize::from(!within(&spans[1]));
+                }
+            }
+        }
+        assert!(kept > 100_000, "{kept} samples inside");
+        assert!(missed_without_slack > 0, "the control missed nothing");
     }
 
     #[test]
