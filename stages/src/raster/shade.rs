@@ -12,7 +12,7 @@ use std::borrow::Cow;
 
 use wide::{f32x8, CmpGt, CmpLe, CmpLt};
 
-use super::{DrawItem, Lighting, ShadowMap, VisibilityBuffer};
+use super::{DrawItem, Lighting, ShadowMap, Texture, VisibilityBuffer};
 use crate::mesh::{dot3, normalize3, to_f32, Affine3};
 
 pub(super) fn add3f(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -156,8 +156,18 @@ impl<'s, 'a> Shader<'s, 'a> {
     pub fn shade_hits(&self, hits: &[Hit], colors: &mut [[f32; 3]]) {
         assert_eq!(hits.len(), colors.len(), "one colour per hit");
         let mut planes = Planes::default();
+        let mut lookups = Vec::with_capacity(SHADE_BATCH);
         for (hits, colors) in hits.chunks(SHADE_BATCH).zip(colors.chunks_mut(SHADE_BATCH)) {
-            self.gather(hits, &mut planes);
+            lookups.clear();
+            self.gather(hits, &mut planes, &mut lookups);
+            // The texture lookups in a loop of their own: their cache misses overlap.
+            for &(i, texture, uv) in &lookups {
+                let t = texture.sample_linear_rgb(uv);
+                for (k, plane) in planes.albedo.iter_mut().enumerate() {
+                    let a = &mut plane[i / LANES].as_array_mut()[i % LANES];
+                    *a *= t[k];
+                }
+            }
             self.light(&mut planes, hits.len());
             for (i, color) in colors.iter_mut().enumerate() {
                 *color = get3(&planes.color, i);
@@ -166,8 +176,15 @@ impl<'s, 'a> Shader<'s, 'a> {
     }
 
     /// Fills the planes' first `hits.len()` lanes with each hit's interpolated world position
-    /// and normal (not yet normalised), its albedo and its item's specular terms.
-    fn gather(&self, hits: &[Hit], planes: &mut Planes) {
+    /// and normal (not yet normalised), its base colour, its vertex colour (the tint; one
+    /// without) and its item's specular terms, and lists the texture lookups: the albedo is
+    /// the base colour times the texture's colour, times the tint.
+    fn gather<'t>(
+        &'t self,
+        hits: &[Hit],
+        planes: &mut Planes,
+        lookups: &mut Vec<(usize, &'t Texture, [f32; 2])>,
+    ) {
         for (i, hit) in hits.iter().enumerate() {
             let item = &self.items[hit.item as usize];
             let (positions, normals) = &self.world[hit.item as usize];
@@ -181,27 +198,27 @@ impl<'s, 'a> Shader<'s, 'a> {
             let p = interp(positions);
             let n = interp(normals);
             let material = item.material;
-            let mut albedo = material.base_color;
             if let (Some(texture), true) = (&material.texture, item.mesh.has_uvs()) {
                 let uv: [f32; 2] = std::array::from_fn(|k| {
                     (0..3)
                         .map(|j| weights[j] * item.mesh.uvs[tri[j] as usize][k])
                         .sum::<f32>()
                 });
-                let t = texture.sample_linear_rgb(uv);
-                albedo = [albedo[0] * t[0], albedo[1] * t[1], albedo[2] * t[2]];
+                lookups.push((i, &**texture, uv));
             }
-            if let Some(colors) = item.vertex_colors {
-                for (k, a) in albedo.iter_mut().enumerate() {
-                    *a *= (0..3)
+            let tint = match item.vertex_colors {
+                Some(colors) => std::array::from_fn(|k| {
+                    (0..3)
                         .map(|j| weights[j] * colors[tri[j] as usize][k])
-                        .sum::<f32>();
-                }
-            }
+                        .sum::<f32>()
+                }),
+                None => [1.0; 3],
+            };
+            set3(&mut planes.albedo, i, material.base_color);
+            set3(&mut planes.tint, i, tint);
             let (shininess, strength) = self.specular[hit.item as usize];
             set3(&mut planes.position, i, p);
             set3(&mut planes.normal, i, n);
-            set3(&mut planes.albedo, i, albedo);
             set(&mut planes.shininess, i, shininess);
             set(&mut planes.strength, i, strength);
         }
@@ -217,6 +234,7 @@ impl<'s, 'a> Shader<'s, 'a> {
             normal,
             to_eye,
             albedo,
+            tint,
             shininess,
             strength,
             visible,
@@ -235,6 +253,8 @@ impl<'s, 'a> Shader<'s, 'a> {
             for k in 0..3 {
                 normal[k][c] = n[k];
                 to_eye[k][c] = e[k];
+                // Times one where there is no vertex colour: the same bits.
+                albedo[k][c] = albedo[k][c] * tint[k][c];
                 color[k][c] = albedo[k][c]
                     * (V::splat(lighting.sky_color[k]) * hemi
                         + V::splat(lighting.ground_color[k]) * (V::ONE - hemi));
@@ -353,6 +373,7 @@ struct Planes {
     normal: [Plane; 3],
     to_eye: [Plane; 3],
     albedo: [Plane; 3],
+    tint: [Plane; 3],
     shininess: Plane,
     strength: Plane,
     visible: Plane,
@@ -367,6 +388,7 @@ impl Default for Planes {
             normal: [zero; 3],
             to_eye: [zero; 3],
             albedo: [zero; 3],
+            tint: [zero; 3],
             shininess: [V::ONE; CHUNKS],
             strength: zero,
             visible: zero,
