@@ -254,7 +254,7 @@ impl<'s, 'a> Shader<'s, 'a> {
                 normal[k][c] = n[k];
                 to_eye[k][c] = e[k];
                 // Times one where there is no vertex colour: the same bits.
-                albedo[k][c] = albedo[k][c] * tint[k][c];
+                albedo[k][c] *= tint[k][c];
                 color[k][c] = albedo[k][c]
                     * (V::splat(lighting.sky_color[k]) * hemi
                         + V::splat(lighting.ground_color[k]) * (V::ONE - hemi));
