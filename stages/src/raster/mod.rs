@@ -8,8 +8,9 @@
 //! not the distance along the ray.
 //!
 //! The renderer first fills a visibility buffer (depth, drawn item, triangle, perspective-
-//! correct barycentrics) and shades only what is visible. It is single-threaded and
-//! deterministic: ties in depth keep the item drawn first.
+//! correct barycentrics) and shades only what is visible ([`Shader`], in `shade.rs`, many
+//! samples at a time). It is single-threaded and deterministic: ties in depth keep the item
+//! drawn first.
 
 use std::sync::Arc;
 
@@ -902,6 +903,7 @@ type RowWeights = [(f64, f64); 3];
 /// where the weights computed at each sample change sign, so `slack` 1 never leaves out a
 /// sample the exact test would keep (`row_spans_keep_every_sample_inside`), and adds one
 /// outside only where a bound is within a millionth of a pixel of an integer.
+#[inline(always)]
 fn row_span(
     edges: &[(f64, f64, f64); 3],
     minus_inv_a: &[f64; 3],
