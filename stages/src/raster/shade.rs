@@ -12,7 +12,7 @@ use std::borrow::Cow;
 
 use wide::{f32x8, CmpGt, CmpLe, CmpLt};
 
-use super::{DrawItem, Lighting, ShadowMap, Texture, VisibilityBuffer};
+use super::{DrawItem, Lighting, ShadowMap, Texture};
 use crate::mesh::{dot3, normalize3, to_f32, Affine3};
 
 pub(super) fn add3f(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -133,11 +133,6 @@ impl<'s, 'a> Shader<'s, 'a> {
                 .collect(),
             specular,
         }
-    }
-
-    /// The linear RGB colour of what sample `o` of `buffer` sees (which must be an item).
-    pub fn shade_at(&self, buffer: &VisibilityBuffer, o: usize) -> [f32; 3] {
-        self.shade(buffer.hit(o))
     }
 
     /// The linear RGB colour of one hit ([`Shader::shade_hits`] of one).
