@@ -780,8 +780,7 @@ fn raster_triangle<S: Samples>(
 ) {
     let screen: [[f64; 2]; 3] = corners.map(|c| c.screen);
     let v: [ClipVertex; 3] = corners.map(|c| c.v);
-    let area = (screen[1][0] - screen[0][0]) * (screen[2][1] - screen[0][1])
-        - (screen[1][1] - screen[0][1]) * (screen[2][0] - screen[0][0]);
+    let area = signed_area(&screen);
     // Degenerate, or facing away from the eye on a closed surface (`back`: the sign of such
     // areas, 0 for none).
     if area.abs() < 1e-12 || !area.is_finite() || area * back > 0.0 {
@@ -867,6 +866,13 @@ fn raster_triangle<S: Samples>(
             }
         });
     }
+}
+
+/// The signed area of a picture triangle, `(s1 - s0) × (s2 - s0)` (negative for corners
+/// counter-clockwise seen from the eye: x right, y down).
+fn signed_area(screen: &[[f64; 2]; 3]) -> f64 {
+    (screen[1][0] - screen[0][0]) * (screen[2][1] - screen[0][1])
+        - (screen[1][1] - screen[0][1]) * (screen[2][0] - screen[0][0])
 }
 
 /// The barycentric weights of a picture triangle as functions of the sample:
@@ -1640,8 +1646,7 @@ mod tests {
                     screen[0][k] + t * (screen[1][k] - screen[0][k]) + rng.random_range(-1e-3..1e-3)
                 });
             }
-            let area = (screen[1][0] - screen[0][0]) * (screen[2][1] - screen[0][1])
-                - (screen[1][1] - screen[0][1]) * (screen[2][0] - screen[0][0]);
+            let area = signed_area(&screen);
             if area.abs() < 1e-12 {
                 continue;
             }

@@ -158,9 +158,8 @@ impl<'s, 'a> Shader<'s, 'a> {
             // The texture lookups in a loop of their own: their cache misses overlap.
             for &(i, texture, uv) in &lookups {
                 let t = texture.sample_linear_rgb(uv);
-                for (k, plane) in planes.albedo.iter_mut().enumerate() {
-                    let a = &mut plane[i / LANES].as_array_mut()[i % LANES];
-                    *a *= t[k];
+                for (plane, t) in planes.albedo.iter_mut().zip(t) {
+                    *lane_mut(plane, i) *= t;
                 }
             }
             self.light(&mut planes, hits.len());
@@ -309,7 +308,7 @@ pub struct Hit {
     pub barycentric: [f32; 2],
 }
 
-/// How many hits [`Shader::shade_hits`] lights at once: its planes (17 floats a hit) stay in
+/// How many hits [`Shader::shade_hits`] lights at once: its planes (21 floats a hit) stay in
 /// the first-level cache.
 pub const SHADE_BATCH: usize = 64;
 
@@ -325,8 +324,13 @@ const CHUNKS: usize = SHADE_BATCH / LANES;
 /// One quantity of a batch, lane `i` of the batch at lane `i % LANES` of vector `i / LANES`.
 type Plane = [V; CHUNKS];
 
+/// Lane `i` of a plane.
+fn lane_mut(plane: &mut Plane, i: usize) -> &mut f32 {
+    &mut plane[i / LANES].as_array_mut()[i % LANES]
+}
+
 fn set(plane: &mut Plane, i: usize, x: f32) {
-    plane[i / LANES].as_array_mut()[i % LANES] = x;
+    *lane_mut(plane, i) = x;
 }
 
 fn set3(planes: &mut [Plane; 3], i: usize, x: [f32; 3]) {
