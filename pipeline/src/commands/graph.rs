@@ -114,7 +114,8 @@ impl SceneStage for GraphStage {
             return Err(no_layout(scene));
         }
         let mut inputs: Vec<String> = layouts.iter().map(|rel| scene.rel(rel)).collect();
-        if ctx.dataset.join(ANNOTATIONS).exists() {
+        // Read once a run (the cache), not looked up again for every scene.
+        if self.annotations(ctx.dataset)?.is_some() {
             inputs.push(ANNOTATIONS.to_owned());
         }
         Ok(inputs)
@@ -154,7 +155,10 @@ impl SceneStage for GraphStage {
                 containers.by_keyword.join(", ")
             ));
         }
-        output.add_json(GRAPH_JSON, &graph.to_artifact(&scene.scene_id, rel))?;
+        output.add_file(
+            GRAPH_JSON,
+            graph.to_artifact(&scene.scene_id, rel).to_pretty_json(),
+        );
         output.add_file(GRAPH_TXT, graph.to_text().into_bytes());
         Ok(output)
     }
