@@ -272,10 +272,10 @@ mod tests {
         #![proptest_config(ProptestConfig::with_cases(2000))]
         #[test]
         fn writes_the_bytes_of_the_sorted_serde_path(artifact in artifact()) {
-            let expected = to_sorted_pretty(&artifact).unwrap();
+            let expected = to_sorted_pretty(&artifact).expect("serialises");
             prop_assert_eq!(
-                String::from_utf8(artifact.to_pretty_json()).unwrap(),
-                String::from_utf8(expected).unwrap()
+                String::from_utf8(artifact.to_pretty_json()).expect("UTF-8"),
+                String::from_utf8(expected).expect("UTF-8")
             );
         }
     }
@@ -297,7 +297,7 @@ mod tests {
             }],
             equally_spaced: vec![],
         };
-        let text = String::from_utf8(artifact.to_pretty_json()).unwrap();
+        let text = String::from_utf8(artifact.to_pretty_json()).expect("UTF-8");
         assert_eq!(
             text,
             String::from_utf8(to_sorted_pretty(&artifact).unwrap()).unwrap()
