@@ -81,12 +81,26 @@ fn encode(
     depth: png::BitDepth,
     data: &[u8],
 ) -> Result<Vec<u8>, ImageError> {
+    encode_filtered(width, height, color, depth, data, png::Filter::Adaptive)
+}
+
+/// [`encode`] with every row filtered by `filter` (`Adaptive`: the best of the five for each
+/// row, which costs trying all five).
+fn encode_filtered(
+    width: u32,
+    height: u32,
+    color: png::ColorType,
+    depth: png::BitDepth,
+    data: &[u8],
+    filter: png::Filter,
+) -> Result<Vec<u8>, ImageError> {
     let mut out = Vec::new();
     {
         let mut encoder = png::Encoder::new(&mut out, width, height);
         encoder.set_color(color);
         encoder.set_depth(depth);
         encoder.set_compression(png::Compression::Fast);
+        encoder.set_filter(filter);
         let mut writer = encoder.write_header()?;
         writer.write_image_data(data)?;
         writer.finish()?;
@@ -103,6 +117,22 @@ pub fn encode_rgb8(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>, Image
         png::ColorType::Rgb,
         png::BitDepth::Eight,
         rgb,
+    )
+}
+
+/// [`encode_rgb8`] for a photograph: every row Paeth-filtered instead of the best filter of
+/// each row. On the annotator snapshots of 12 demo scenes (160 crops of photos) that is a fifth
+/// less time (7.9 against 9.8 ms) for files 0.5 % larger; `Up`, png's fastest setting, took 6.6
+/// ms for files 38 % larger.
+pub fn encode_rgb8_photo(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>, ImageError> {
+    check_len(rgb.len(), width, height, 3)?;
+    encode_filtered(
+        width,
+        height,
+        png::ColorType::Rgb,
+        png::BitDepth::Eight,
+        rgb,
+        png::Filter::Paeth,
     )
 }
 
@@ -224,6 +254,53 @@ mod tests {
         let d = decode_png(&encode_rgb8(2, 2, &rgb).expect("encode")).expect("decode");
         assert_eq!(d.layout, PixelLayout::Rgb8);
         assert_eq!(d.samples, rgb.iter().map(|&v| v as u16).collect::<Vec<_>>());
+    }
+
+    /// The filter type byte of each row of a PNG with one IDAT chunk (the encoder writes one).
+    fn row_filters(png_bytes: &[u8], width: usize, height: usize) -> Vec<u8> {
+        let mut at = 8;
+        let mut idat = Vec::new();
+        while at + 8 <= png_bytes.len() {
+            let len = u32::from_be_bytes(png_bytes[at..at + 4].try_into().expect("4")) as usize;
+            if &png_bytes[at + 4..at + 8] == b"IDAT" {
+                idat.extend_from_slice(&png_bytes[at + 8..at + 8 + len]);
+            }
+            at += 12 + len;
+        }
+        let raw = fdeflate::decompress_to_vec(&idat).expect("zlib");
+        (0..height).map(|y| raw[y * (1 + 3 * width)]).collect()
+    }
+
+    #[test]
+    fn photos_are_paeth_filtered_with_the_same_pixels() {
+        // A photo-like picture: smooth gradients with noise.
+        let (w, h) = (48, 32);
+        let mut state = 7u32;
+        let rgb: Vec<u8> = (0..w * h * 3)
+            .map(|i| {
+                state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let (x, y) = ((i / 3) % w, (i / 3) / w);
+                ((x * 4 + y * 3 + i % 3 * 40) as u32 + (state >> 29)) as u8
+            })
+            .collect();
+        let photo = encode_rgb8_photo(w as u32, h as u32, &rgb).expect("encode");
+        let adaptive = encode_rgb8(w as u32, h as u32, &rgb).expect("encode");
+        let expected: Vec<u16> = rgb.iter().map(|&v| u16::from(v)).collect();
+        assert_eq!(decode_png(&photo).expect("decode").samples, expected);
+        assert_eq!(decode_png(&adaptive).expect("decode").samples, expected);
+        // Paeth is filter type 4, on every row.
+        assert_eq!(row_filters(&photo, w, h), vec![4; h]);
+        // The control: on a picture of one colour a row, where `Sub` leaves zeros, the
+        // adaptive encoder chooses another filter; the photo encoder still writes Paeth.
+        let stripes: Vec<u8> = (0..w * h * 3).map(|i| ((i / 3 / w) * 7) as u8).collect();
+        let adaptive = encode_rgb8(w as u32, h as u32, &stripes).expect("encode");
+        let photo = encode_rgb8_photo(w as u32, h as u32, &stripes).expect("encode");
+        assert_ne!(row_filters(&adaptive, w, h), vec![4; h]);
+        assert_eq!(row_filters(&photo, w, h), vec![4; h]);
+        assert_eq!(
+            decode_png(&photo).expect("decode").samples,
+            decode_png(&adaptive).expect("decode").samples
+        );
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! outside the mask dimmed so that the instance stands out while its surroundings stay
 //! readable.
 
-use crate::image_io::{encode_rgb8, ImageError};
+use crate::image_io::{encode_rgb8_photo, ImageError};
 
 /// A photo as RGB8, row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -73,7 +73,7 @@ pub fn snapshot_png(
         let o = ((v - cv0) * cw + (u - cu0)) * 3;
         rgb[o..o + 3].copy_from_slice(&photo.rgb[p]);
     }
-    encode_rgb8(cw as u32, ch as u32, &rgb).map(Some)
+    encode_rgb8_photo(cw as u32, ch as u32, &rgb).map(Some)
 }
 
 #[cfg(test)]
