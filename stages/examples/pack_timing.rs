@@ -4,9 +4,8 @@
 //! one thread, as the script times Blender. Prints one JSON line: the seconds of each run.
 //!
 //! It allocates through mimalloc, as the `mesa` executable does (pipeline/src/main.rs). With
-//! glibc's allocator the figure moved between two levels from one process to the next (2.0 and
-//! 2.6 ms), with its heap's state: `_int_malloc`, `malloc_consolidate` and fresh pages were 6 %
-//! of the profile.
+//! glibc's allocator, `_int_malloc`, `malloc_consolidate` and fresh pages were 6 % of the
+//! profile, a cost `mesa pack` does not pay.
 //!
 //! `cargo run --release -p mesa-stages --example pack_timing -- [--repeat 5]`
 
