@@ -77,7 +77,23 @@ pub fn layout_form_of(value: &Value) -> LayoutForm {
 }
 
 /// Reads and validates layout text of any form; every problem is returned.
+///
+/// A layout as mesa writes it is read straight into its type ([`crate::layout_plain`]); any
+/// other document, and every invalid one, goes through the general reader, which names each
+/// problem's JSON path. Both give the same result for what the quick one accepts.
 pub fn read_layout_text(text: &str) -> Result<ReadLayout, Vec<Problem>> {
+    if let Some(layout) = crate::layout_plain::read_plain_dataset_layout(text) {
+        return Ok(ReadLayout {
+            form: LayoutForm::Dataset,
+            layout: AnyLayout::Dataset(layout),
+        });
+    }
+    read_layout_text_general(text)
+}
+
+/// [`read_layout_text`] without the quick reader of plain dataset layouts: the document parsed
+/// into a `Value`, recognised, checked against its kind's JSON Schema, then converted.
+pub fn read_layout_text_general(text: &str) -> Result<ReadLayout, Vec<Problem>> {
     let value = parse_lenient(text).map_err(|e| {
         vec![Problem::new(
             "$",

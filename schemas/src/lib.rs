@@ -26,6 +26,7 @@ pub mod json;
 pub mod kinds;
 pub mod layout;
 pub mod layout_file;
+mod layout_plain;
 pub mod llm;
 pub mod order;
 pub mod output;
