@@ -14,14 +14,14 @@ use mesa_stages::graph::LoadedLayout;
 use mesa_stages::paths::scene::LAYOUT_CANDIDATES;
 
 use crate::fsio::{read_bounded, sha256_hex, JSON_LIMIT};
-use crate::runner::Scene;
+use crate::runner::{scene_files, Scene};
 
 /// The layout file a scene's stages after `ingest` read: the first present of
 /// [`LAYOUT_CANDIDATES`] (settled, else refined).
 pub fn chosen_layout(scene: &Scene) -> Option<&'static str> {
     LAYOUT_CANDIDATES
         .into_iter()
-        .find(|rel| scene.path(rel).is_file())
+        .find(|rel| scene_files::is_file(&scene.path(rel)))
 }
 
 /// Every layout file of [`LAYOUT_CANDIDATES`] present, most refined first (a new
@@ -29,15 +29,20 @@ pub fn chosen_layout(scene: &Scene) -> Option<&'static str> {
 pub fn present_layouts(scene: &Scene) -> Vec<&'static str> {
     LAYOUT_CANDIDATES
         .into_iter()
-        .filter(|rel| scene.path(rel).is_file())
+        .filter(|rel| scene_files::is_file(&scene.path(rel)))
         .collect()
 }
 
 /// The bytes of a layout file as text (hashed only by the readers that return the SHA-256:
 /// the graph stage reads 10,000 layouts whose digests the runner already has).
+///
+/// Inside a scene, the bytes the runner read to hash the layout ([`scene_files`]), if it did.
 fn read_text(path: &Path) -> anyhow::Result<String> {
-    let bytes = read_bounded(path, JSON_LIMIT)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let bytes = match scene_files::take(path) {
+        Some(bytes) => bytes,
+        None => read_bounded(path, JSON_LIMIT)
+            .with_context(|| format!("{}: cannot read", path.display()))?,
+    };
     let text = String::from_utf8(bytes).map_err(|_| {
         anyhow!(
             "{}: not UTF-8 text (expected a layout JSON)",

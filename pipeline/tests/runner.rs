@@ -416,3 +416,109 @@ fn kill_then_resume_is_byte_identical() {
     assert!(extra.is_empty(), "left behind after the kill: {extra:?}");
     assert!(got == expected, "outputs differ from an uninterrupted run");
 }
+
+/// Writes whether the runner handed it the bytes of `input/data.txt` it hashed (and whether
+/// they are the file's), and whether it saw the input through the scene's record.
+struct Handed;
+
+impl SceneStage for Handed {
+    fn name(&self) -> &'static str {
+        "handed"
+    }
+
+    fn inputs(&self, _: &StageContext<'_>, scene: &Scene) -> anyhow::Result<Vec<String>> {
+        Ok(vec![scene.rel("input/data.txt")])
+    }
+
+    fn config_digest(&self, _: &StageContext<'_>) -> String {
+        String::new()
+    }
+
+    fn run(&self, _: &StageContext<'_>, scene: &Scene) -> anyhow::Result<SceneOutput> {
+        use mesa_pipeline::runner::scene_files;
+        let path = scene.path("input/data.txt");
+        let on_disk = std::fs::read(&path)?;
+        let verdict = match scene_files::take(&path) {
+            Some(bytes) if bytes == on_disk => "handed",
+            Some(_) => "handed other bytes",
+            None => "read",
+        };
+        let mut out = SceneOutput::new();
+        out.add_file("handed/verdict.txt", verdict.into());
+        Ok(out)
+    }
+}
+
+fn modified_and_inode(path: &Path) -> (std::time::SystemTime, u64) {
+    use std::os::unix::fs::MetadataExt as _;
+    let meta = std::fs::symlink_metadata(path).expect("marker");
+    (meta.modified().expect("mtime"), meta.ino())
+}
+
+/// The runner hands a stage the bytes of the small inputs it hashed for the scene, the same
+/// bytes as the file; outside a scene nothing is handed (the control).
+#[test]
+fn the_runner_hands_the_stage_the_bytes_it_hashed() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), 6);
+    let config = Config::default();
+    let ctx = StageContext {
+        dataset: dir.path(),
+        config: &config,
+    };
+    let summary = run_stage(&Handed, &ctx, &options(2)).expect("run");
+    assert_eq!(summary.done, 6);
+    let verdicts: Vec<Vec<u8>> = snapshot(dir.path())
+        .into_iter()
+        .filter(|(rel, _)| rel.ends_with("handed/verdict.txt"))
+        .map(|(_, bytes)| bytes)
+        .collect();
+    assert_eq!(verdicts, vec![b"handed".to_vec(); 6]);
+    let path = dir
+        .path()
+        .join("scenes/office_table/office_table_0000/input/data.txt");
+    assert_eq!(mesa_pipeline::runner::scene_files::take(&path), None);
+}
+
+/// A forced rerun whose markers come out the same leaves them as they are (same inode, same
+/// time); a marker changed on disk, or one that is a link, is written anew. The control for
+/// the first: the changed one gets a new inode.
+#[test]
+fn a_marker_is_rewritten_only_when_its_bytes_change() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), 3);
+    let config = Config::default();
+    assert_eq!(run(dir.path(), &config, &options(1)).done, 3);
+    let markers = dir.path().join(".mesa/markers/echo");
+    let marker = |table: &str, k: usize| markers.join(format!("{table}/{table}_{k:04}.json"));
+    let (office, dining, coffee) = (
+        marker("office_table", 0),
+        marker("dining_table", 1),
+        marker("coffee_table", 2),
+    );
+    let canonical = std::fs::read(&office).expect("marker");
+    let before: Vec<_> = [&office, &dining, &coffee]
+        .iter()
+        .map(|p| modified_and_inode(p))
+        .collect();
+    // A marker changed on disk (still valid JSON), and one replaced by a link to a copy.
+    let mut edited = canonical.clone();
+    edited.extend_from_slice(b"  \n");
+    std::fs::write(&office, &edited).expect("edit");
+    let edited_state = modified_and_inode(&office);
+    let copy = dir.path().join("dining_copy.json");
+    std::fs::copy(&dining, &copy).expect("copy");
+    std::fs::remove_file(&dining).expect("rm");
+    std::os::unix::fs::symlink(&copy, &dining).expect("link");
+
+    let forced = RunOptions {
+        force: true,
+        ..options(1)
+    };
+    assert_eq!(run(dir.path(), &config, &forced).done, 3);
+    assert_eq!(std::fs::read(&office).expect("marker"), canonical);
+    assert_ne!(modified_and_inode(&office).1, edited_state.1, "rewritten");
+    let dining_meta = std::fs::symlink_metadata(&dining).expect("marker");
+    assert!(dining_meta.is_file(), "the link is replaced by the marker");
+    assert_eq!(modified_and_inode(&coffee), before[2], "left as it was");
+}

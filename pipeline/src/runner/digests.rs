@@ -34,13 +34,14 @@
 
 use std::collections::BTreeMap;
 use std::fs;
-use std::io;
+use std::io::{self, Read as _};
 use std::os::unix::fs::MetadataExt as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
+use super::scene_files;
 use crate::fsio::{
-    check_regular_file, read_bounded, sha256_reader, write_if_changed, SizeLimit,
+    check_regular_file, read_bounded, sha256_hex, sha256_reader, write_if_changed, SizeLimit,
     HASHED_INPUT_LIMIT,
 };
 
@@ -170,7 +171,21 @@ impl RememberedDigests {
     pub fn digest(&mut self, path: &Path, rel: &str, now: SystemTime) -> io::Result<String> {
         let size = check_regular_file(path, HASHED_INPUT_LIMIT)?;
         let file = fs::File::open(path)?;
-        if size < REMEMBER_FROM_BYTES || rel.contains('\n') {
+        if size < REMEMBER_FROM_BYTES {
+            // Read whole, and the bytes handed to the stage that runs next on this thread
+            // ([`scene_files`]): it reads what was hashed, without opening the file again.
+            let cap = REMEMBER_FROM_BYTES.saturating_mul(2);
+            let mut bytes = Vec::with_capacity(size as usize);
+            (&file).take(cap).read_to_end(&mut bytes)?;
+            if bytes.len() as u64 >= cap {
+                // It grew while being read: hashed whole from the start, not handed over.
+                return sha256_reader(fs::File::open(path)?, HASHED_INPUT_LIMIT);
+            }
+            let digest = sha256_hex(&bytes);
+            scene_files::keep(path, bytes);
+            return Ok(digest);
+        }
+        if rel.contains('\n') {
             return sha256_reader(file, HASHED_INPUT_LIMIT);
         }
         let before = FileIdentity::of(&file.metadata()?);

@@ -29,6 +29,7 @@ pub mod dataset;
 pub mod digests;
 pub mod lock;
 mod scene;
+pub mod scene_files;
 
 pub use self::core::{
     digest_of, discover_all, discover_scenes, progress, read_marker, select_scenes, thread_pool,

@@ -17,6 +17,7 @@ use super::core::{
     RunOptions, Scene, StageContext, RUN_DIR,
 };
 use super::digests::RememberedDigests;
+use super::scene_files;
 use crate::exit::UsageError;
 use crate::fsio::{
     sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic, write_if_changed, DigestCache,
@@ -285,7 +286,7 @@ fn prepare(
     cache: &DigestCache,
     remember: Remember,
 ) -> anyhow::Result<Prepared> {
-    let previous = read_marker(&marker_path(ctx.dataset, stage.name(), scene));
+    let previous = read_scene_marker(&marker_path(ctx.dataset, stage.name(), scene));
     let listed = stage.inputs(ctx, scene)?;
     let scene_prefix = scene.rel("");
     let mut remembered = RememberedDigests::at(digests_path(ctx.dataset, stage.name(), scene));
@@ -425,8 +426,21 @@ fn error_chain(e: &anyhow::Error) -> Vec<String> {
     e.chain().map(|c| c.to_string()).collect()
 }
 
-/// Processes one scene: skip, run and write, or record the failure.
+/// Processes one scene: skip, run and write, or record the failure. What the runner reads of
+/// the scene's files on the way is handed to the stage ([`scene_files`]).
 pub fn process_scene(
+    stage: &dyn SceneStage,
+    ctx: &StageContext<'_>,
+    scene: &Scene,
+    config_digest: &str,
+    force: bool,
+    cache: &DigestCache,
+) -> SceneOutcome {
+    scene_files::within_scene(|| process_scene_here(stage, ctx, scene, config_digest, force, cache))
+}
+
+/// [`process_scene`] inside the scene's record of files.
+fn process_scene_here(
     stage: &dyn SceneStage,
     ctx: &StageContext<'_>,
     scene: &Scene,
@@ -642,13 +656,41 @@ fn fail(
     SceneOutcome::Failed { error }
 }
 
-/// Writes a scene's marker. Its folder (one per stage and table type, a file a scene) is
+/// [`read_marker`], whose bytes are kept in the scene's record ([`scene_files`]) when it is a
+/// regular file: writing the scene's marker then compares with them instead of reading the
+/// file again.
+fn read_scene_marker(path: &Path) -> Option<RunMarker> {
+    let meta = std::fs::symlink_metadata(path).ok()?;
+    if !meta.is_file() {
+        // A link (or anything else): read as before, and compared on disk when written.
+        return read_marker(path);
+    }
+    // A marker is a few KB; one of more than 16 MiB is not mesa's, and is read as absent.
+    const MARKER_LIMIT: u64 = 16 << 20;
+    let mut bytes = Vec::with_capacity(usize::try_from(meta.len().min(MARKER_LIMIT)).ok()?);
+    let file = std::fs::File::open(path).ok()?;
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, MARKER_LIMIT + 1), &mut bytes)
+        .ok()?;
+    if bytes.len() as u64 > MARKER_LIMIT {
+        return None;
+    }
+    let marker = serde_json::from_str(std::str::from_utf8(&bytes).ok()?).ok()?;
+    scene_files::keep(path, bytes);
+    Some(marker)
+}
+
+/// Writes a scene's marker, unless the file holds these bytes already (compared with the
+/// bytes [`read_scene_marker`] kept for the scene, else with the file). Its folder (one per stage and table type, a file a scene) is
 /// swept of dead writers' temporary files once per run by [`run_stage`], not here: sweeping
 /// beside each marker listed the whole folder once a scene, quadratic in the scenes of a table
 /// type (10,000 scenes: 2.6 ms a scene of runner cost, most of it listing).
 fn write_marker(path: &Path, marker: &RunMarker) -> std::io::Result<()> {
     let bytes = to_sorted_pretty(marker).map_err(std::io::Error::other)?;
-    write_if_changed(path, &bytes).map(drop)
+    match scene_files::take(path) {
+        Some(previous) if previous == bytes => Ok(()),
+        Some(_) => write_atomic(path, &bytes),
+        None => write_if_changed(path, &bytes).map(drop),
+    }
 }
 
 /// Sweeps the marker folders of `scenes` (each once), and those of their remembered digests,
