@@ -1,11 +1,12 @@
 //! The runner's per-scene overhead: what it costs beyond the stage's own work.
 //!
 //! - `skip_done`: a rerun over a done scene (read the marker, hash the inputs, compare);
-//! - `write_scene`: a scene processed with a trivial stage (run, atomic write of one output,
-//!   atomic write of the marker);
+//! - `write_scene`: a scene processed again with a trivial stage (`--force`: run, then the
+//!   output and the marker compared with the files, which hold the same bytes after the first
+//!   iteration, so nothing is written: the cost of a forced rerun);
 //! - `noop_10k/{write,skip}`: `run_stage` of a stage that does nothing, over 10,000 scenes of
-//!   one table type, on one thread: a forced run (every marker written) and a rerun (every
-//!   scene skipped). Divided by 10,000, the runner's own cost a scene at dataset scale, where a
+//!   one table type, on one thread: a forced run (every scene run, its marker written the
+//!   first time and compared after) and a rerun (every scene skipped). Divided by 10,000, the runner's own cost a scene at dataset scale, where a
 //!   table type's marker folder holds thousands of files.
 
 use std::path::Path;

@@ -680,10 +680,11 @@ fn read_scene_marker(path: &Path) -> Option<RunMarker> {
 }
 
 /// Writes a scene's marker, unless the file holds these bytes already (compared with the
-/// bytes [`read_scene_marker`] kept for the scene, else with the file). Its folder (one per stage and table type, a file a scene) is
-/// swept of dead writers' temporary files once per run by [`run_stage`], not here: sweeping
-/// beside each marker listed the whole folder once a scene, quadratic in the scenes of a table
-/// type (10,000 scenes: 2.6 ms a scene of runner cost, most of it listing).
+/// bytes [`read_scene_marker`] kept for the scene, else with the file). Its folder (one per
+/// stage and table type, a file a scene) is swept of dead writers' temporary files once per
+/// run by [`run_stage`], not here: sweeping beside each marker listed the whole folder once a
+/// scene, quadratic in the scenes of a table type (10,000 scenes: 2.6 ms a scene of runner
+/// cost, most of it listing).
 fn write_marker(path: &Path, marker: &RunMarker) -> std::io::Result<()> {
     let bytes = to_sorted_pretty(marker).map_err(std::io::Error::other)?;
     match scene_files::take(path) {
