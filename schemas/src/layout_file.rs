@@ -11,6 +11,8 @@ use crate::layout::{DatasetLayout, LAYOUT_SCHEMA};
 use crate::llm::LlmLayout;
 use crate::{Kind, Problem};
 
+pub use crate::layout_plain::read_plain_dataset_layout;
+
 /// The form a layout document was recognised as.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LayoutForm {

@@ -46,7 +46,8 @@ pub fn read_plain_dataset_layout(text: &str) -> Option<DatasetLayout> {
 
 /// The bounds of the JSON Schema that the type does not carry: sizes and scale factors above 0,
 /// and no string that the lenient parser's non-finite marker could have produced (instance
-/// names are left to [`DatasetLayout::problems`], whose name rule refuses the marker).
+/// names are left to [`DatasetLayout::problems`], whose name rule refuses the marker, and the
+/// `schema` is checked as it is read).
 fn within_schema_bounds(layout: &DatasetLayout) -> bool {
     let marked = |s: &str| s.starts_with(NONFINITE_PREFIX);
     layout.objects.iter().all(|o| {
@@ -60,7 +61,7 @@ fn within_schema_bounds(layout: &DatasetLayout) -> bool {
             && !o.category.as_deref().is_some_and(marked)
             && !o.description.as_deref().is_some_and(marked)
             && !provenance_marked
-    }) && !marked(&layout.schema)
+    })
 }
 
 /// Declines the plain reading (the message is never shown).

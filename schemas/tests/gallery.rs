@@ -4,6 +4,9 @@ mod common;
 
 use mesa_schemas::convert::{dataset_from_llm, llm_from_dataset};
 use mesa_schemas::json::to_sorted_pretty;
+use mesa_schemas::layout_file::{
+    read_layout_text, read_layout_text_general, read_plain_dataset_layout,
+};
 use mesa_schemas::output::{compose_model_output, parse_model_output, FINAL_ANSWER_MARKER};
 use mesa_schemas::{validate_text, DatasetLayout, GalleryRecord, Kind, LlmLayout};
 
@@ -117,4 +120,61 @@ fn assembled_gallery_outputs_parse_as_successes() {
             assert!(parsed.dropped_objects.is_empty());
         }
     }
+}
+
+/// The published layouts through both layout readers: a record, and its layout in the LLM
+/// form, are left to the general reader; the dataset form that `mesa convert` writes from it
+/// is taken by the quick reader, with the general reader's result to the bit (compared as
+/// written JSON). The control: the released MesaTask-10K shape (no `schema`, no provenance) is
+/// taken too, and one extra key sends it back to the general reader.
+#[test]
+fn published_layouts_read_the_same_through_both_readers() {
+    let same = |text: &str| {
+        let quick = read_layout_text(text).map(|r| format!("{:?}", r.layout));
+        let general = read_layout_text_general(text).map(|r| format!("{:?}", r.layout));
+        assert_eq!(quick, general);
+    };
+    let mut taken = 0;
+    for (name, text) in common::gallery_records() {
+        let record: GalleryRecord = serde_json::from_str(&text).expect("record");
+        assert!(read_plain_dataset_layout(&text).is_none(), "{name}");
+        same(&text);
+        let llm: LlmLayout = record.scene_layout_json.resolve().expect("layout");
+        let llm_text = serde_json::to_string_pretty(&llm).expect("json");
+        assert!(read_plain_dataset_layout(&llm_text).is_none(), "{name}");
+        same(&llm_text);
+        let mut dataset = dataset_from_llm(&llm).layout;
+        let bytes = to_sorted_pretty(&dataset).expect("serialise");
+        let dataset_text = std::str::from_utf8(&bytes).expect("utf8");
+        let quick = read_plain_dataset_layout(dataset_text)
+            .unwrap_or_else(|| panic!("{name}: the dataset form was declined"));
+        let general = read_layout_text_general(dataset_text).expect("valid");
+        assert_eq!(
+            serde_json::to_string(&quick).expect("json"),
+            serde_json::to_string(&match general.layout {
+                mesa_schemas::layout_file::AnyLayout::Dataset(layout) => layout,
+                other => panic!("{name}: read as {other:?}"),
+            })
+            .expect("json")
+        );
+        taken += 1;
+        // The released files' shape: no schema field, no z_rotation, no provenance.
+        for object in &mut dataset.objects {
+            object.z_rotation_deg = None;
+            object.provenance = None;
+        }
+        let mut released = serde_json::to_value(&dataset).expect("json");
+        released.as_object_mut().expect("object").remove("schema");
+        let released_text = serde_json::to_string(&released).expect("json");
+        assert!(
+            read_plain_dataset_layout(&released_text).is_some(),
+            "{name}"
+        );
+        same(&released_text);
+        released["source_tool"] = serde_json::json!("another tool");
+        let extra_text = serde_json::to_string(&released).expect("json");
+        assert!(read_plain_dataset_layout(&extra_text).is_none(), "{name}");
+        same(&extra_text);
+    }
+    assert_eq!(taken, 7);
 }
