@@ -2,11 +2,12 @@
 //! in one pass of the text, without the generic [`Value`](serde_json::Value) and the JSON
 //! Schema walk of [`read_layout_text`](crate::layout_file::read_layout_text).
 //!
-//! **Why.** Every stage after `place` reads a layout per scene, and the general reader spends
-//! about 45 µs on a 10 KB layout: 30 µs building a `Value` (a map and a string per key), 13 µs
-//! walking the schema with JSON paths, 2.6 µs converting to the type. Read straight into the
-//! type, the same layout takes about a third of that (criterion: `schemas/benches/layout.rs`). The graph
-//! stage, whose own work is 5 µs a scene, spent a quarter of its time here.
+//! **Why.** Every stage after `place` reads a layout per scene, and the general reader spent
+//! 41 µs on a 10 KB demo layout: most of it building a `Value` (a map and a string per key,
+//! 30 µs alone) and walking the schema with JSON paths (13 µs alone), then 2.6 µs converting to
+//! the type. Read straight into the type, the same layout takes 16 µs (criterion,
+//! `schemas/benches/layout.rs`: 22 against 58.5 µs on a 12.6 KB layout). The graph stage,
+//! whose own work is 5 µs a scene, spent a quarter of its time here.
 //!
 //! **It only ever accepts what the general reader accepts, with the same result.** It declines
 //! (returns `None`, and the general reader runs and reports every problem with its JSON path)
