@@ -74,19 +74,9 @@ fn check_len(len: usize, width: u32, height: u32, channels: usize) -> Result<(),
     Ok(())
 }
 
+/// Encodes `data` with every row filtered by `filter` (`Adaptive`: the best of the five for
+/// each row, which costs trying all five).
 fn encode(
-    width: u32,
-    height: u32,
-    color: png::ColorType,
-    depth: png::BitDepth,
-    data: &[u8],
-) -> Result<Vec<u8>, ImageError> {
-    encode_filtered(width, height, color, depth, data, png::Filter::Adaptive)
-}
-
-/// [`encode`] with every row filtered by `filter` (`Adaptive`: the best of the five for each
-/// row, which costs trying all five).
-fn encode_filtered(
     width: u32,
     height: u32,
     color: png::ColorType,
@@ -121,7 +111,7 @@ fn encode_rgb8_filtered(
     filter: png::Filter,
 ) -> Result<Vec<u8>, ImageError> {
     check_len(rgb.len(), width, height, 3)?;
-    encode_filtered(
+    encode(
         width,
         height,
         png::ColorType::Rgb,
@@ -148,6 +138,7 @@ pub fn encode_rgba8(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>, Ima
         png::ColorType::Rgba,
         png::BitDepth::Eight,
         rgba,
+        png::Filter::Adaptive,
     )
 }
 
@@ -160,6 +151,7 @@ pub fn encode_gray8(width: u32, height: u32, values: &[u8]) -> Result<Vec<u8>, I
         png::ColorType::Grayscale,
         png::BitDepth::Eight,
         values,
+        png::Filter::Adaptive,
     )
 }
 
@@ -173,6 +165,7 @@ pub fn encode_gray16(width: u32, height: u32, values: &[u16]) -> Result<Vec<u8>,
         png::ColorType::Grayscale,
         png::BitDepth::Sixteen,
         &bytes,
+        png::Filter::Adaptive,
     )
 }
 

@@ -20,7 +20,8 @@ use super::digests::RememberedDigests;
 use super::scene_files;
 use crate::exit::UsageError;
 use crate::fsio::{
-    sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic, write_if_changed, DigestCache,
+    read_bounded, sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic, write_if_changed,
+    DigestCache, SizeLimit,
 };
 use crate::progress::Tick;
 
@@ -666,14 +667,12 @@ fn read_scene_marker(path: &Path) -> Option<RunMarker> {
         return read_marker(path);
     }
     // A marker is a few KB; one of more than 16 MiB is not mesa's, and is read as absent.
-    const MARKER_LIMIT: u64 = 16 << 20;
-    let mut bytes = Vec::with_capacity(usize::try_from(meta.len().min(MARKER_LIMIT)).ok()?);
-    let file = std::fs::File::open(path).ok()?;
-    std::io::Read::read_to_end(&mut std::io::Read::take(file, MARKER_LIMIT + 1), &mut bytes)
-        .ok()?;
-    if bytes.len() as u64 > MARKER_LIMIT {
-        return None;
-    }
+    const MARKER_LIMIT: SizeLimit = SizeLimit {
+        bytes: 16 << 20,
+        what: "a done marker",
+        name: "MARKER_LIMIT",
+    };
+    let bytes = read_bounded(path, MARKER_LIMIT).ok()?;
     let marker = serde_json::from_str(std::str::from_utf8(&bytes).ok()?).ok()?;
     scene_files::keep(path, bytes);
     Some(marker)

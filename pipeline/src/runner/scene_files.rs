@@ -51,25 +51,18 @@ pub(crate) fn within_scene<R>(f: impl FnOnce() -> R) -> R {
 
 /// Whether `path` is a regular file ([`Path::is_file`]), looked up once per scene.
 pub fn is_file(path: &Path) -> bool {
-    let known = RECORD.with(|record| {
-        let record = record.borrow();
-        record
-            .as_ref()
-            .map(|files| files.is_file.get(path).copied())
-    });
-    match known {
-        Some(Some(is_file)) => is_file,
-        Some(None) => {
-            let is_file = path.is_file();
-            RECORD.with(|record| {
-                if let Some(files) = record.borrow_mut().as_mut() {
-                    files.is_file.insert(path.to_path_buf(), is_file);
-                }
-            });
-            is_file
+    RECORD.with(|record| {
+        let mut record = record.borrow_mut();
+        let Some(files) = record.as_mut() else {
+            return path.is_file();
+        };
+        if let Some(&known) = files.is_file.get(path) {
+            return known;
         }
-        None => path.is_file(),
-    }
+        let is_file = path.is_file();
+        files.is_file.insert(path.to_path_buf(), is_file);
+        is_file
+    })
 }
 
 /// Keeps the bytes of an input the runner read whole (to hash it), for the stage; nothing is
