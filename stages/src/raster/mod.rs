@@ -18,6 +18,7 @@ use crate::mesh::{add3, cross3, normalize3, scale3, sub3, Aabb, Affine3, TriMesh
 
 mod shade;
 
+#[cfg(test)]
 use shade::{add3f, scale3f};
 pub use shade::{Hit, Shader, SHADE_BATCH};
 
@@ -394,6 +395,17 @@ impl Tiled {
         let tile = (y / SHADOW_TILE) * self.tiles_x + x / SHADOW_TILE;
         (tile * SHADOW_TILE * SHADOW_TILE + (y % SHADOW_TILE) * SHADOW_TILE + x % SHADOW_TILE)
             as usize
+    }
+
+    /// [`Tiled::index`] of a texel of the map, in unsigned arithmetic (no rounding toward
+    /// zero to correct for: the shader's lookups).
+    #[inline(always)]
+    fn index_of_texel(&self, x: u32, y: u32) -> usize {
+        const SHIFT: u32 = SHADOW_TILE.trailing_zeros();
+        const MASK: u32 = SHADOW_TILE as u32 - 1;
+        let (x, y) = (x as usize, y as usize);
+        let tile = (y >> SHIFT) * self.tiles_x as usize + (x >> SHIFT);
+        (tile << (2 * SHIFT)) + ((y & MASK as usize) << SHIFT) + (x & MASK as usize)
     }
 }
 
@@ -1092,8 +1104,9 @@ impl ShadowMap {
     }
 
     /// Fraction of light reaching `p_world` (percentage-closer filtering over the 2×2 texels
-    /// around it, bilinearly weighted).
-    #[inline(always)]
+    /// around it, bilinearly weighted): the scalar reference of the shader's lookups, which
+    /// do the same eight points at a time (`shade::light_fractions`).
+    #[cfg(test)]
     fn light_fraction(&self, p_world: [f32; 3], normal_world: [f32; 3]) -> f32 {
         let ShadowLookup {
             to_x,

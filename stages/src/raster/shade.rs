@@ -10,19 +10,25 @@
 
 use std::borrow::Cow;
 
-use wide::{f32x8, CmpGt, CmpLe, CmpLt};
+use wide::{f32x8, CmpGe, CmpGt, CmpLe, CmpLt};
 
-use super::{DrawItem, Lighting, ShadowMap, Texture};
+use super::{DrawItem, Lighting, ShadowLookup, ShadowMap, Texture};
 use crate::mesh::{dot3, normalize3, to_f32, Affine3};
 
+// The scalar arithmetic of the tests' reference shader (and of `ShadowMap::light_fraction`, the
+// reference of `light_fractions`): the batches do the same operations lane by lane.
+
+#[cfg(test)]
 pub(super) fn add3f(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
+#[cfg(test)]
 pub(super) fn scale3f(a: [f32; 3], s: f32) -> [f32; 3] {
     [a[0] * s, a[1] * s, a[2] * s]
 }
 
+#[cfg(test)]
 fn dot3f(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
@@ -257,16 +263,17 @@ impl<'s, 'a> Shader<'s, 'a> {
         for (li, (light, &l)) in lighting.lights.iter().zip(&self.toward_lights).enumerate() {
             match (&self.shadow, self.shadow_light) {
                 (Some(map), Some(s)) if s == li => {
-                    for i in 0..len {
-                        let n = get3(normal, i);
-                        // Only where the light reaches the surface (the lookups are the
-                        // costly part).
-                        let v = if dot3f(n, l) > 0.0 {
-                            map.light_fraction(get3(position, i), n)
+                    let l = l.map(V::splat);
+                    for c in 0..chunks_of(len) {
+                        let n = [normal[0][c], normal[1][c], normal[2][c]];
+                        let p = [position[0][c], position[1][c], position[2][c]];
+                        // Where the light does not reach the surface, none of it arrives.
+                        let reaches = dot(n, l).cmp_gt(V::ZERO);
+                        visible[c] = if reaches.any() {
+                            reaches.blend(light_fractions(map, p, n), V::ZERO)
                         } else {
-                            0.0
+                            V::ZERO
                         };
-                        set(visible, i, v);
                     }
                 }
                 _ => *visible = [V::ONE; CHUNKS],
@@ -343,6 +350,53 @@ fn get3(planes: &[Plane; 3], i: usize) -> [f32; 3] {
     planes
         .each_ref()
         .map(|plane| plane[i / LANES].as_array_ref()[i % LANES])
+}
+
+/// The vectors that hold the first `len` lanes of a plane.
+fn chunks_of(len: usize) -> usize {
+    len.div_ceil(LANES)
+}
+
+/// `ShadowMap::light_fraction` (the tests' scalar reference) lane by lane: the same operations in the same order, so the
+/// same bits. The texel coordinates, the depths and the bilinear weights are computed eight
+/// lanes at a time; only the four texels of each lane are read one by one. A lane outside the
+/// map is lit (its texels are read at the map's corner and not used).
+#[inline(always)]
+fn light_fractions(map: &ShadowMap, p_world: [V; 3], normal: [V; 3]) -> V {
+    let ShadowLookup {
+        to_x,
+        to_y,
+        to_depth,
+        normal_offset,
+    } = &map.lookup;
+    let offset = V::splat(*normal_offset);
+    let p: [V; 3] = std::array::from_fn(|k| p_world[k] + normal[k] * offset);
+    let affine = |r: &[f32; 4]| {
+        V::splat(r[0]) * p[0] + V::splat(r[1]) * p[1] + V::splat(r[2]) * p[2] + V::splat(r[3])
+    };
+    let (sx, sy) = (affine(to_x), affine(to_y));
+    let last = V::splat((map.tiles.size - 1) as f32);
+    // NaN compares false: outside.
+    let inside = sx.cmp_ge(V::ZERO) & sy.cmp_ge(V::ZERO) & sx.cmp_lt(last) & sy.cmp_lt(last);
+    let (sx, sy) = (inside.blend(sx, V::ZERO), inside.blend(sy, V::ZERO));
+    // In the map the coordinates are at least 0, so truncation is the floor.
+    let (x0, y0) = (sx.trunc_int(), sy.trunc_int());
+    let (fx, fy) = (sx - V::from_i32x8(x0), sy - V::from_i32x8(y0));
+    let depth = affine(to_depth).to_array();
+    let (xs, ys) = (x0.to_array(), y0.to_array());
+    let mut lit = [[0.0f32; LANES]; 4];
+    for lane in 0..LANES {
+        // Not negative: in the map, or its corner.
+        let (x, y) = (xs[lane] as u32, ys[lane] as u32);
+        for (corner, (dx, dy)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+            let stored = map.buffer.depth_m[map.tiles.index_of_texel(x + dx, y + dy)];
+            lit[corner][lane] = if depth[lane] <= stored { 1.0 } else { 0.0 };
+        }
+    }
+    let [l00, l10, l01, l11] = lit.map(V::from);
+    let top = l00 * (V::ONE - fx) + l10 * fx;
+    let bottom = l01 * (V::ONE - fx) + l11 * fx;
+    inside.blend(top * (V::ONE - fy) + bottom * fy, V::ONE)
 }
 
 /// [`dot3f`] lane by lane (the same operations in the same order).
@@ -598,5 +652,108 @@ mod tests {
                 "flip {flip}, shadows {shadows}: {control} differ"
             );
         }
+    }
+
+    /// The shader's shadow lookups, eight points at a time, give the bits of the scalar
+    /// lookup at every point: in the map, in the shadow and half in it, on texel edges, on
+    /// the map's last texels and past them, behind the light, and at NaN. Controls: the
+    /// points reach each kind of answer (lit, dark, between, outside), so a lookup that
+    /// always answered one thing would fail.
+    #[test]
+    fn lookups_in_lanes_give_the_scalar_lookups_bits() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let ball = TriMesh::uv_sphere(0.3, 24, 12);
+        let floor = TriMesh::cuboid([3.0, 3.0, 0.02])
+            .transformed(&Affine3::from_translation([0.0, 0.0, -0.32]));
+        let plain = SurfaceMaterial::plain([0.4, 0.5, 0.6], 0.9);
+        let item = |mesh| DrawItem {
+            mesh,
+            world_from_mesh: Affine3::IDENTITY,
+            material: &plain,
+            instance: 1,
+            casts_shadow: true,
+            vertex_colors: None,
+            closed_within: None,
+        };
+        let items = [item(&floor), item(&ball)];
+        let lighting = Lighting {
+            lights: vec![DirectionalLight {
+                toward_light_world: crate::mesh::normalize3([0.5, -0.4, 1.0]),
+                color: [1.0; 3],
+                casts_shadow: true,
+            }],
+            shadow_region: Aabb::from_points([[-1.5, -1.5, -0.4], [1.5, 1.5, 0.4]]),
+            shadow_map_px: 100,
+            ..Default::default()
+        };
+        let map = ShadowMap::of_lighting(&lighting, &items).expect("a shadow map");
+        let size = (map.tiles.size - 1) as f32;
+        type PointNormal = ([f32; 3], [f32; 3]);
+        let mut points: Vec<PointNormal> = (0..4000)
+            .map(|_| {
+                let p = [
+                    rng.random_range(-2.0..2.0f32),
+                    rng.random_range(-2.0..2.0f32),
+                    rng.random_range(-0.4..0.4f32),
+                ];
+                let n = to_f32(normalize3([
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                ]));
+                (p, n)
+            })
+            .collect();
+        // Points whose map coordinates fall on texel edges and on the map's last texels:
+        // solved from the lookup's rows for a chosen texel position and depth.
+        let ShadowLookup { to_x, to_y, .. } = &map.lookup;
+        for (sx, sy) in [
+            (0.0, 0.0),
+            (size, 3.0),
+            (size - 0.5, size - 0.5),
+            (12.0, 40.0),
+            (-0.25, 5.0),
+        ] {
+            // Solve the 2×2 system in x and y at z = 0 (zero normal: no offset).
+            let (a, b, c, d) = (to_x[0], to_x[1], to_y[0], to_y[1]);
+            let (ex, ey) = (sx - to_x[3], sy - to_y[3]);
+            let det = a * d - b * c;
+            points.push((
+                [(ex * d - b * ey) / det, (a * ey - c * ex) / det, 0.0],
+                [0.0; 3],
+            ));
+        }
+        points.push(([f32::NAN, 0.0, 0.0], [0.0, 0.0, 1.0]));
+        points.push(([0.0; 3], [f32::NAN; 3]));
+        let mut kinds = [0usize; 4];
+        for chunk in points.chunks(LANES) {
+            let lane = |get: &dyn Fn(&PointNormal) -> f32| {
+                V::from(std::array::from_fn::<f32, LANES, _>(|i| {
+                    chunk.get(i).map_or(0.0, get)
+                }))
+            };
+            let p: [V; 3] = std::array::from_fn(|k| lane(&|q| q.0[k]));
+            let n: [V; 3] = std::array::from_fn(|k| lane(&|q| q.1[k]));
+            let got = light_fractions(&map, p, n).to_array();
+            for (i, &(p, n)) in chunk.iter().enumerate() {
+                let want = map.light_fraction(p, n);
+                assert_eq!(got[i].to_bits(), want.to_bits(), "at {p:?}, normal {n:?}");
+                let (sx, sy) = (
+                    to_x[0] * p[0] + to_x[1] * p[1] + to_x[2] * p[2] + to_x[3],
+                    to_y[0] * p[0] + to_y[1] * p[1] + to_y[2] * p[2] + to_y[3],
+                );
+                let inside = sx >= 0.0 && sy >= 0.0 && sx < size && sy < size;
+                kinds[match want {
+                    _ if !inside => 3,
+                    1.0 => 0,
+                    0.0 => 1,
+                    _ => 2,
+                }] += 1;
+            }
+        }
+        assert!(
+            kinds.iter().all(|&k| k > 50),
+            "lit, dark, between, outside: {kinds:?}"
+        );
     }
 }
