@@ -357,10 +357,11 @@ fn chunks_of(len: usize) -> usize {
     len.div_ceil(LANES)
 }
 
-/// `ShadowMap::light_fraction` (the tests' scalar reference) lane by lane: the same operations in the same order, so the
-/// same bits. The texel coordinates, the depths and the bilinear weights are computed eight
-/// lanes at a time; only the four texels of each lane are read one by one. A lane outside the
-/// map is lit (its texels are read at the map's corner and not used).
+/// `ShadowMap::light_fraction` (the tests' scalar reference) lane by lane: the same operations
+/// in the same order, so the same bits. The texel coordinates, the depths and the bilinear
+/// weights are computed eight lanes at a time; only the four texels of each lane are read one
+/// by one. A lane outside the map is lit (its texels are read at the map's corner and not
+/// used).
 #[inline(always)]
 fn light_fractions(map: &ShadowMap, p_world: [V; 3], normal: [V; 3]) -> V {
     let ShadowLookup {
@@ -704,8 +705,9 @@ mod tests {
                 (p, n)
             })
             .collect();
-        // Points whose map coordinates fall on texel edges and on the map's last texels:
-        // solved from the lookup's rows for a chosen texel position and depth.
+        // Points whose map coordinates fall on (or within a rounding of) texel edges, the map's
+        // last texels and just past them: solved from the lookup's rows for a chosen texel
+        // position.
         let ShadowLookup { to_x, to_y, .. } = &map.lookup;
         for (sx, sy) in [
             (0.0, 0.0),
@@ -738,6 +740,8 @@ mod tests {
             for (i, &(p, n)) in chunk.iter().enumerate() {
                 let want = map.light_fraction(p, n);
                 assert_eq!(got[i].to_bits(), want.to_bits(), "at {p:?}, normal {n:?}");
+                // Where the lookup lands (the point moved along its normal, as it does).
+                let p = add3f(p, scale3f(n, map.lookup.normal_offset));
                 let (sx, sy) = (
                     to_x[0] * p[0] + to_x[1] * p[1] + to_x[2] * p[2] + to_x[3],
                     to_y[0] * p[0] + to_y[1] * p[1] + to_y[2] * p[2] + to_y[3],
