@@ -41,6 +41,8 @@ def runs(out: Path, stem: str):
 
 RATIO = {
     "open3d": r"^ratio:\s+([\d.]+)x best to best, ([\d.]+)x median to median",
+    "open3d_sampled": r"^open3d, its plane fitted on mesa's sample.*ratio ([\d.]+)x best to best, "
+                      r"([\d.]+)x median to median",
     "blender": r"^ratio \(Blender / mesa\): ([\d.]+)x on the minima, ([\d.]+)x on the medians",
     "graph": r"ratio python / mesa: ([\d.]+)x min to min, ([\d.]+)x median to median",
 }
@@ -52,6 +54,8 @@ def targets(out: Path):
     for stem, what in (("open3d_syn", "lift, 1024² synthetic, as a stage"),
                        ("open3d_m2t2", "lift, real M2T2 frame, as a stage")):
         rows.append((what, [find(read(p), RATIO["open3d"]) for p in runs(out, stem)], 10.0))
+        rows.append((f"{what} (Open3D's plane on mesa's sample of the pixels)",
+                     [find(read(p), RATIO["open3d_sampled"]) for p in runs(out, stem)], 10.0))
     rows.append(("render, 512² view, one thread",
                  [find(read(p), RATIO["blender"]) for p in runs(out, "blender")], 100.0))
     rows.append(("pack, 15 objects",
