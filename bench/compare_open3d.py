@@ -16,7 +16,7 @@ input is that real 1280x720 frame instead: its label image with the robot's and 
 set to background, the table labelled as the support when its label is in the image, as
 `stages/tests/lift_real.rs` reads it. Frame 00 has no table pixels labelled (the table is in
 the background, label 0): 12 objects, and both sides fit the table plane on the background.
-Before 2026-11-30 14:30 the Open3D side fitted no plane for such a frame, and the script said
+Before 2026-11-30 14:15 the Open3D side fitted no plane for such a frame, and the script said
 "11 objects + table".
 
     pip install open3d numpy pillow
