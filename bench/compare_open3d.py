@@ -111,6 +111,18 @@ def m2t2_input(frame: Path, out: Path):
     return width, height, objects, any(i["support"] for i in instances)
 
 
+def timed(run, repeat):
+    """One untimed warm-up of `run` (the page cache, the allocator), then `repeat` timed runs:
+    the best and the median, in ms."""
+    run()
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        run()
+        times.append(time.perf_counter() - start)
+    return 1000 * min(times), 1000 * statistics.median(times)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--copies", type=int, default=20, help="scenes in the mesa dataset")
@@ -133,33 +145,12 @@ def main():
             shutil.copytree(first, dataset / f"scenes/office_table/office_table_{k:04d}/input")
 
         # Both sides the same way: a warm-up, then `--repeat` timed runs; best and median.
-        open3d_lift(first)
-        times = []
-        for _ in range(args.repeat):
-            start = time.perf_counter()
-            open3d_lift(first)
-            times.append(time.perf_counter() - start)
-        open3d_ms = 1000 * min(times)
-        open3d_median = 1000 * statistics.median(times)
+        open3d_ms, open3d_median = timed(lambda: open3d_lift(first), args.repeat)
         # The same, the plane fitted on the pixels mesa fits it on (a second figure).
-        open3d_lift(first, plane_sample=True)
-        sampled = []
-        for _ in range(args.repeat):
-            start = time.perf_counter()
-            open3d_lift(first, plane_sample=True)
-            sampled.append(time.perf_counter() - start)
-        sampled_ms = 1000 * min(sampled)
-        sampled_median = 1000 * statistics.median(sampled)
-
+        sampled_ms, sampled_median = timed(lambda: open3d_lift(first, plane_sample=True), args.repeat)
         cmd = [args.mesa, "lift", str(dataset), "--jobs", "1", "--force", "--progress", "off", "-q"]
-        subprocess.run(cmd, check=True)  # warm-up (page cache)
-        runs = []
-        for _ in range(args.repeat):
-            start = time.perf_counter()
-            subprocess.run(cmd, check=True)
-            runs.append((time.perf_counter() - start) / args.copies)
-        mesa_ms = 1000 * min(runs)
-        mesa_median = 1000 * statistics.median(runs)
+        mesa_ms, mesa_median = (
+            t / args.copies for t in timed(lambda: subprocess.run(cmd, check=True), args.repeat))
 
     load = os.getloadavg()
     print(f"input: {what}; Open3D {o3d.__version__}, single-threaded; load average "

@@ -10,9 +10,6 @@ import re
 import sys
 from pathlib import Path
 
-MISSING = None
-
-
 def read(path: Path) -> str:
     try:
         return path.read_text(errors="replace")
@@ -23,11 +20,11 @@ def read(path: Path) -> str:
 def find(text: str, pattern: str):
     """The groups of the first match of `pattern` in `text`, as floats; None without one."""
     match = re.search(pattern, text, re.MULTILINE)
-    return tuple(float(g) for g in match.groups()) if match else MISSING
+    return tuple(float(g) for g in match.groups()) if match else None
 
 
 def section(text: str, start: str, end: str) -> str:
-    """The text from the line starting with `start` to the next line starting with `end`."""
+    """The text from the first `start` to the next `end` after it (to the end without one)."""
     at = text.find(start)
     if at < 0:
         return ""
@@ -49,7 +46,7 @@ RATIO = {
 
 
 def targets(out: Path):
-    """(what, [(ratio on the minima, ratio on the medians) or None per run], goal, unit)."""
+    """(what, [(ratio on the minima, ratio on the medians or None) or None per run], goal)."""
     rows = []
     for stem, what in (("open3d_syn", "lift, 1024² synthetic, as a stage"),
                        ("open3d_m2t2", "lift, real M2T2 frame, as a stage")):
@@ -82,7 +79,7 @@ def mesa_run(out: Path):
 
 
 def cell(ratio):
-    if ratio is MISSING:
+    if ratio is None:
         return "missing"
     low, median = ratio
     return f"{low:.1f}×" + ("" if median is None else f" ({median:.1f}×)")
@@ -98,7 +95,7 @@ def main():
     print("|---|---|---|---|")
     unmet = 0
     for what, ratios, goal in targets(out):
-        met = bool(ratios) and all(r is not MISSING and r[0] >= goal for r in ratios)
+        met = bool(ratios) and all(r is not None and r[0] >= goal for r in ratios)
         unmet += not met
         shown = ", ".join(cell(r) for r in ratios) or "missing"
         print(f"| {what} | {shown} | ≥ {goal:g}× | {'yes' if met else 'no'} |")
