@@ -64,8 +64,8 @@ pub fn write_if_changed(path: &Path, bytes: &[u8]) -> io::Result<bool> {
     Ok(true)
 }
 
-/// Whether `path` is a regular file (not a link) whose contents are `bytes`, read in blocks
-/// and compared as they come (a differing file usually differs in its size or first block).
+/// Whether `path` is a regular file (not a link) whose contents are `bytes` (a file of another
+/// size is not read).
 fn holds_exactly(path: &Path, bytes: &[u8]) -> bool {
     match fs::symlink_metadata(path) {
         Ok(meta) if meta.is_file() && meta.len() == bytes.len() as u64 => {}
@@ -74,6 +74,11 @@ fn holds_exactly(path: &Path, bytes: &[u8]) -> bool {
     let Ok(file) = fs::File::open(path) else {
         return false;
     };
+    let len = bytes.len() as u64;
+    if len <= WHOLE_COMPARE_UP_TO {
+        // Markers and most outputs: read whole in one call ([`read_sized`]).
+        return matches!(read_sized(&file, len, len), Ok(held) if held == bytes);
+    }
     let mut reader = io::BufReader::with_capacity(1 << 16, file);
     let mut rest = bytes;
     loop {
@@ -92,6 +97,10 @@ fn holds_exactly(path: &Path, bytes: &[u8]) -> bool {
         reader.consume(n);
     }
 }
+
+/// Up to this size, [`holds_exactly`] reads a file whole to compare it; above it, block by
+/// block, so that comparing a scene's GLB does not hold a second copy of it in memory.
+const WHOLE_COMPARE_UP_TO: u64 = 1 << 20;
 
 /// A file written through a temporary name beside it and renamed over the target by
 /// [`AtomicFile::commit`], for outputs too large to hold in memory (the record files).
@@ -372,10 +381,7 @@ pub fn human_bytes(n: u64) -> String {
 /// read itself bounded, so a file that grows meanwhile cannot exceed the limit).
 pub fn read_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
     let len = check_regular_file(path, limit)?;
-    let file = fs::File::open(path)?;
-    let mut bytes = Vec::with_capacity(len as usize);
-    file.take(limit.bytes.saturating_add(1))
-        .read_to_end(&mut bytes)?;
+    let bytes = read_sized(&fs::File::open(path)?, len, limit.bytes)?;
     if bytes.len() as u64 > limit.bytes {
         return Err(io::Error::new(
             io::ErrorKind::InvalidInput,
@@ -384,6 +390,43 @@ pub fn read_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
                 human_bytes(limit.bytes)
             ),
         ));
+    }
+    Ok(bytes)
+}
+
+/// Reads `file` (a regular file, `size` bytes long when it was statted) whole, but never more
+/// than `max + 1` bytes: a caller tells a file that outgrew `max` by the extra byte. Any
+/// reader is taken, for the tests.
+///
+/// **Why not `read_to_end`.** It reads in blocks of 8 KiB at first and always makes one more
+/// read to see the end, so a 10 KB layout took three reads. Here the first read asks for one
+/// byte more than `size`; a regular file's read stops only at its end (page-cache reads on
+/// Linux), so when it returns exactly `size` bytes the file has been read whole, in one call.
+/// A file that grew since it was statted, or a read cut short, goes on block by block to the
+/// end as before.
+pub fn read_sized(mut file: impl Read, size: u64, max: u64) -> io::Result<Vec<u8>> {
+    let want = size.min(max).saturating_add(1);
+    let mut bytes = vec![0u8; usize::try_from(want).map_err(io::Error::other)?];
+    let mut filled = 0;
+    while filled < bytes.len() {
+        let n = match file.read(&mut bytes[filled..]) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        filled += n;
+        if filled as u64 == size && filled < bytes.len() {
+            // Asked for more than `size` and got exactly `size`: the end.
+            bytes.truncate(filled);
+            return Ok(bytes);
+        }
+    }
+    bytes.truncate(filled);
+    if filled as u64 == want {
+        // It grew past `size`: the rest, up to one byte over `max`.
+        file.take(max.saturating_add(1) - want)
+            .read_to_end(&mut bytes)?;
     }
     Ok(bytes)
 }
@@ -598,6 +641,98 @@ mod tests {
             .expect("list")
             .count();
         assert_eq!(leftovers, 1, "and leaves no temporary file");
+    }
+
+    /// A reader of `data` as a regular file reads: each call gives what is asked for, up to
+    /// the end; except its first call, which may be cut to `cut` bytes (a read cut short) or
+    /// fail with `Interrupted`. It counts its calls.
+    struct FileLike<'a> {
+        data: &'a [u8],
+        cut: Option<usize>,
+        interrupt_first: bool,
+        calls: usize,
+    }
+
+    impl Read for FileLike<'_> {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            self.calls += 1;
+            if std::mem::take(&mut self.interrupt_first) {
+                return Err(io::ErrorKind::Interrupted.into());
+            }
+            let limit = self.cut.take().unwrap_or(usize::MAX);
+            let n = buf.len().min(limit).min(self.data.len());
+            buf[..n].copy_from_slice(&self.data[..n]);
+            self.data = &self.data[n..];
+            Ok(n)
+        }
+    }
+
+    fn file_like(data: &[u8]) -> FileLike<'_> {
+        FileLike {
+            data,
+            cut: None,
+            interrupt_first: false,
+            calls: 0,
+        }
+    }
+
+    /// A file read whole in one call when it still has its statted size; every other case (a
+    /// read cut short, a file that grew or shrank, one over the bound) reads on to its end or
+    /// to one byte over the bound, as `read_to_end` over `take(max + 1)` does.
+    #[test]
+    fn a_sized_read_reads_whole_in_one_call_and_every_other_case_to_the_end() {
+        let data: Vec<u8> = (0..10_000u32).map(|i| (i * 7 % 251) as u8).collect();
+        let reference = |max: u64| {
+            let mut all = Vec::new();
+            data.as_slice()
+                .take(max + 1)
+                .read_to_end(&mut all)
+                .expect("read");
+            all
+        };
+        // The size as statted: one call.
+        let mut reader = file_like(&data);
+        let bytes = read_sized(&mut reader, data.len() as u64, 1 << 20).expect("read");
+        assert!(bytes == data);
+        assert_eq!(reader.calls, 1);
+        // The control: `read_to_end` makes more calls for the same file.
+        let mut reader = file_like(&data);
+        let mut all = Vec::new();
+        (&mut reader)
+            .take(1 << 20)
+            .read_to_end(&mut all)
+            .expect("read");
+        assert!(reader.calls > 1, "{} calls", reader.calls);
+
+        for (cut, interrupt_first) in [
+            (None, false),
+            (None, true),
+            (Some(1), false),
+            (Some(4096), true),
+        ] {
+            for (size, max) in [
+                (10_000, 1 << 20), // as statted
+                (9_000, 1 << 20),  // grew since
+                (11_000, 1 << 20), // shrank since
+                (10_000, 9_999),   // over the bound
+                (5_000, 6_000),    // grew over the bound
+                (0, 1 << 20),      // was empty
+            ] {
+                let mut reader = file_like(&data);
+                reader.cut = cut;
+                reader.interrupt_first = interrupt_first;
+                let bytes = read_sized(&mut reader, size, max).expect("read");
+                let expected = reference(max);
+                assert!(
+                    bytes == expected,
+                    "cut {cut:?}, size {size}, max {max}: {} bytes read, {} expected",
+                    bytes.len(),
+                    expected.len()
+                );
+            }
+        }
+        let bytes = read_sized(file_like(&[]), 0, 100).expect("read");
+        assert!(bytes.is_empty());
     }
 
     #[test]

@@ -34,15 +34,15 @@
 
 use std::collections::BTreeMap;
 use std::fs;
-use std::io::{self, Read as _};
+use std::io;
 use std::os::unix::fs::MetadataExt as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use super::scene_files;
 use crate::fsio::{
-    check_regular_file, read_bounded, sha256_hex, sha256_reader, write_if_changed, SizeLimit,
-    HASHED_INPUT_LIMIT,
+    check_regular_file, read_bounded, read_sized, sha256_hex, sha256_reader, write_if_changed,
+    SizeLimit, HASHED_INPUT_LIMIT,
 };
 
 /// Inputs smaller than this are hashed every time (256 KiB: a quarter of a millisecond of
@@ -169,14 +169,17 @@ impl RememberedDigests {
     /// when the file's identity is the one remembered with it, else hashed (and remembered
     /// when the file has settled, as of `now`).
     pub fn digest(&mut self, path: &Path, rel: &str, now: SystemTime) -> io::Result<String> {
-        let size = check_regular_file(path, HASHED_INPUT_LIMIT)?;
+        // A scene's input the runner looked up just before is not statted again.
+        let size = match scene_files::regular_file_size(path) {
+            Some(size) if size <= HASHED_INPUT_LIMIT.bytes => size,
+            _ => check_regular_file(path, HASHED_INPUT_LIMIT)?,
+        };
         let file = fs::File::open(path)?;
         if size < REMEMBER_FROM_BYTES {
             // Read whole, and the bytes handed to the stage that runs next on this thread
             // ([`scene_files`]): it reads what was hashed, without opening the file again.
             let cap = REMEMBER_FROM_BYTES.saturating_mul(2);
-            let mut bytes = Vec::with_capacity(size as usize);
-            (&file).take(cap).read_to_end(&mut bytes)?;
+            let bytes = read_sized(&file, size, cap - 1)?;
             if bytes.len() as u64 >= cap {
                 // It grew while being read: hashed whole from the start, not handed over.
                 return sha256_reader(fs::File::open(path)?, HASHED_INPUT_LIMIT);

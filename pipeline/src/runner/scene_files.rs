@@ -24,8 +24,10 @@ use std::path::{Path, PathBuf};
 /// One scene's record.
 #[derive(Default)]
 struct SceneFiles {
-    /// Whether a path is a regular file (following links, as [`Path::is_file`]).
-    is_file: HashMap<PathBuf, bool>,
+    /// Whether a path is a regular file (following links, as [`Path::is_file`]), with its size
+    /// when it is one and the runner statted it (`Some(None)`: a regular file the runner read
+    /// without a size kept here).
+    is_file: HashMap<PathBuf, Option<Option<u64>>>,
     /// The bytes of inputs the runner read whole to hash them.
     bytes: HashMap<PathBuf, Vec<u8>>,
 }
@@ -56,13 +58,22 @@ pub fn is_file(path: &Path) -> bool {
         let Some(files) = record.as_mut() else {
             return path.is_file();
         };
-        if let Some(&known) = files.is_file.get(path) {
-            return known;
+        if let Some(known) = files.is_file.get(path) {
+            return known.is_some();
         }
-        let is_file = path.is_file();
-        files.is_file.insert(path.to_path_buf(), is_file);
-        is_file
+        let size = std::fs::metadata(path)
+            .ok()
+            .filter(std::fs::Metadata::is_file)
+            .map(|meta| Some(meta.len()));
+        files.is_file.insert(path.to_path_buf(), size);
+        size.is_some()
     })
+}
+
+/// The size of `path` when [`is_file`] found it a regular file in this scene, so that the
+/// runner reading it next does not stat it again; `None` outside a scene, or when not known.
+pub(crate) fn regular_file_size(path: &Path) -> Option<u64> {
+    RECORD.with(|record| *record.borrow().as_ref()?.is_file.get(path)?.as_ref()?)
 }
 
 /// Keeps the bytes of an input the runner read whole (to hash it), for the stage; nothing is
@@ -70,7 +81,7 @@ pub fn is_file(path: &Path) -> bool {
 pub(crate) fn keep(path: &Path, bytes: Vec<u8>) {
     RECORD.with(|record| {
         if let Some(files) = record.borrow_mut().as_mut() {
-            files.is_file.insert(path.to_path_buf(), true);
+            files.is_file.insert(path.to_path_buf(), Some(None));
             files.bytes.insert(path.to_path_buf(), bytes);
         }
     });
@@ -94,9 +105,11 @@ mod tests {
         let path = dir.path().join("layout.json");
         within_scene(|| {
             assert!(!is_file(&path));
+            assert_eq!(regular_file_size(&path), None);
             std::fs::write(&path, b"{}").expect("write");
             // Looked up once per scene: still absent.
             assert!(!is_file(&path));
+            assert_eq!(regular_file_size(&path), None);
             keep(&path, b"kept".to_vec());
             assert!(is_file(&path));
             assert_eq!(take(&path).as_deref(), Some(&b"kept"[..]));
@@ -105,11 +118,16 @@ mod tests {
         assert!(is_file(&path));
         keep(&path, b"kept".to_vec());
         assert_eq!(take(&path), None);
-        // A new scene starts with nothing known.
+        // A new scene starts with nothing known; its size is that of its lookup.
         within_scene(|| {
+            assert_eq!(regular_file_size(&path), None);
             assert!(is_file(&path));
+            assert_eq!(regular_file_size(&path), Some(2));
+            std::fs::write(&path, b"{ }").expect("write");
+            assert_eq!(regular_file_size(&path), Some(2));
             assert_eq!(take(&path), None);
         });
+        assert_eq!(regular_file_size(&path), None);
         // A panic inside a scene closes its record too.
         let caught = std::panic::catch_unwind(|| {
             within_scene(|| {
