@@ -2,10 +2,12 @@
 //!
 //! A file is written to a temporary name in the same folder and renamed over the target, so a
 //! reader (or a rerun after `kill -9`) sees either the old bytes or the new ones, never a
-//! mixture. Temporary names carry the owner's file name, [`TMP_MARK`] and the writing process's
-//! pid (`.<name>.mesa-tmp-<pid>-<n>`), so a rerun can sweep the leftovers of a killed run for
-//! exactly the files it is about to write, and leave alone those of a run still going (two
-//! runs on one dataset must not delete each other's files half-way).
+//! mixture. Temporary names carry the owner's file name, [`TMP_MARK`], the writing process's
+//! pid and a tag of its machine (`.<name>.mesa-tmp-<pid>-<n>-<host tag>`), so a rerun can sweep
+//! the leftovers of a killed run for exactly the files it is about to write, and leave alone
+//! those of a run still going (two runs on one dataset must not delete each other's files
+//! half-way), on this machine or on another one sharing the dataset (the shards of a cluster
+//! job: a pid says nothing about a process of another machine).
 
 use std::collections::HashMap;
 use std::fs;
@@ -23,20 +25,51 @@ pub const TMP_MARK: &str = ".mesa-tmp-";
 
 static COUNTER: AtomicU64 = AtomicU64::new(0);
 
+/// The name of this machine (`/proc/sys/kernel/hostname`, else `/etc/hostname`; empty when
+/// neither is readable).
+pub fn host_name() -> String {
+    fs::read_to_string("/proc/sys/kernel/hostname")
+        .or_else(|_| fs::read_to_string("/etc/hostname"))
+        .map(|name| name.trim().to_owned())
+        .unwrap_or_default()
+}
+
+/// This machine's tag in temporary names: 8 hex digits of a hash (64-bit FNV-1a, folded) of
+/// its host name. Short, so that a temporary name stays within a file name's 255 bytes
+/// ([`MAX_SCENE_NAME_BYTES`](crate::runner::MAX_SCENE_NAME_BYTES)).
+fn host_tag() -> &'static str {
+    static TAG: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    TAG.get_or_init(|| tag_of_host(&host_name()))
+}
+
+fn tag_of_host(host: &str) -> String {
+    let hash = host.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    });
+    format!("{:08x}", (hash ^ (hash >> 32)) as u32)
+}
+
+/// The temporary name beside `path` that this process writes it under next.
+fn tmp_path(path: &Path) -> io::Result<PathBuf> {
+    let dir = path.parent().unwrap_or_else(|| Path::new("."));
+    let name = path
+        .file_name()
+        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"))?;
+    Ok(dir.join(format!(
+        ".{}{}{}-{}-{}",
+        name.to_string_lossy(),
+        TMP_MARK,
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed),
+        host_tag()
+    )))
+}
+
 /// Writes `bytes` to `path` atomically, creating parent folders.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     let dir = path.parent().unwrap_or_else(|| Path::new("."));
     fs::create_dir_all(dir)?;
-    let name = path
-        .file_name()
-        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"))?;
-    let tmp = dir.join(format!(
-        ".{}{}{}-{}",
-        name.to_string_lossy(),
-        TMP_MARK,
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
+    let tmp = tmp_path(path)?;
     let result = (|| {
         let mut file = fs::File::create(&tmp)?;
         file.write_all(bytes)?;
@@ -119,16 +152,7 @@ impl AtomicFile {
         let dir = path.parent().unwrap_or_else(|| Path::new("."));
         fs::create_dir_all(dir)?;
         sweep_tmp_for(path)?;
-        let name = path
-            .file_name()
-            .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"))?;
-        let tmp = dir.join(format!(
-            ".{}{}{}-{}",
-            name.to_string_lossy(),
-            TMP_MARK,
-            std::process::id(),
-            COUNTER.fetch_add(1, Ordering::Relaxed)
-        ));
+        let tmp = tmp_path(path)?;
         let file = fs::File::create(&tmp)?;
         Ok(Self {
             target: path.to_owned(),
@@ -177,8 +201,9 @@ impl Drop for AtomicFile {
 }
 
 /// Removes temporary files left beside `path` by a killed writer of that same file: those whose
-/// pid names a process that no longer runs (or whose name carries no pid). Those of a process
-/// still running, this one included, are left alone: they are another run's work in progress.
+/// pid names a process of this machine that no longer runs (or whose name carries no pid).
+/// Those of a process still running, this one included, are left alone: they are another run's
+/// work in progress; so are those of another machine, whose processes cannot be seen from here.
 pub fn sweep_tmp_for(path: &Path) -> io::Result<()> {
     let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
         return Ok(());
@@ -200,7 +225,7 @@ pub fn sweep_dead_tmp_in(dir: &Path) -> io::Result<()> {
 }
 
 /// Removes the files of `dir` that `owner_part` takes for temporary files (giving what follows
-/// [`TMP_MARK`] in their name, `<pid>-<n>`) and whose writer no longer runs.
+/// [`TMP_MARK`] in their name, `<pid>-<n>-<host tag>`) and whose writer no longer runs.
 fn sweep_dead_tmp(dir: &Path, owner_part: impl Fn(&str) -> Option<&str>) -> io::Result<()> {
     let entries = match fs::read_dir(dir) {
         Ok(entries) => entries,
@@ -213,13 +238,29 @@ fn sweep_dead_tmp(dir: &Path, owner_part: impl Fn(&str) -> Option<&str>) -> io::
         let Some(rest) = owner_part(&file_name.to_string_lossy()).map(str::to_owned) else {
             continue;
         };
-        let owner = rest.split('-').next().and_then(|p| p.parse::<u32>().ok());
-        let in_use = owner.is_some_and(|pid| pid == std::process::id() || process_running(pid));
-        if !in_use {
-            let _ = fs::remove_file(entry.path());
+        if !writer_is_dead(&rest) {
+            continue;
         }
+        let _ = fs::remove_file(entry.path());
     }
     Ok(())
+}
+
+/// Whether the writer of a temporary file, `owner` being what follows [`TMP_MARK`] in its
+/// name, certainly no longer runs: a process of this machine that has exited, or a name with
+/// no pid. A name of mesa before the host tag (`<pid>-<n>`) is taken for this machine's.
+fn writer_is_dead(owner: &str) -> bool {
+    let mut parts = owner.split('-');
+    let Some(pid) = parts.next().and_then(|p| p.parse::<u32>().ok()) else {
+        return true;
+    };
+    let _counter = parts.next();
+    if let Some(tag) = parts.next() {
+        if tag != host_tag() {
+            return false;
+        }
+    }
+    pid != std::process::id() && !process_running(pid)
 }
 
 /// Whether process `pid` of this machine may still be running. On Linux it is whether
@@ -540,6 +581,26 @@ mod tests {
         assert!(fs::symlink_metadata(&link).expect("meta").is_file());
     }
 
+    /// Temporary names carry this machine's tag, and the tags of two host names differ.
+    #[test]
+    fn temporary_names_carry_the_host_tag() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let tmp = tmp_path(&dir.path().join("out.json")).expect("name");
+        let name = tmp
+            .file_name()
+            .expect("name")
+            .to_string_lossy()
+            .into_owned();
+        let owner = name.split(TMP_MARK).nth(1).expect("mark");
+        let parts: Vec<&str> = owner.split('-').collect();
+        assert_eq!(parts.len(), 3, "{name}");
+        assert_eq!(parts[0], std::process::id().to_string());
+        assert_eq!(parts[2], host_tag());
+        assert_eq!(host_tag().len(), 8);
+        assert_ne!(tag_of_host("node-1"), tag_of_host("node-2"));
+        assert_eq!(tag_of_host(&host_name()), host_tag());
+    }
+
     #[test]
     fn atomic_write_replaces_and_sweeps() {
         let dir = tempfile::tempdir().expect("tempdir");
@@ -579,6 +640,11 @@ mod tests {
         for stray in &strays {
             fs::write(stray, b"half").expect("stray");
         }
+        // Written by this mesa on this machine, by a dead process: swept too.
+        let tagged = dir
+            .path()
+            .join(format!(".c.json{TMP_MARK}{dead}-4-{}", host_tag()));
+        fs::write(&tagged, b"half").expect("tagged");
         let live = dir
             .path()
             .join(format!(".a.json{TMP_MARK}{}-1", std::process::id()));
@@ -588,12 +654,17 @@ mod tests {
             dir.path().join(format!("a.json{TMP_MARK}{dead}-0")),
             dir.path().join(".hidden.json"),
             live.clone(),
+            // Another machine's writer (the same pid says nothing here): left alone.
+            dir.path().join(format!(
+                ".b.json{TMP_MARK}{dead}-2-{}",
+                tag_of_host("another-node")
+            )),
         ];
         for file in &kept {
             fs::write(file, b"keep").expect("write");
         }
         sweep_dead_tmp_in(dir.path()).expect("sweep");
-        for stray in &strays {
+        for stray in strays.iter().chain([&tagged]) {
             assert!(!stray.exists(), "{} is swept", stray.display());
         }
         for file in &kept {

@@ -238,7 +238,8 @@ pub fn discover_scenes(dataset: &Path) -> Result<Vec<Scene>, RunError> {
 }
 
 /// The longest scene id or table type, in bytes: a file name holds `<scene_id>.glb` and a
-/// writer's temporary name `.<name>.mesa-tmp-<pid>-<n>`, within the 255 bytes of a file name.
+/// writer's temporary name `.<name>.mesa-tmp-<pid>-<n>-<host tag>` (7, about 6 and 8 bytes),
+/// within the 255 bytes of a file name.
 pub const MAX_SCENE_NAME_BYTES: usize = 200;
 
 /// A folder under `scenes/` that is not taken as a scene.

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use super::core::{Shard, StageContext, RUN_DIR};
 use crate::config::LockMode;
 use crate::exit::UsageError;
-use crate::fsio::{process_running, process_start_ticks};
+use crate::fsio::{host_name, process_running, process_start_ticks};
 
 /// The folder of the lock files, under the dataset's `.mesa/`.
 pub const LOCK_DIR: &str = "locks";
@@ -194,13 +194,6 @@ pub fn lock_stage(ctx: &StageContext<'_>, stage: &str, shard: Shard) -> anyhow::
 }
 
 /// The name of this machine, or "" when it cannot be read.
-fn host_name() -> String {
-    fs::read_to_string("/proc/sys/kernel/hostname")
-        .or_else(|_| fs::read_to_string("/etc/hostname"))
-        .map(|name| name.trim().to_owned())
-        .unwrap_or_default()
-}
-
 fn now_unix_s() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
