@@ -465,7 +465,8 @@ pub fn read_sized(mut file: impl Read, size: u64, max: u64) -> io::Result<Vec<u8
     }
     bytes.truncate(filled);
     if filled as u64 == want {
-        // It grew past `size`: the rest, up to one byte over `max`.
+        // Longer than `size` (it grew since it was statted) or than `max`: the rest, up to
+        // one byte over `max`.
         file.take(max.saturating_add(1) - want)
             .read_to_end(&mut bytes)?;
     }

@@ -193,7 +193,6 @@ pub fn lock_stage(ctx: &StageContext<'_>, stage: &str, shard: Shard) -> anyhow::
     }
 }
 
-/// The name of this machine, or "" when it cannot be read.
 fn now_unix_s() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)

@@ -24,12 +24,19 @@ use std::path::{Path, PathBuf};
 /// One scene's record.
 #[derive(Default)]
 struct SceneFiles {
-    /// Whether a path is a regular file (following links, as [`Path::is_file`]), with its size
-    /// when it is one and the runner statted it (`Some(None)`: a regular file the runner read
-    /// without a size kept here).
-    is_file: HashMap<PathBuf, Option<Option<u64>>>,
+    /// Whether a path is a regular file (following links, as [`Path::is_file`]).
+    is_file: HashMap<PathBuf, Known>,
     /// The bytes of inputs the runner read whole to hash them.
     bytes: HashMap<PathBuf, Vec<u8>>,
+}
+
+/// What a scene's record knows of a path.
+#[derive(Debug, Clone, Copy)]
+enum Known {
+    /// Not a regular file (absent, a folder, …).
+    NotAFile,
+    /// A regular file, with its size when the runner statted it (not when it only read it).
+    File(Option<u64>),
 }
 
 thread_local! {
@@ -59,21 +66,26 @@ pub fn is_file(path: &Path) -> bool {
             return path.is_file();
         };
         if let Some(known) = files.is_file.get(path) {
-            return known.is_some();
+            return matches!(known, Known::File(_));
         }
-        let size = std::fs::metadata(path)
-            .ok()
-            .filter(std::fs::Metadata::is_file)
-            .map(|meta| Some(meta.len()));
-        files.is_file.insert(path.to_path_buf(), size);
-        size.is_some()
+        let known = match std::fs::metadata(path) {
+            Ok(meta) if meta.is_file() => Known::File(Some(meta.len())),
+            _ => Known::NotAFile,
+        };
+        files.is_file.insert(path.to_path_buf(), known);
+        matches!(known, Known::File(_))
     })
 }
 
 /// The size of `path` when [`is_file`] found it a regular file in this scene, so that the
 /// runner reading it next does not stat it again; `None` outside a scene, or when not known.
 pub(crate) fn regular_file_size(path: &Path) -> Option<u64> {
-    RECORD.with(|record| *record.borrow().as_ref()?.is_file.get(path)?.as_ref()?)
+    RECORD.with(
+        |record| match record.borrow().as_ref()?.is_file.get(path)? {
+            Known::File(size) => *size,
+            Known::NotAFile => None,
+        },
+    )
 }
 
 /// Keeps the bytes of an input the runner read whole (to hash it), for the stage; nothing is
@@ -81,7 +93,7 @@ pub(crate) fn regular_file_size(path: &Path) -> Option<u64> {
 pub(crate) fn keep(path: &Path, bytes: Vec<u8>) {
     RECORD.with(|record| {
         if let Some(files) = record.borrow_mut().as_mut() {
-            files.is_file.insert(path.to_path_buf(), Some(None));
+            files.is_file.insert(path.to_path_buf(), Known::File(None));
             files.bytes.insert(path.to_path_buf(), bytes);
         }
     });
