@@ -321,7 +321,7 @@ pub fn discover_all(dataset: &Path) -> Result<Discovery, RunError> {
     let mut scenes = Vec::new();
     for table in std::fs::read_dir(&root).map_err(io(&root))? {
         let table = table.map_err(io(&root))?;
-        if !table.path().is_dir() {
+        if !listed_folder(&table) {
             continue;
         }
         let table_os = table.file_name();
@@ -332,7 +332,7 @@ pub fn discover_all(dataset: &Path) -> Result<Discovery, RunError> {
         }
         for scene in std::fs::read_dir(table.path()).map_err(io(&table.path()))? {
             let scene = scene.map_err(io(&table.path()))?;
-            if !scene.path().is_dir() {
+            if !listed_folder(&scene) {
                 continue;
             }
             let scene_os = scene.file_name();
@@ -352,6 +352,18 @@ pub fn discover_all(dataset: &Path) -> Result<Discovery, RunError> {
     found.scenes = scenes;
     found.skipped.sort_by(|a, b| a.key.cmp(&b.key));
     Ok(found)
+}
+
+/// Whether a listed entry is a folder, a link followed as [`Path::is_dir`] follows it. The
+/// listing says what each entry is, so a scene's folder costs no `stat` of its own (on the
+/// 1,000-scene demo, 1,000 of the 23,000 system calls of `mesa graph`); only a link, or a
+/// file system that does not say, is statted.
+fn listed_folder(entry: &std::fs::DirEntry) -> bool {
+    match entry.file_type() {
+        Ok(kind) if kind.is_symlink() => entry.path().is_dir(),
+        Ok(kind) => kind.is_dir(),
+        Err(_) => entry.path().is_dir(),
+    }
 }
 
 /// Filters scenes by glob, then keeps this shard's share of the sorted list.
@@ -428,6 +440,45 @@ pub(crate) fn write_run_record<T: Serialize>(path: &Path, summary: &T) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Scene and table folders are found from the listing's file types, links to folders
+    /// followed as `Path::is_dir` follows them; files, links to files and dangling links are
+    /// not scenes. The control: the linked entries are links in the listing, so a listing that
+    /// did not follow them would miss those scenes.
+    #[test]
+    fn linked_folders_are_scenes_and_files_are_not() {
+        use std::os::unix::fs::symlink;
+        let dir = tempfile::tempdir().expect("tempdir");
+        let scenes = dir.path().join("scenes");
+        let elsewhere = dir.path().join("elsewhere");
+        for folder in [
+            scenes.join("desk/desk_0001"),
+            elsewhere.join("desk_0002"),
+            elsewhere.join("shelf/shelf_0001"),
+        ] {
+            std::fs::create_dir_all(folder).expect("folder");
+        }
+        symlink(elsewhere.join("desk_0002"), scenes.join("desk/desk_0002")).expect("link");
+        symlink(elsewhere.join("shelf"), scenes.join("shelf")).expect("link");
+        std::fs::write(scenes.join("desk/notes.txt"), b"x").expect("file");
+        symlink(scenes.join("desk/notes.txt"), scenes.join("desk/desk_0003")).expect("link");
+        symlink(elsewhere.join("gone"), scenes.join("desk/desk_0004")).expect("link");
+        let keys: Vec<String> = discover_scenes(dir.path())
+            .expect("dataset")
+            .iter()
+            .map(Scene::key)
+            .collect();
+        assert_eq!(
+            keys,
+            ["desk/desk_0001", "desk/desk_0002", "shelf/shelf_0001"]
+        );
+        let linked = std::fs::read_dir(scenes.join("desk"))
+            .expect("list")
+            .map(|e| e.expect("entry"))
+            .find(|e| e.file_name() == "desk_0002")
+            .expect("listed");
+        assert!(linked.file_type().expect("type").is_symlink());
+    }
 
     #[test]
     fn shards_parse_and_partition() {
