@@ -40,7 +40,6 @@ import os
 import platform
 import resource
 import shutil
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -53,6 +52,7 @@ for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 sys.dont_write_bytecode = True  # no __pycache__ left in bench/
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import graph_rules  # noqa: E402
+from timing import best_median_ms, timed  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "target/release/examples/graph_timing"
@@ -127,17 +127,6 @@ def check_outputs(dataset, out):
     return len(scenes), txt_same, json_same, json_close, differing
 
 
-def timed(function, repeat):
-    """A warm-up call, then `repeat` timed calls: the seconds of each."""
-    function()
-    runs = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        function()
-        runs.append(time.perf_counter() - start)
-    return runs
-
-
 def timed_process(cmd, repeat, prepare=None):
     """A warm-up run of a command, then `repeat` timed runs: the wall seconds and the CPU
     seconds (user + system, of the process and its children) of each. `prepare`, if given,
@@ -160,8 +149,8 @@ def timed_process(cmd, repeat, prepare=None):
 
 def report(label, python_runs, mesa_runs, what):
     """Prints min and median per scene (ms) of both sides and the python / mesa ratios."""
-    py_min, py_med = 1e3 * min(python_runs), 1e3 * statistics.median(python_runs)
-    me_min, me_med = 1e3 * min(mesa_runs), 1e3 * statistics.median(mesa_runs)
+    py_min, py_med = best_median_ms(python_runs)
+    me_min, me_med = best_median_ms(mesa_runs)
     print(f"{label}: {what}")
     print(f"  python: {py_min:9.4f} ms per scene (min of {len(python_runs)}; median {py_med:.4f})")
     print(f"  mesa:   {me_min:9.4f} ms per scene (min of {len(mesa_runs)}; median {me_med:.4f})")

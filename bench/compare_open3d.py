@@ -23,13 +23,17 @@ Before 2026-11-30 14:15 the Open3D side fitted no plane for such a frame, and th
     python bench/compare_open3d.py [--copies 20] [--repeat 5] [--m2t2 FRAME]
     (both sides: best and median of the runs)
 """
-import argparse, json, os, shutil, statistics, subprocess, sys, tempfile, time
+import argparse, json, os, shutil, subprocess, sys, tempfile
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 import open3d as o3d  # noqa: E402
 from PIL import Image  # noqa: E402
+
+sys.dont_write_bytecode = True  # no __pycache__ left in bench/
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from timing import best_median_ms, timed  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -111,18 +115,6 @@ def m2t2_input(frame: Path, out: Path):
     return width, height, objects, any(i["support"] for i in instances)
 
 
-def timed(run, repeat):
-    """One untimed warm-up of `run` (the page cache, the allocator), then `repeat` timed runs:
-    the best and the median, in ms."""
-    run()
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return 1000 * min(times), 1000 * statistics.median(times)
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--copies", type=int, default=20, help="scenes in the mesa dataset")
@@ -145,12 +137,14 @@ def main():
             shutil.copytree(first, dataset / f"scenes/office_table/office_table_{k:04d}/input")
 
         # Both sides the same way: a warm-up, then `--repeat` timed runs; best and median.
-        open3d_ms, open3d_median = timed(lambda: open3d_lift(first), args.repeat)
+        open3d_ms, open3d_median = best_median_ms(timed(lambda: open3d_lift(first), args.repeat))
         # The same, the plane fitted on the pixels mesa fits it on (a second figure).
-        sampled_ms, sampled_median = timed(lambda: open3d_lift(first, plane_sample=True), args.repeat)
+        sampled_ms, sampled_median = best_median_ms(
+            timed(lambda: open3d_lift(first, plane_sample=True), args.repeat))
         cmd = [args.mesa, "lift", str(dataset), "--jobs", "1", "--force", "--progress", "off", "-q"]
         mesa_ms, mesa_median = (
-            t / args.copies for t in timed(lambda: subprocess.run(cmd, check=True), args.repeat))
+            t / args.copies
+            for t in best_median_ms(timed(lambda: subprocess.run(cmd, check=True), args.repeat)))
 
     load = os.getloadavg()
     print(f"input: {what}; Open3D {o3d.__version__}, single-threaded; load average "

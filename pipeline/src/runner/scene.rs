@@ -20,7 +20,7 @@ use super::digests::RememberedDigests;
 use super::scene_files;
 use crate::exit::UsageError;
 use crate::fsio::{
-    read_sized, sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic, write_if_changed,
+    read_statted, sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic, write_if_changed,
     DigestCache, SizeLimit,
 };
 use crate::progress::Tick;
@@ -676,15 +676,7 @@ fn read_scene_marker(path: &Path) -> Option<RunMarker> {
         return None;
     }
     // Statted above (not a link, a regular file): opened and read at once.
-    let bytes = read_sized(
-        &std::fs::File::open(path).ok()?,
-        meta.len(),
-        MARKER_LIMIT.bytes,
-    )
-    .ok()?;
-    if bytes.len() as u64 > MARKER_LIMIT.bytes {
-        return None;
-    }
+    let bytes = read_statted(path, meta.len(), MARKER_LIMIT).ok()?;
     let marker = serde_json::from_str(std::str::from_utf8(&bytes).ok()?).ok()?;
     scene_files::keep(path, bytes);
     Some(marker)
