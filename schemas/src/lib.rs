@@ -21,7 +21,7 @@ pub mod annotation;
 pub mod artifacts;
 pub mod convert;
 pub mod eval;
-mod graph_json;
+pub mod graph_json;
 pub mod json;
 pub mod kinds;
 pub mod layout;

@@ -59,6 +59,7 @@ use std::fmt;
 
 use mesa_schemas::artifacts::{GraphArtifact, GraphEdge, GraphNode, GraphSpacing, GRAPH_SCHEMA};
 use mesa_schemas::convert::{category_of_instance, yaw_deg_of, TILT_EPSILON_DEG};
+use mesa_schemas::graph_json::{write_graph_json, EdgeRef, NodeRef, SpacingRef};
 use mesa_schemas::layout_file::AnyLayout;
 use mesa_schemas::rotation::tilt_deg_from_quat_xyzw;
 use mesa_schemas::{DatasetLayout, LlmLayout, Problem};
@@ -856,6 +857,62 @@ impl Evidence {
         };
         pairs.into_iter().map(|(k, v)| (k.to_owned(), v)).collect()
     }
+
+    /// The numbers of [`Self::numbers`] in the map's order (keys in byte order), without the
+    /// map: what [`SceneGraph::to_json`] writes.
+    pub fn sorted_numbers(&self) -> impl Iterator<Item = (&'static str, f64)> {
+        let (items, len): ([(&'static str, f64); 6], usize) = match *self {
+            Self::Containment {
+                footprint_share,
+                z_share,
+                subject_area_cm2,
+                container_area_cm2,
+            } => (
+                [
+                    ("container_area_cm2", container_area_cm2),
+                    ("footprint_share", footprint_share),
+                    ("subject_area_cm2", subject_area_cm2),
+                    ("z_share", z_share),
+                    ("", 0.0),
+                    ("", 0.0),
+                ],
+                4,
+            ),
+            Self::Support {
+                footprint_share,
+                z_gap_cm,
+            } => (
+                [
+                    ("footprint_share", footprint_share),
+                    ("z_gap_cm", z_gap_cm),
+                    ("", 0.0),
+                    ("", 0.0),
+                    ("", 0.0),
+                    ("", 0.0),
+                ],
+                2,
+            ),
+            Self::Proximity {
+                dx_cm,
+                dy_cm,
+                distance_2d_cm,
+                distance_3d_cm,
+                max_distance_cm,
+                rank,
+            } => (
+                [
+                    ("distance_2d_cm", distance_2d_cm),
+                    ("distance_3d_cm", distance_3d_cm),
+                    ("dx_cm", dx_cm),
+                    ("dy_cm", dy_cm),
+                    ("max_distance_cm", max_distance_cm),
+                    ("rank", rank as f64),
+                ],
+                6,
+            ),
+        };
+        items.into_iter().take(len)
+    }
 }
 
 /// A node: where an object is, where it faces, and the numbers behind them. The names of
@@ -1022,6 +1079,38 @@ impl SceneGraph<'_> {
         let mut text = String::with_capacity(40 * lines);
         self.write_lines(&mut text, |text| text.push('\n'));
         text
+    }
+
+    /// The bytes of `graph.json` (`mesa.graph/1`) of a scene: those of
+    /// [`GraphArtifact::to_pretty_json`] on [`Self::to_artifact`], written from the graph's
+    /// own parts without making the artifact's strings and maps.
+    pub fn to_json(&self, scene_id: &str, layout: &str) -> Vec<u8> {
+        write_graph_json(
+            GRAPH_SCHEMA,
+            scene_id,
+            layout,
+            self.nodes.iter().map(|n| NodeRef {
+                instance: n.instance,
+                is_at: n.is_at.label(),
+                face_to: n.face_to.label(),
+                container: n.container,
+            }),
+            self.edges.iter().map(|e| EdgeRef {
+                subject: e.subject,
+                relation: e.relation.label(),
+                object: e.object,
+                numbers: e.evidence.sorted_numbers(),
+            }),
+            self.equally_spaced.iter().map(|s| SpacingRef {
+                instances: s.instances,
+                axis: s.axis.label(),
+                numbers: [
+                    ("gap_1_cm", s.gaps_cm[0]),
+                    ("gap_2_cm", s.gaps_cm[1]),
+                    ("spread_cm", s.spread_cm),
+                ],
+            }),
+        )
     }
 
     /// `graph.json` (`mesa.graph/1`) of a scene; `layout` is the layout file relative to the
@@ -3013,6 +3102,58 @@ mod tests {
         );
     }
 
+    /// `to_json` writes the bytes of the artifact's writer, and `sorted_numbers` gives each
+    /// kind of evidence's numbers in the map's order, on a scene with every kind of edge and an
+    /// equally-spaced triple; a changed number changes the bytes (so the comparison can fail).
+    #[test]
+    fn the_json_written_from_the_graph_is_the_artifacts() {
+        let s = scene(
+            [0.0, 100.0, 0.0, 100.0],
+            vec![
+                obj("bowl_0", [30.0, 30.0, 4.0], [20.0, 20.0, 8.0], 0.0),
+                obj("apple_0", [30.0, 30.0, 5.0], [6.0, 6.0, 6.0], 0.0),
+                obj("book_0", [60.0, 30.0, 1.0], [12.0, 16.0, 2.0], 30.0),
+                obj("pen_0", [60.0, 30.0, 2.5], [1.0, 10.0, 1.0], 0.0),
+                obj("cup_0", [10.0, 70.0, 5.0], [6.0, 6.0, 10.0], 0.0),
+                obj("cup_1", [20.0, 70.0, 5.0], [6.0, 6.0, 10.0], 0.0),
+                obj("cup_2", [30.0, 70.0, 5.0], [6.0, 6.0, 10.0], 0.0),
+            ],
+        );
+        let options = GraphOptions::default().with_equally_spaced(true);
+        let mut graph = graph_of(&s, &options);
+        let kinds: Vec<&str> = graph
+            .edges
+            .iter()
+            .map(|e| match e.evidence {
+                Evidence::Containment { .. } => "in",
+                Evidence::Support { .. } => "above",
+                Evidence::Proximity { .. } => "near",
+            })
+            .collect();
+        for kind in ["in", "above", "near"] {
+            assert!(kinds.contains(&kind), "{kind} missing from {kinds:?}");
+        }
+        assert!(!graph.equally_spaced.is_empty());
+        for edge in &graph.edges {
+            let map: Vec<(String, f64)> = edge.evidence.numbers().into_iter().collect();
+            let sorted: Vec<(String, f64)> = edge
+                .evidence
+                .sorted_numbers()
+                .map(|(k, v)| (k.to_owned(), v))
+                .collect();
+            assert_eq!(sorted, map);
+        }
+        let json = graph.to_json("office_table_0001", "qa/layout.json");
+        let artifact = graph.to_artifact("office_table_0001", "qa/layout.json");
+        assert_eq!(json, artifact.to_pretty_json());
+        if let Evidence::Proximity { dx_cm, .. } =
+            &mut graph.edges.last_mut().expect("edges").evidence
+        {
+            *dx_cm += 1e-9;
+        }
+        assert_ne!(graph.to_json("office_table_0001", "qa/layout.json"), json);
+    }
+
     // --- equally spaced --------------------------------------------------------------------
 
     #[test]
@@ -3465,6 +3606,20 @@ mod tests {
             let flags = keyword_containers(&s, &options);
             let oracle = extract(&s, &flags, &options, PairSearch::Literal).expect("valid");
             prop_assert_eq!(extract_graph(&s, &flags, &options).expect("valid"), oracle);
+        }
+
+        #[test]
+        fn the_json_written_from_a_graph_is_the_artifacts(
+            s in arb_scene(),
+            equally_spaced in any::<bool>(),
+            scene_id in "[a-z_0-9\"\\\\\u{1}é]{0,10}",
+        ) {
+            let options = GraphOptions::default().with_equally_spaced(equally_spaced);
+            let graph = graph_of(&s, &options);
+            prop_assert_eq!(
+                graph.to_json(&scene_id, "refined/layout.json"),
+                graph.to_artifact(&scene_id, "refined/layout.json").to_pretty_json()
+            );
         }
 
         #[test]

@@ -155,10 +155,7 @@ impl SceneStage for GraphStage {
                 containers.by_keyword.join(", ")
             ));
         }
-        output.add_file(
-            GRAPH_JSON,
-            graph.to_artifact(&scene.scene_id, rel).to_pretty_json(),
-        );
+        output.add_file(GRAPH_JSON, graph.to_json(&scene.scene_id, rel));
         output.add_file(GRAPH_TXT, graph.to_text().into_bytes());
         Ok(output)
     }
