@@ -99,14 +99,18 @@ pub fn write_if_changed(path: &Path, bytes: &[u8]) -> io::Result<bool> {
 
 /// Whether `path` is a regular file (not a link) whose contents are `bytes` (a file of another
 /// size is not read).
+///
+/// The file is opened first ([`open_own_file`]: a link is refused by the open, a FIFO does not
+/// block it) and then statted through the open file, so the path is walked once, not twice:
+/// a scene's output sits eight folders down, and the walk was most of a `stat`'s cost.
 fn holds_exactly(path: &Path, bytes: &[u8]) -> bool {
-    match fs::symlink_metadata(path) {
+    let Ok(file) = open_own_file(path) else {
+        return false;
+    };
+    match file.metadata() {
         Ok(meta) if meta.is_file() && meta.len() == bytes.len() as u64 => {}
         _ => return false,
     }
-    let Ok(file) = fs::File::open(path) else {
-        return false;
-    };
     let len = bytes.len() as u64;
     if len <= WHOLE_COMPARE_UP_TO {
         // Markers and most outputs: read whole in one call ([`read_sized`]).
@@ -129,6 +133,21 @@ fn holds_exactly(path: &Path, bytes: &[u8]) -> bool {
         rest = &rest[n..];
         reader.consume(n);
     }
+}
+
+/// Opens one of mesa's own files (an output or a marker it wrote) to read it, refusing a link
+/// as the last component (the open fails with `ELOOP`) and without waiting on a FIFO or a
+/// device (`O_NONBLOCK`, which changes nothing for a regular file). The caller stats the open
+/// file (`File::metadata`) and reads only a regular one.
+///
+/// Inputs are statted by path before they are opened ([`check_regular_file`]): a link to
+/// them is followed, and nothing of a user's that is not a regular file is ever opened.
+pub fn open_own_file(path: &Path) -> io::Result<fs::File> {
+    use std::os::unix::fs::OpenOptionsExt as _;
+    fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
+        .open(path)
 }
 
 /// Up to this size, [`holds_exactly`] reads a file whole to compare it; above it, block by
@@ -422,12 +441,6 @@ pub fn human_bytes(n: u64) -> String {
 /// read itself bounded, so a file that grows meanwhile cannot exceed the limit).
 pub fn read_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
     let len = check_regular_file(path, limit)?;
-    read_statted(path, len, limit)
-}
-
-/// The reading half of [`read_bounded`], for a caller that has statted `path` itself and
-/// found a regular file of `len` bytes, at most `limit.bytes`.
-pub fn read_statted(path: &Path, len: u64, limit: SizeLimit) -> io::Result<Vec<u8>> {
     let bytes = read_sized(&fs::File::open(path)?, len, limit.bytes)?;
     if bytes.len() as u64 > limit.bytes {
         return Err(io::Error::new(
@@ -586,6 +599,19 @@ mod tests {
         std::os::unix::fs::symlink(&elsewhere, &link).expect("symlink");
         assert!(write_if_changed(&link, b"linked").expect("link"));
         assert!(fs::symlink_metadata(&link).expect("meta").is_file());
+        // A FIFO is replaced by a file, without waiting for a writer to open it (the empty
+        // bytes too: a FIFO reads as empty, but it is not a regular file).
+        for bytes in [&b""[..], b"(a, is at, center)\n"] {
+            let fifo = dir.path().join("out/fifo.txt");
+            let _ = fs::remove_file(&fifo);
+            let status = std::process::Command::new("mkfifo")
+                .arg(&fifo)
+                .status()
+                .expect("mkfifo");
+            assert!(status.success());
+            assert!(write_if_changed(&fifo, bytes).expect("fifo"));
+            assert_eq!(fs::read(&fifo).expect("read"), bytes);
+        }
     }
 
     /// Temporary names carry this machine's tag, and the tags of two host names differ.

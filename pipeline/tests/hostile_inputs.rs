@@ -746,3 +746,49 @@ fn sizes_claimed_by_a_header_fail_their_scene_and_the_others_finish() {
     let out = run_mesa(&[os("lift"), os("--progress"), os("off"), ws.as_os_str()]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr_of(&out));
 }
+
+/// A FIFO, a folder or a link in place of a scene's done marker (mesa's own file) never hangs
+/// or stops a run: a FIFO or a folder is read as no marker, so the scene is redone and its
+/// marker written over it; a link is read through, as before. Controls: before the run each
+/// special marker is what it was made as, and the scene whose marker was left alone is
+/// skipped, not redone.
+#[test]
+fn special_files_in_place_of_markers_are_redone_over() {
+    use std::os::unix::fs::FileTypeExt as _;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (ws, scenes) = demo(dir.path());
+    let out = run_mesa(&[os("lift"), ws.as_os_str(), os("--progress"), os("off")]);
+    assert!(out.status.success(), "first lift: {}", stderr_of(&out));
+    let marker = |scene: &str| ws.join(".mesa/markers/lift").join(format!("{scene}.json"));
+    // Scene 0: a FIFO (a read of it would block forever).
+    std::fs::remove_file(marker(&scenes[0])).expect("remove marker");
+    mkfifo(&marker(&scenes[0]));
+    assert!(std::fs::symlink_metadata(marker(&scenes[0]))
+        .expect("meta")
+        .file_type()
+        .is_fifo());
+    // Scene 1: a link to a copy of its own marker, read through.
+    let copy = dir.path().join("marker-copy.json");
+    std::fs::rename(marker(&scenes[1]), &copy).expect("move marker");
+    std::os::unix::fs::symlink(&copy, marker(&scenes[1])).expect("symlink");
+
+    let out = run_mesa(&[os("lift"), ws.as_os_str(), os("--progress"), os("off")]);
+    let stderr = stderr_of(&out);
+    assert!(out.status.success(), "second lift: {stderr}");
+    assert!(stderr.contains("1 done, 1 skipped"), "{stderr}");
+    let redone = std::fs::symlink_metadata(marker(&scenes[0])).expect("meta");
+    assert!(redone.is_file(), "the FIFO is replaced by a marker");
+    let redone: Value =
+        serde_json::from_slice(&std::fs::read(marker(&scenes[0])).expect("read")).expect("json");
+    assert_eq!(redone["status"], "done", "{redone}");
+
+    // A folder in place of scene 0's marker: redone too (the marker cannot be written over a
+    // folder, so the scene reports that).
+    std::fs::remove_file(marker(&scenes[0])).expect("remove marker");
+    std::fs::create_dir(marker(&scenes[0])).expect("mkdir");
+    let out = run_mesa(&[os("lift"), ws.as_os_str(), os("--progress"), os("off")]);
+    let stderr = stderr_of(&out);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains("0 done, 1 skipped, 1 failed"), "{stderr}");
+    assert!(stderr.contains("cannot write marker"), "{stderr}");
+}

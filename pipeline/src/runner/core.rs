@@ -10,7 +10,7 @@ use serde::Serialize;
 
 use crate::config::{Config, ProgressMode};
 use crate::exit::UsageError;
-use crate::fsio::{sha256_hex, write_atomic};
+use crate::fsio::{read_bounded, sha256_hex, write_atomic, SizeLimit};
 use crate::progress::Progress;
 
 /// The folder of run records inside a dataset.
@@ -398,10 +398,19 @@ pub fn select_scenes(
         .collect())
 }
 
-/// Reads a marker; `None` when absent or unreadable (an unreadable marker means "redo").
+/// A marker is a few KB; one of more than 16 MiB is not mesa's, and is read as absent.
+pub const MARKER_LIMIT: SizeLimit = SizeLimit {
+    bytes: 16 << 20,
+    what: "a done marker",
+    name: "MARKER_LIMIT",
+};
+
+/// Reads a marker; `None` when absent or unreadable (an unreadable marker means "redo"): a
+/// link is followed, and what it leads to is read only when it is a regular file of at most
+/// [`MARKER_LIMIT`] (a FIFO there does not hang the run).
 pub fn read_marker(path: &Path) -> Option<RunMarker> {
-    let text = std::fs::read_to_string(path).ok()?;
-    serde_json::from_str(&text).ok()
+    let bytes = read_bounded(path, MARKER_LIMIT).ok()?;
+    serde_json::from_slice(&bytes).ok()
 }
 
 /// The worker threads of a stage run: every stage, per-scene or dataset-level, runs on one of

@@ -14,14 +14,14 @@ use serde::Serialize;
 
 use super::core::{
     discover_all, progress, read_marker, select_scenes, thread_pool, write_run_record, RunError,
-    RunOptions, Scene, StageContext, RUN_DIR,
+    RunOptions, Scene, StageContext, MARKER_LIMIT, RUN_DIR,
 };
 use super::digests::RememberedDigests;
 use super::scene_files;
 use crate::exit::UsageError;
 use crate::fsio::{
-    read_statted, sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic, write_if_changed,
-    DigestCache, SizeLimit,
+    open_own_file, read_sized, sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic,
+    write_if_changed, DigestCache,
 };
 use crate::progress::Tick;
 
@@ -661,23 +661,25 @@ fn fail(
 /// regular file: writing the scene's marker then compares with them instead of reading the
 /// file again.
 fn read_scene_marker(path: &Path) -> Option<RunMarker> {
-    let meta = std::fs::symlink_metadata(path).ok()?;
-    if !meta.is_file() {
-        // A link (or anything else): read as before, and compared on disk when written.
-        return read_marker(path);
-    }
-    // A marker is a few KB; one of more than 16 MiB is not mesa's, and is read as absent.
-    const MARKER_LIMIT: SizeLimit = SizeLimit {
-        bytes: 16 << 20,
-        what: "a done marker",
-        name: "MARKER_LIMIT",
+    // Opened without following a link, then statted through the open file: one walk of the
+    // path (as `holds_exactly` does for the outputs).
+    let file = match open_own_file(path) {
+        Ok(file) => file,
+        // A link: read through it as before, and compared on disk when written.
+        Err(e) if e.raw_os_error() == Some(libc::ELOOP) => return read_marker(path),
+        Err(_) => return None,
     };
-    if meta.len() > MARKER_LIMIT.bytes {
+    let meta = file.metadata().ok()?;
+    if !meta.is_file() || meta.len() > MARKER_LIMIT.bytes {
+        // A FIFO, a folder or an outsized file is no marker of mesa's: the scene is redone
+        // and its marker written over it.
         return None;
     }
-    // Statted above (not a link, a regular file): opened and read at once.
-    let bytes = read_statted(path, meta.len(), MARKER_LIMIT).ok()?;
-    let marker = serde_json::from_str(std::str::from_utf8(&bytes).ok()?).ok()?;
+    let bytes = read_sized(&file, meta.len(), MARKER_LIMIT.bytes).ok()?;
+    if bytes.len() as u64 > MARKER_LIMIT.bytes {
+        return None;
+    }
+    let marker = serde_json::from_slice(&bytes).ok()?;
     scene_files::keep(path, bytes);
     Some(marker)
 }
