@@ -18,16 +18,52 @@
 //! after its run.
 
 use std::cell::RefCell;
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// One scene's record.
 #[derive(Default)]
 struct SceneFiles {
     /// Whether a path is a regular file (following links, as [`Path::is_file`]).
-    is_file: HashMap<PathBuf, Known>,
+    is_file: Entries<Known>,
     /// The bytes of inputs the runner read whole to hash them.
-    bytes: HashMap<PathBuf, Vec<u8>>,
+    bytes: Entries<Vec<u8>>,
+}
+
+/// A few paths of one scene with what is known of each, looked up by the path's bytes.
+///
+/// A scene knows half a dozen files, so a list searched in order costs less than a map, whose
+/// hash of a `Path` parses it into components first. Two spellings of one file (`a//b`, `a/b`)
+/// are two entries: a miss only costs a lookup again, never a wrong answer.
+struct Entries<T>(Vec<(PathBuf, T)>);
+
+impl<T> Default for Entries<T> {
+    fn default() -> Self {
+        Self(Vec::new())
+    }
+}
+
+impl<T> Entries<T> {
+    fn position(&self, path: &Path) -> Option<usize> {
+        let key = path.as_os_str().as_encoded_bytes();
+        self.0
+            .iter()
+            .position(|(p, _)| p.as_os_str().as_encoded_bytes() == key)
+    }
+
+    fn get(&self, path: &Path) -> Option<&T> {
+        self.position(path).map(|i| &self.0[i].1)
+    }
+
+    fn insert(&mut self, path: &Path, value: T) {
+        match self.position(path) {
+            Some(i) => self.0[i].1 = value,
+            None => self.0.push((path.to_path_buf(), value)),
+        }
+    }
+
+    fn remove(&mut self, path: &Path) -> Option<T> {
+        self.position(path).map(|i| self.0.swap_remove(i).1)
+    }
 }
 
 /// What a scene's record knows of a path.
@@ -72,7 +108,7 @@ pub fn is_file(path: &Path) -> bool {
             Ok(meta) if meta.is_file() => Known::File(Some(meta.len())),
             _ => Known::NotAFile,
         };
-        files.is_file.insert(path.to_path_buf(), known);
+        files.is_file.insert(path, known);
         matches!(known, Known::File(_))
     })
 }
@@ -93,8 +129,8 @@ pub(crate) fn regular_file_size(path: &Path) -> Option<u64> {
 pub(crate) fn keep(path: &Path, bytes: Vec<u8>) {
     RECORD.with(|record| {
         if let Some(files) = record.borrow_mut().as_mut() {
-            files.is_file.insert(path.to_path_buf(), Known::File(None));
-            files.bytes.insert(path.to_path_buf(), bytes);
+            files.is_file.insert(path, Known::File(None));
+            files.bytes.insert(path, bytes);
         }
     });
 }
@@ -111,6 +147,22 @@ mod tests {
 
     /// Inside a scene, answers come from the record; outside, from the file system. The
     /// control: the same questions outside a scene see the file's change.
+    /// Entries are found by the path's bytes: an insert of a known path replaces its value, a
+    /// removal takes it out, and another spelling of the same file is another entry.
+    #[test]
+    fn entries_are_found_by_the_paths_bytes() {
+        let mut entries = Entries::default();
+        entries.insert(Path::new("s/graph/graph.json"), 1);
+        entries.insert(Path::new("s/graph/graph.txt"), 2);
+        entries.insert(Path::new("s/graph/graph.json"), 3);
+        assert_eq!(entries.0.len(), 2);
+        assert_eq!(entries.get(Path::new("s/graph/graph.json")), Some(&3));
+        assert_eq!(entries.get(Path::new("s//graph/graph.json")), None);
+        assert_eq!(entries.remove(Path::new("s/graph/graph.json")), Some(3));
+        assert_eq!(entries.get(Path::new("s/graph/graph.json")), None);
+        assert_eq!(entries.get(Path::new("s/graph/graph.txt")), Some(&2));
+    }
+
     #[test]
     fn a_record_lives_as_long_as_its_scene() {
         let dir = tempfile::tempdir().expect("tempdir");
