@@ -823,43 +823,13 @@ pub enum Evidence {
 impl Evidence {
     /// The numbers by name, as `graph.json` stores them.
     pub fn numbers(&self) -> BTreeMap<String, f64> {
-        let pairs: Vec<(&str, f64)> = match *self {
-            Self::Containment {
-                footprint_share,
-                z_share,
-                subject_area_cm2,
-                container_area_cm2,
-            } => vec![
-                ("footprint_share", footprint_share),
-                ("z_share", z_share),
-                ("subject_area_cm2", subject_area_cm2),
-                ("container_area_cm2", container_area_cm2),
-            ],
-            Self::Support {
-                footprint_share,
-                z_gap_cm,
-            } => vec![("footprint_share", footprint_share), ("z_gap_cm", z_gap_cm)],
-            Self::Proximity {
-                dx_cm,
-                dy_cm,
-                distance_2d_cm,
-                distance_3d_cm,
-                max_distance_cm,
-                rank,
-            } => vec![
-                ("dx_cm", dx_cm),
-                ("dy_cm", dy_cm),
-                ("distance_2d_cm", distance_2d_cm),
-                ("distance_3d_cm", distance_3d_cm),
-                ("max_distance_cm", max_distance_cm),
-                ("rank", rank as f64),
-            ],
-        };
-        pairs.into_iter().map(|(k, v)| (k.to_owned(), v)).collect()
+        self.sorted_numbers()
+            .map(|(k, v)| (k.to_owned(), v))
+            .collect()
     }
 
-    /// The numbers of [`Self::numbers`] in the map's order (keys in byte order), without the
-    /// map: what [`SceneGraph::to_json`] writes.
+    /// Each number with its name, the names in byte order (the order of [`Self::numbers`]'s
+    /// map and of `graph.json`): what [`SceneGraph::to_json`] writes.
     pub fn sorted_numbers(&self) -> impl Iterator<Item = (&'static str, f64)> {
         let (items, len): ([(&'static str, f64); 6], usize) = match *self {
             Self::Containment {
@@ -3135,13 +3105,10 @@ mod tests {
         }
         assert!(!graph.equally_spaced.is_empty());
         for edge in &graph.edges {
-            let map: Vec<(String, f64)> = edge.evidence.numbers().into_iter().collect();
-            let sorted: Vec<(String, f64)> = edge
-                .evidence
-                .sorted_numbers()
-                .map(|(k, v)| (k.to_owned(), v))
-                .collect();
-            assert_eq!(sorted, map);
+            // The names in strictly increasing byte order, as the artifact's map holds them.
+            let names: Vec<&str> = edge.evidence.sorted_numbers().map(|(k, _)| k).collect();
+            assert!(names.windows(2).all(|w| w[0] < w[1]), "{names:?}");
+            assert_eq!(names.len(), edge.evidence.numbers().len());
         }
         let json = graph.to_json("office_table_0001", "qa/layout.json");
         let artifact = graph.to_artifact("office_table_0001", "qa/layout.json");
