@@ -749,9 +749,9 @@ fn sizes_claimed_by_a_header_fail_their_scene_and_the_others_finish() {
 
 /// A FIFO, a folder or a link in place of a scene's done marker (mesa's own file) never hangs
 /// or stops a run: a FIFO or a folder is read as no marker, so the scene is redone and its
-/// marker written over it; a link is read through, as before. Controls: before the run each
-/// special marker is what it was made as, and the scene whose marker was left alone is
-/// skipped, not redone.
+/// marker written over it; a link is read through, as before, so its scene is skipped. The
+/// control: before the run, the FIFO is a FIFO (a read of it, as the runner did before, never
+/// returns).
 #[test]
 fn special_files_in_place_of_markers_are_redone_over() {
     use std::os::unix::fs::FileTypeExt as _;

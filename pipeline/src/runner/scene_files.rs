@@ -145,8 +145,6 @@ pub fn take(path: &Path) -> Option<Vec<u8>> {
 mod tests {
     use super::*;
 
-    /// Inside a scene, answers come from the record; outside, from the file system. The
-    /// control: the same questions outside a scene see the file's change.
     /// Entries are found by the path's bytes: an insert of a known path replaces its value, a
     /// removal takes it out, and another spelling of the same file is another entry.
     #[test]
@@ -163,6 +161,8 @@ mod tests {
         assert_eq!(entries.get(Path::new("s/graph/graph.txt")), Some(&2));
     }
 
+    /// Inside a scene, answers come from the record; outside, from the file system. The
+    /// control: the same questions outside a scene see the file's change.
     #[test]
     fn a_record_lives_as_long_as_its_scene() {
         let dir = tempfile::tempdir().expect("tempdir");
