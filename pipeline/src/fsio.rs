@@ -441,7 +441,14 @@ pub fn human_bytes(n: u64) -> String {
 /// read itself bounded, so a file that grows meanwhile cannot exceed the limit).
 pub fn read_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
     let len = check_regular_file(path, limit)?;
-    let bytes = read_sized(&fs::File::open(path)?, len, limit.bytes)?;
+    read_statted(&fs::File::open(path)?, len, limit)
+}
+
+/// The reading half of [`read_bounded`], for a caller that has statted the file itself (by
+/// path, or through the open `file`) and found a regular file of `len` bytes, at most
+/// `limit.bytes`: an error when it grew over the limit since.
+pub fn read_statted(file: &fs::File, len: u64, limit: SizeLimit) -> io::Result<Vec<u8>> {
+    let bytes = read_sized(file, len, limit.bytes)?;
     if bytes.len() as u64 > limit.bytes {
         return Err(io::Error::new(
             io::ErrorKind::InvalidInput,

@@ -986,6 +986,15 @@ pub struct EquallySpaced<'a> {
 }
 
 impl EquallySpaced<'_> {
+    /// The gaps and the spread by name, the names in byte order (as `graph.json` holds them).
+    pub fn numbers(&self) -> [(&'static str, f64); 3] {
+        [
+            ("gap_1_cm", self.gaps_cm[0]),
+            ("gap_2_cm", self.gaps_cm[1]),
+            ("spread_cm", self.spread_cm),
+        ]
+    }
+
     /// `(a, b, c, are equally spaced along, x)`.
     pub fn triplet(&self) -> String {
         let mut line = String::new();
@@ -1074,11 +1083,7 @@ impl SceneGraph<'_> {
             self.equally_spaced.iter().map(|s| SpacingRef {
                 instances: s.instances,
                 axis: s.axis.label(),
-                numbers: [
-                    ("gap_1_cm", s.gaps_cm[0]),
-                    ("gap_2_cm", s.gaps_cm[1]),
-                    ("spread_cm", s.spread_cm),
-                ],
+                numbers: s.numbers(),
             }),
         )
     }
@@ -1116,13 +1121,11 @@ impl SceneGraph<'_> {
                 .map(|s| GraphSpacing {
                     instances: s.instances.map(str::to_owned),
                     axis: s.axis.label().to_owned(),
-                    numbers: [
-                        ("gap_1_cm".to_owned(), s.gaps_cm[0]),
-                        ("gap_2_cm".to_owned(), s.gaps_cm[1]),
-                        ("spread_cm".to_owned(), s.spread_cm),
-                    ]
-                    .into_iter()
-                    .collect(),
+                    numbers: s
+                        .numbers()
+                        .into_iter()
+                        .map(|(k, v)| (k.to_owned(), v))
+                        .collect(),
                 })
                 .collect(),
         }

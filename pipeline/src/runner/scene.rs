@@ -20,7 +20,7 @@ use super::digests::RememberedDigests;
 use super::scene_files;
 use crate::exit::UsageError;
 use crate::fsio::{
-    open_own_file, read_sized, sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic,
+    open_own_file, read_statted, sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic,
     write_if_changed, DigestCache,
 };
 use crate::progress::Tick;
@@ -675,10 +675,7 @@ fn read_scene_marker(path: &Path) -> Option<RunMarker> {
         // and its marker written over it.
         return None;
     }
-    let bytes = read_sized(&file, meta.len(), MARKER_LIMIT.bytes).ok()?;
-    if bytes.len() as u64 > MARKER_LIMIT.bytes {
-        return None;
-    }
+    let bytes = read_statted(&file, meta.len(), MARKER_LIMIT).ok()?;
     let marker = serde_json::from_slice(&bytes).ok()?;
     scene_files::keep(path, bytes);
     Some(marker)
