@@ -54,6 +54,7 @@
 //! along` (off by default) is about triples: its output alone can grow with n², and its
 //! search stays quadratic in n.
 
+use std::cell::OnceCell;
 use std::collections::BTreeMap;
 use std::fmt;
 
@@ -346,19 +347,14 @@ impl GraphScene {
                 problem: format!("is empty [{x_min}, {x_max}, {y_min}, {y_max}]"),
             });
         }
-        // Whether any name may repeat, by sorting short summaries of them (see
+        // Whether any name may repeat, by comparing short summaries of them (see
         // `name_summary`); only then are first indices kept (the map costs more than the
         // rest of the checks).
-        let mut sorted: Vec<NameSummary> = self
-            .objects
-            .iter()
-            .map(|o| name_summary(&o.instance))
-            .collect();
-        sorted.sort_unstable();
-        let repeats = sorted.windows(2).any(|pair| pair[0] == pair[1]);
+        let repeats = summaries_repeat(&self.objects);
         let mut first_index: BTreeMap<&str, usize> = BTreeMap::new();
         for (index, object) in self.objects.iter().enumerate() {
-            if object.instance.trim().is_empty() {
+            // `trim().is_empty()`, deciding at the first character that is not white space.
+            if object.instance.chars().all(char::is_whitespace) {
                 return Err(GraphError::EmptyInstance { index });
             }
             if repeats {
@@ -405,6 +401,32 @@ impl GraphScene {
             }
         }
         Ok(())
+    }
+}
+
+/// Whether two of the objects' names have the same [`NameSummary`] (which two names that
+/// are equal do). A table's summaries are compared pair by pair on the stack, without a
+/// branch per pair (a sort's comparisons are a coin toss for the branch predictor); more
+/// are sorted.
+fn summaries_repeat(objects: &[SceneObject]) -> bool {
+    let mut on_stack = [0; ALL_PAIRS_UP_TO_OBJECTS];
+    if objects.len() <= on_stack.len() {
+        let summaries = &mut on_stack[..objects.len()];
+        for (summary, object) in summaries.iter_mut().zip(objects) {
+            *summary = name_summary(&object.instance);
+        }
+        let mut repeats = false;
+        for (i, &a) in summaries.iter().enumerate() {
+            for &b in &summaries[i + 1..] {
+                repeats |= a == b;
+            }
+        }
+        repeats
+    } else {
+        let mut sorted: Vec<NameSummary> =
+            objects.iter().map(|o| name_summary(&o.instance)).collect();
+        sorted.sort_unstable();
+        sorted.windows(2).any(|pair| pair[0] == pair[1])
     }
 }
 
@@ -622,6 +644,21 @@ impl GridCell {
         Self { y, x }
     }
 
+    /// What follows the subject in its `is at` line: `, is at, <label>)`.
+    fn is_at_tail(self) -> &'static str {
+        match (self.y, self.x) {
+            (YBand::Front, XBand::Left) => ", is at, front_left)",
+            (YBand::Front, XBand::Middle) => ", is at, front_middle)",
+            (YBand::Front, XBand::Right) => ", is at, front_right)",
+            (YBand::Middle, XBand::Left) => ", is at, middle_left)",
+            (YBand::Middle, XBand::Middle) => ", is at, center)",
+            (YBand::Middle, XBand::Right) => ", is at, middle_right)",
+            (YBand::Back, XBand::Left) => ", is at, back_left)",
+            (YBand::Back, XBand::Middle) => ", is at, back_middle)",
+            (YBand::Back, XBand::Right) => ", is at, back_right)",
+        }
+    }
+
     /// `<y band>_<x band>`, or `center` for the middle cell.
     pub fn label(self) -> &'static str {
         match (self.y, self.x) {
@@ -706,6 +743,20 @@ impl Facing {
         let truncated = sector as i64;
         let floor = truncated - i64::from((truncated as f64) > sector);
         Self::ALL[floor.rem_euclid(8) as usize]
+    }
+
+    /// What follows the subject in its `face to` line: `, face to, <label>)`.
+    fn face_to_tail(self) -> &'static str {
+        match self {
+            Self::Front => ", face to, front)",
+            Self::FrontRight => ", face to, front_right)",
+            Self::Right => ", face to, right)",
+            Self::BackRight => ", face to, back_right)",
+            Self::Back => ", face to, back)",
+            Self::BackLeft => ", face to, back_left)",
+            Self::Left => ", face to, left)",
+            Self::FrontLeft => ", face to, front_left)",
+        }
     }
 
     /// The label, like `front_right`.
@@ -1027,9 +1078,13 @@ impl SceneGraph<'_> {
     /// `is at` then `face to`, then the edges, then the equally-spaced triples.
     fn write_lines(&self, out: &mut String, mut end: impl FnMut(&mut String)) {
         for node in &self.nodes {
-            push_triple(out, node.instance, "is at", node.is_at.label());
+            out.push('(');
+            out.push_str(node.instance);
+            out.push_str(node.is_at.is_at_tail());
             end(out);
-            push_triple(out, node.instance, "face to", node.face_to.label());
+            out.push('(');
+            out.push_str(node.instance);
+            out.push_str(node.face_to.face_to_tail());
             end(out);
         }
         for edge in &self.edges {
@@ -1216,12 +1271,15 @@ pub fn intersection_area_footprints(a: &Footprint, b: &Footprint, offset_cm: [f6
         return ox.max(0.0) * oy.max(0.0);
     }
     let clip: [[f64; 2]; 4] = b.corners_cm.map(|[x, y]| [x + dx, y + dy]);
+    // Clipped back and forth between two polygons, so that no polygon is copied.
     let mut polygon = Polygon::from_slice(&a.corners_cm);
+    let mut clipped = Polygon::from_slice(&[]);
     for i in 0..4 {
-        polygon = polygon.clip_half_plane(clip[i], clip[(i + 1) % 4]);
-        if polygon.len < 3 {
+        polygon.clip_half_plane(clip[i], clip[(i + 1) % 4], &mut clipped);
+        if clipped.len < 3 {
             return 0.0;
         }
+        std::mem::swap(&mut polygon, &mut clipped);
     }
     polygon.area()
 }
@@ -1255,10 +1313,10 @@ impl Polygon {
         }
     }
 
-    /// Keeps the part left of the directed line a → b (counter-clockwise clip edge).
-    fn clip_half_plane(&self, a: [f64; 2], b: [f64; 2]) -> Self {
+    /// Sets `out` to the part left of the directed line a → b (counter-clockwise clip edge).
+    fn clip_half_plane(&self, a: [f64; 2], b: [f64; 2], out: &mut Self) {
         let side = |p: [f64; 2]| (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]);
-        let mut out = Self::from_slice(&[]);
+        out.len = 0;
         for i in 0..self.len {
             let p = self.points[i];
             let q = self.points[(i + 1) % self.len];
@@ -1271,7 +1329,6 @@ impl Polygon {
                 out.push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
             }
         }
-        out
     }
 
     fn area(&self) -> f64 {
@@ -1285,7 +1342,9 @@ impl Polygon {
     }
 }
 
-/// The derived geometry of one object.
+/// The derived geometry of one object. The footprint's corners take a sine and a cosine, and
+/// most pairs are too far apart for their footprints to meet (the circles around them do not),
+/// so it is made the first time a pair needs it.
 struct Solid {
     x: f64,
     y: f64,
@@ -1293,7 +1352,14 @@ struct Solid {
     z_min: f64,
     z_max: f64,
     height: f64,
-    footprint: Footprint,
+    /// w·d in cm² (the footprint's `area_cm2`).
+    area_cm2: f64,
+    /// Half the footprint's diagonal: its corners are this far from the centre, whatever the
+    /// yaw.
+    half_diagonal_cm: f64,
+    size_cm: [f64; 2],
+    yaw_deg: f64,
+    footprint: OnceCell<Footprint>,
 }
 
 impl Solid {
@@ -1307,21 +1373,35 @@ impl Solid {
             z_min: z - h / 2.0,
             z_max: z + h / 2.0,
             height: h,
-            footprint: Footprint::new(w, d, object.yaw_deg),
+            area_cm2: w * d,
+            half_diagonal_cm: (w * w + d * d).sqrt() / 2.0,
+            size_cm: [w, d],
+            yaw_deg: object.yaw_deg,
+            footprint: OnceCell::new(),
         }
     }
 
-    fn area(&self) -> f64 {
-        self.footprint.area_cm2
+    fn footprint(&self) -> &Footprint {
+        self.footprint
+            .get_or_init(|| Footprint::new(self.size_cm[0], self.size_cm[1], self.yaw_deg))
     }
 
-    /// Share of this object's footprint inside `other`'s.
+    fn area(&self) -> f64 {
+        self.area_cm2
+    }
+
+    /// Share of this object's footprint inside `other`'s. Zero without making either
+    /// footprint when the circles around them are apart (by more than a relative 1e-9, far
+    /// more than the corners' rounding): the rectangles cannot meet then, and every caller
+    /// compares the share with a threshold of 0.5 or more.
     fn footprint_share_in(&self, other: &Solid) -> f64 {
-        let inter = intersection_area_footprints(
-            &self.footprint,
-            &other.footprint,
-            [other.x - self.x, other.y - self.y],
-        );
+        let offset_cm = [other.x - self.x, other.y - self.y];
+        let reach = self.half_diagonal_cm + other.half_diagonal_cm;
+        let squared = offset_cm[0] * offset_cm[0] + offset_cm[1] * offset_cm[1];
+        if squared > reach * reach * (1.0 + 1e-9) {
+            return 0.0;
+        }
+        let inter = intersection_area_footprints(self.footprint(), other.footprint(), offset_cm);
         inter / self.area()
     }
 
@@ -1382,27 +1462,16 @@ impl PairSearch {
 
 /// The objects whose footprints may overlap a given object's.
 enum Overlaps {
-    /// Every object: the indices of all of them.
-    All(Vec<usize>),
+    /// Every object.
+    All,
     /// Those whose footprint boxes overlap in a grid.
     Grid(BoxGrid),
 }
 
 impl Overlaps {
-    /// In layout order, every object whose footprint may overlap that of `s` (a superset of
-    /// those that do, which may hold `s` itself); `buffer` holds the list when it is made.
-    fn of<'b>(&'b self, solids: &[Solid], s: usize, buffer: &'b mut Vec<usize>) -> &'b [usize] {
-        match self {
-            Self::All(all) => all,
-            Self::Grid(grid) => {
-                buffer.clear();
-                grid.overlapping(solids, s, buffer);
-                buffer
-            }
-        }
-    }
-
-    /// [`Overlaps::of`] among the containers (`containers` lists them all, in layout order).
+    /// In layout order, every container whose footprint may overlap that of `s` (a superset of
+    /// those that do, which may hold `s` itself and objects that are no containers):
+    /// `containers` lists them all, in layout order; `buffer` holds the list when it is made.
     fn containers_of<'b>(
         &'b self,
         solids: &[Solid],
@@ -1411,12 +1480,17 @@ impl Overlaps {
         buffer: &'b mut Vec<usize>,
     ) -> &'b [usize] {
         match self {
-            Self::All(_) => containers,
-            Self::Grid(_) => self.of(solids, s, buffer),
+            Self::All => containers,
+            Self::Grid(grid) => {
+                buffer.clear();
+                grid.overlapping(solids, s, buffer);
+                buffer
+            }
         }
     }
 
-    /// [`Overlaps::of`] among the `free` objects (in layout order; `is_free` their flags).
+    /// In layout order, every `free` object (`is_free` their flags) whose footprint may
+    /// overlap that of `s` (a superset of those that do, which may hold `s` itself).
     fn free_of<'b>(
         &'b self,
         solids: &[Solid],
@@ -1426,7 +1500,7 @@ impl Overlaps {
         buffer: &'b mut Vec<usize>,
     ) -> &'b [usize] {
         match self {
-            Self::All(_) => free,
+            Self::All => free,
             Self::Grid(grid) => {
                 buffer.clear();
                 grid.overlapping(solids, s, buffer);
@@ -1451,7 +1525,7 @@ fn extract<'a>(
         });
     }
     let solids: Vec<Solid> = scene.objects.iter().map(Solid::new).collect();
-    let names: Vec<&str> = scene.objects.iter().map(|o| o.instance.as_str()).collect();
+    let name = |i: usize| scene.objects[i].instance.as_str();
     let [x_min, x_max, y_min, y_max] = scene.zone_cm;
     let (width, depth) = (x_max - x_min, y_max - y_min);
 
@@ -1474,9 +1548,9 @@ fn extract<'a>(
 
     let overlaps = match search {
         PairSearch::Grid => Overlaps::Grid(BoxGrid::new(&solids)),
-        PairSearch::AllPairs => Overlaps::All((0..solids.len()).collect()),
+        PairSearch::AllPairs => Overlaps::All,
         #[cfg(test)]
-        PairSearch::Literal => Overlaps::All((0..solids.len()).collect()),
+        PairSearch::Literal => Overlaps::All,
     };
     let mut near = Vec::with_capacity(solids.len());
     let container_of = containment(&solids, containers, &overlaps, &mut near);
@@ -1484,9 +1558,9 @@ fn extract<'a>(
     for (s, found) in container_of.iter().enumerate() {
         if let Some((c, evidence)) = found {
             edges.push(Edge {
-                subject: names[s],
+                subject: name(s),
                 relation: Relation::In,
-                object: names[*c],
+                object: name(*c),
                 evidence: *evidence,
             });
         }
@@ -1510,9 +1584,9 @@ fn extract<'a>(
         let near = overlaps.free_of(&solids, s, &free, &is_free, &mut near);
         if let Some((o, evidence)) = support_of(s, &solids, near) {
             edges.push(Edge {
-                subject: names[s],
+                subject: name(s),
                 relation: Relation::Above,
-                object: names[o],
+                object: name(o),
                 evidence,
             });
         }
@@ -1527,14 +1601,14 @@ fn extract<'a>(
     edges.extend(pairs.into_iter().map(|(s, o, rank)| {
         let (relation, evidence) = proximity(s, o, &solids, max_distance_cm, rank);
         Edge {
-            subject: names[s],
+            subject: name(s),
             relation,
-            object: names[o],
+            object: name(o),
             evidence,
         }
     }));
     let equally_spaced = if options.equally_spaced {
-        spacings(&solids, &free, &names)
+        spacings(&solids, &free, &scene.objects)
     } else {
         Vec::new()
     };
@@ -1921,7 +1995,7 @@ struct BoxGrid {
 impl BoxGrid {
     /// The box of an object, a hair larger, so that rounding never loses an overlap.
     fn bounds(solid: &Solid) -> ([f64; 2], [f64; 2]) {
-        let [hx, hy] = solid.footprint.half_extent_cm;
+        let [hx, hy] = solid.footprint().half_extent_cm;
         let pad = |c: f64, h: f64| h + 1e-9 * (c.abs() + h) + 1e-12;
         let (px, py) = (pad(solid.x, hx), pad(solid.y, hy));
         ([solid.x - px, solid.y - py], [solid.x + px, solid.y + py])
@@ -2127,7 +2201,12 @@ impl Within {
 }
 
 /// The optional `are equally spaced along` triples, along x then y.
-fn spacings<'a>(solids: &[Solid], free: &[usize], names: &[&'a str]) -> Vec<EquallySpaced<'a>> {
+fn spacings<'a>(
+    solids: &[Solid],
+    free: &[usize],
+    objects: &'a [SceneObject],
+) -> Vec<EquallySpaced<'a>> {
+    let name = |i: usize| objects[i].instance.as_str();
     let mut out = Vec::new();
     for axis in [Axis::X, Axis::Y] {
         let along = |i: usize| match axis {
@@ -2159,7 +2238,7 @@ fn spacings<'a>(solids: &[Solid], free: &[usize], names: &[&'a str]) -> Vec<Equa
                         continue;
                     }
                     out.push(EquallySpaced {
-                        instances: [names[a], names[b], names[c]],
+                        instances: [name(a), name(b), name(c)],
                         axis,
                         gaps_cm: [g1, g2],
                         spread_cm: spread,
@@ -3313,6 +3392,63 @@ mod tests {
         assert!(zeros.check().is_ok());
     }
 
+    /// Scenes of more objects than a table holds have their names' summaries sorted instead
+    /// of compared pair by pair: both ways find a duplicate wherever it is, and only then.
+    #[test]
+    fn duplicate_names_are_found_in_scenes_of_any_size() {
+        for n in [
+            3,
+            ALL_PAIRS_UP_TO_OBJECTS - 1,
+            ALL_PAIRS_UP_TO_OBJECTS,
+            ALL_PAIRS_UP_TO_OBJECTS + 1,
+            150,
+        ] {
+            let objects: Vec<SceneObject> = (0..n)
+                .map(|i| {
+                    obj(
+                        &format!("cup_{i}"),
+                        [i as f64, 10.0, 5.0],
+                        [1.0, 1.0, 1.0],
+                        0.0,
+                    )
+                })
+                .collect();
+            let zone = [0.0, 200.0, 0.0, 100.0];
+            assert!(scene(zone, objects.clone()).check().is_ok(), "{n} objects");
+            for (first, second) in [(0, n - 1), (n / 2, n / 2 + 1), (n - 2, n - 1)] {
+                let mut with = objects.clone();
+                with[second].instance = with[first].instance.clone();
+                let name = &with[first].instance;
+                assert_eq!(
+                    error_of(&scene(zone, with.clone())),
+                    format!(
+                        "objects[{second}].instance: duplicate instance \"{name}\" (also \
+                         objects[{first}]) (expected unique instance names; rename one, like \
+                         `{name}_dup`)"
+                    ),
+                    "{n} objects"
+                );
+            }
+        }
+    }
+
+    /// A node's line is written with its tail in one piece: the tails are the labels'.
+    #[test]
+    fn node_line_tails_are_the_labels() {
+        for y in [YBand::Front, YBand::Middle, YBand::Back] {
+            for x in [XBand::Left, XBand::Middle, XBand::Right] {
+                let cell = GridCell { y, x };
+                assert_eq!(cell.is_at_tail(), format!(", is at, {})", cell.label()));
+            }
+        }
+        for facing in Facing::ALL {
+            assert_eq!(
+                facing.face_to_tail(),
+                format!(", face to, {})", facing.label())
+            );
+        }
+    }
+
     #[test]
     fn malformed_layouts_are_errors_naming_object_and_field() {
         let good = || obj("cup_0", [10.0, 10.0, 5.0], [8.0, 8.0, 10.0], 0.0);
@@ -3697,5 +3833,73 @@ mod tests {
             let aa = intersection_area_footprints(&a, &a, [0.0, 0.0]);
             prop_assert!((aa - a.area_cm2).abs() <= tolerance);
         }
+
+        /// The share a pair's rule sees is the share of the two footprints, whether the
+        /// circles around them settled it or the footprints were made: the same bits when the
+        /// footprints were made, and no overlap when the circles were apart. The offsets are
+        /// drawn around the distance where the circles touch, where a rectangle's corner may
+        /// reach its circle (`k` scales that distance).
+        #[test]
+        fn a_share_settled_by_the_circles_is_the_footprints(
+            w1 in 0.5f64..50.0, d1 in 0.5f64..50.0, t1 in -180.0f64..180.0,
+            w2 in 0.5f64..50.0, d2 in 0.5f64..50.0, t2 in -180.0f64..180.0,
+            direction in -180.0f64..180.0,
+            k in prop_oneof![0.0f64..1.2, 1.0 - 1e-3..1.0 + 1e-3, 1.0 - 1e-6..1.0 + 1e-6, Just(1.0)],
+            corner_to_corner in any::<bool>(),
+        ) {
+            let solid = |w: f64, d: f64, yaw: f64, x: f64, y: f64| {
+                Solid::new(&SceneObject::new("o", [x, y, 5.0], [w, d, 10.0], yaw))
+            };
+            let (sin, cos) = direction.to_radians().sin_cos();
+            // Corner to corner: each rectangle turned so that a corner points at the other.
+            let diagonal = |w: f64, d: f64| d.atan2(w).to_degrees();
+            let (t1, t2) = if corner_to_corner {
+                (direction - diagonal(w1, d1), direction + 180.0 - diagonal(w2, d2))
+            } else {
+                (t1, t2)
+            };
+            let a = solid(w1, d1, t1, 10.0, 20.0);
+            let touching = a.half_diagonal_cm + solid(w2, d2, t2, 0.0, 0.0).half_diagonal_cm;
+            let b = solid(w2, d2, t2, 10.0 + k * touching * cos, 20.0 + k * touching * sin);
+            let offset = [b.x - a.x, b.y - a.y];
+            let direct = intersection_area_footprints(
+                &Footprint::new(w1, d1, t1),
+                &Footprint::new(w2, d2, t2),
+                offset,
+            ) / a.area();
+            let share = a.footprint_share_in(&b);
+            if a.footprint.get().is_some() {
+                prop_assert_eq!(share.to_bits(), direct.to_bits());
+            } else {
+                prop_assert_eq!(share, 0.0);
+                prop_assert!(direct <= 1e-9, "the circles were apart, the footprints meet: {}", direct);
+            }
+        }
+    }
+
+    /// The control of the property above: circles smaller than the footprints' (the largest
+    /// circle inside each) would call apart two squares that overlap corner into corner.
+    #[test]
+    fn circles_inside_the_footprints_would_miss_an_overlap() {
+        let square = |x: f64, y: f64| {
+            Solid::new(&SceneObject::new("o", [x, y, 5.0], [10.0, 10.0, 10.0], 0.0))
+        };
+        let (a, b) = (square(0.0, 0.0), square(9.0, 9.0));
+        // The two squares share a 1 × 1 corner; the centres are 12.7 apart.
+        assert_eq!(a.footprint_share_in(&b), 0.01);
+        let mut inside = square(9.0, 9.0);
+        inside.half_diagonal_cm = 5.0;
+        let mut a_inside = square(0.0, 0.0);
+        a_inside.half_diagonal_cm = 5.0;
+        assert_eq!(
+            a_inside.footprint_share_in(&inside),
+            0.0,
+            "the control misses it"
+        );
+        // Apart by a hair more than the circles allow: settled without a footprint.
+        let far = square(14.15, 0.0);
+        let near = square(0.0, 0.0);
+        assert_eq!(near.footprint_share_in(&far), 0.0);
+        assert!(near.footprint.get().is_none() && far.footprint.get().is_none());
     }
 }
