@@ -48,7 +48,9 @@
 //! that can be related, so a table-like layout of n objects costs about n log n. A table's
 //! dozen or two objects are cheaper to test pair by pair, without building grids: each
 //! subject keeps its 5 nearest by insertion, and the distance limit is decided on squared
-//! distances ([`Within`]). The graph borrows the scene's names, so it allocates no strings,
+//! distances ([`Within`]). A footprint's corners (a sine and a cosine) are made only for an
+//! object whose circle around its footprint meets another's in a pair the rules test for `in`
+//! or `above`. The graph borrows the scene's names, so it allocates no strings,
 //! and its text is written in one buffer. A word-for-word version of the rules is kept as the
 //! test oracle (property tests check both searches give its output). `are equally spaced
 //! along` (off by default) is about triples: its output alone can grow with n², and its
