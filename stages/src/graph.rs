@@ -980,9 +980,9 @@ impl Edge<'_> {
     }
 }
 
-/// [`push_fields`] of three fields, inlined where it is called: a field known there (like
-/// `is at`) is copied without a call to `memcpy`, which costs more than the copy for a few
-/// bytes, and a triplet line has only a few bytes per field.
+/// [`push_fields`] of three fields, inlined where it is called: the separators are copied as
+/// constants, without a call to `memcpy`, which costs more than the copy for a few bytes (a
+/// triplet line has only a few bytes per field).
 #[inline(always)]
 fn push_triple(out: &mut String, a: &str, b: &str, c: &str) {
     out.push('(');
