@@ -3,6 +3,11 @@
 //! `mesa.toml` and the Slurm environment ([`Resolved`]). Each command's own flags live in its
 //! file under [`crate::commands`]; doc comments are the `--help` text.
 
+// The doc comments of clap's arguments are `mesa --help` as a user reads it: `[run] jobs`
+// names a section and key of mesa.toml, and `eval/<name>/` a folder with a placeholder. Read as
+// rustdoc, those are a link and an HTML tag that resolve to nothing.
+#![allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
+
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;

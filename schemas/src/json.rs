@@ -249,7 +249,7 @@ fn utf8_len(first: u8) -> usize {
 
 /// Serialises `value` with sorted keys, two-space indentation and a trailing newline: the bytes
 /// of `serde_json::to_vec_pretty(&serde_json::to_value(value)?)` and a newline, written without
-/// the `Value` tree ([`crate::sorted_writer`]).
+/// the `Value` tree (the `sorted_writer` module).
 pub fn to_sorted_pretty<T: Serialize + ?Sized>(value: &T) -> Result<Vec<u8>, serde_json::Error> {
     let mut bytes = crate::sorted_writer::write_sorted(value, true)?;
     bytes.push(b'\n');

@@ -80,7 +80,7 @@ pub fn layout_form_of(value: &Value) -> LayoutForm {
 
 /// Reads and validates layout text of any form; every problem is returned.
 ///
-/// A layout as mesa writes it is read straight into its type ([`crate::layout_plain`]); any
+/// A layout as mesa writes it is read straight into its type (the `layout_plain` module); any
 /// other document, and every invalid one, goes through the general reader, which names each
 /// problem's JSON path. Both give the same result for what the quick one accepts.
 pub fn read_layout_text(text: &str) -> Result<ReadLayout, Vec<Problem>> {

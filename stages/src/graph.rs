@@ -43,12 +43,12 @@
 //!
 //! The rules are stated over all pairs, but `in` and `above` need the two footprints to
 //! overlap and a horizontal pair needs the object among the subject's 5 nearest: above
-//! [`ALL_PAIRS_UP_TO_OBJECTS`] objects, a uniform grid over the footprints' boxes ([`BoxGrid`])
-//! and one over the centres ([`CentreGrid`], searched ring by ring outward) test only pairs
+//! `ALL_PAIRS_UP_TO_OBJECTS` objects, a uniform grid over the footprints' boxes (`BoxGrid`)
+//! and one over the centres (`CentreGrid`, searched ring by ring outward) test only pairs
 //! that can be related, so a table-like layout of n objects costs about n log n. A table's
 //! dozen or two objects are cheaper to test pair by pair, without building grids: each
 //! subject keeps its 5 nearest by insertion, and the distance limit is decided on squared
-//! distances ([`Within`]). A footprint's corners (a sine and a cosine) are made only for an
+//! distances (`Within`). A footprint's corners (a sine and a cosine) are made only for an
 //! object whose circle around its footprint meets another's in a pair the rules test for `in`
 //! or `above`. The graph borrows the scene's names, so it allocates no strings,
 //! and its text is written in one buffer. A word-for-word version of the rules is kept as the

@@ -548,7 +548,7 @@ fn on_meshes<'x>(
 ///
 /// A loose body's lowest point is its mesh's, and a pair with a loose body is judged on the
 /// two meshes ([`solid::fall_onto`]: vertical rays between them; resting within `touch_m`), as
-/// is a pair whose only support is a steep contact ([`SUPPORT_FLAT_DOWNWARD`]).
+/// is a pair whose only support is a steep contact (`SUPPORT_FLAT_DOWNWARD`).
 pub fn fall_of<'a>(
     body: &Body,
     others: impl Iterator<Item = (usize, &'a Body)> + Clone,

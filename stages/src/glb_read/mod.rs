@@ -2,7 +2,7 @@
 //! with what the asset index reports about it.
 //!
 //! What is read:
-//! - the GLB container, every problem with the Khronos validator's code ([`container`]);
+//! - the GLB container, every problem with the Khronos validator's code (`container`);
 //! - the glTF 2.0 JSON with the `gltf-json` crate (the `gltf` crate's document model), and its
 //!   validation (every `(JSON path, problem)` pair);
 //! - the default scene's node tree with each node's `matrix` or TRS, every primitive of every
@@ -11,7 +11,7 @@
 //!   quantized (`KHR_mesh_quantization`) positions;
 //! - skinned meshes at their rest pose (joint world matrices × inverse bind matrices, weighted)
 //!   and morph targets at their default weights, as a viewer shows the file;
-//! - `KHR_draco_mesh_compression`, decoded with a pure-Rust Draco decoder ([`draco`]);
+//! - `KHR_draco_mesh_compression`, decoded with a pure-Rust Draco decoder (`draco`);
 //! - buffers and images embedded in the BIN chunk or in data URIs.
 //!
 //! What is rejected, with the reason and how to fix it: anything that is not a GLB, glTF 1.0

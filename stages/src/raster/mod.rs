@@ -990,7 +990,7 @@ fn draw_every_pixel(
 /// The visibility of the samples of the pixels `mask` selects, seen by `camera` (the picture's
 /// camera [`PinholeCamera::supersampled`] by the mask's factor). Each sample is exactly the
 /// one [`visibility`] finds at that pixel of `camera`; the buffer holds `mask.selected() ·
-/// factor²` samples in [`SampleMask::sample`] order (its `width` is `factor²`, its `height`
+/// factor²` samples in [`SampleMask`] order (its `width` is `factor²`, its `height`
 /// the number of selected pixels). Triangles over no selected pixel are skipped whole.
 pub fn visibility_of_selected(
     camera: &PinholeCamera,

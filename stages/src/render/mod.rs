@@ -596,7 +596,7 @@ fn silhouette_pixels(centres: &VisibilityBuffer) -> Vec<bool> {
 /// [`render_picture`] with the shadow map built beforehand (`shadow`: [`ShadowMap::of_lighting`]
 /// of the same `lighting` and `items`), so that the views of one scene share it.
 ///
-/// Only silhouette pixels ([`silhouette_pixels`]) are sampled `supersampling`² times; the
+/// Only silhouette pixels (`silhouette_pixels`) are sampled `supersampling`² times; the
 /// others are shaded once at their first sample. Where the silhouette test is right (one item
 /// under all samples of a pixel it leaves out) the picture is the same, byte for byte, as
 /// sampling every pixel fully: that pixel's samples all hit that item, and its colour is that
