@@ -3,9 +3,8 @@
 //! `mesa.toml` and the Slurm environment ([`Resolved`]). Each command's own flags live in its
 //! file under [`crate::commands`]; doc comments are the `--help` text.
 
-// The doc comments of clap's arguments are `mesa --help` as a user reads it: `[run] jobs`
-// names a section and key of mesa.toml, and `eval/<name>/` a folder with a placeholder. Read as
-// rustdoc, those are a link and an HTML tag that resolve to nothing.
+// Doc comments here are `--help` text, read by rustdoc as links and HTML tags: see the same
+// allowance in commands/mod.rs.
 #![allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 
 use std::path::PathBuf;

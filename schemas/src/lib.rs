@@ -9,8 +9,8 @@
 //! - [`artifacts`]: inputs and per-stage artifacts (lift, retrieval, check, graph, tasks,
 //!   records, run markers).
 //! - [`render`]: rendered views' cameras, the report's statistics, the release's annotations.
-//! - [`kinds`](mod@kinds) and [`validate`]: the kind registry and a validator that reports every problem
-//!   as `<json path>: <problem> (expected ...)`.
+//! - [`kinds`](mod@kinds) and [`validate`]: the kind registry and a validator that reports
+//!   every problem as `<json path>: <problem> (expected ...)`.
 //! - [`json`]: lenient reading (`NaN` reported, not a syntax error) and sorted-key writing.
 //!
 //! Units live in names: `_cm`, `_deg`, `_m`, `_mm`, `_px`. Layout files are in centimetres in

@@ -407,7 +407,7 @@ pub const MARKER_LIMIT: SizeLimit = SizeLimit {
 
 /// Reads a marker; `None` when absent or unreadable (an unreadable marker means "redo"): a
 /// link is followed, and what it leads to is read only when it is a regular file of at most
-/// `MARKER_LIMIT` (16 MiB; a FIFO there does not hang the run).
+/// `MARKER_LIMIT` (a FIFO there does not hang the run).
 pub fn read_marker(path: &Path) -> Option<RunMarker> {
     let bytes = read_bounded(path, MARKER_LIMIT).ok()?;
     serde_json::from_slice(&bytes).ok()
