@@ -7,7 +7,7 @@ same layouts and writing the same graph.txt and graph.json. Before timing, every
 graph.txt from Python is checked against mesa's, byte for byte (graph.json too: same bytes, or
 else the same structure with numbers equal within 1e-9).
 
-Two comparisons, both sides the same way: a warm-up, then `--repeat` timed runs; the min and
+Three comparisons, every side timed the same way: a warm-up, then `--repeat` timed runs; the min and
 the median over the runs, in ms per scene, and the ratio python / mesa of each:
 
   a. in process: the layouts already parsed and the container flags decided, the graph of
@@ -21,7 +21,16 @@ the median over the runs, in ms per scene, and the ratio python / mesa of each:
      graph.json and graph.txt written under a separate folder DIR, so mesa's outputs and
      markers are not touched). Process start-up (for Python, importing numpy and shapely) is
      counted on both sides, and printed on its own. Wall time, and the CPU time (user +
-     system) of the same runs, which other work on the machine disturbs less.
+     system) of the same runs, which other work on the machine disturbs less. b' is the same
+     with the outputs (and mesa's markers) removed before each run, so both sides create
+     every file.
+  c. the floor under b: the stage's work for each scene in a bare Rust loop, without the
+     runner (pipeline/examples/graph_bare.rs, built here if missing): the layout read, the
+     graph extracted, graph.json and graph.txt made and compared with the files there (what
+     a forced `mesa graph` does before it leaves a file alone), with no lock, done marker,
+     SHA-256 or sweep of dead writers' temporary files. Timed as b; printed against Python
+     and against mesa (what the runner adds). c' is the same loop writing its files under a
+     separate folder with std::fs::write, as the Python side does.
 
 Python runs single-threaded; mesa with --jobs 1 (the example is single-threaded). The load
 average and CPU model are printed with the figures.
@@ -56,6 +65,7 @@ from timing import best_median_ms, timed  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "target/release/examples/graph_timing"
+BARE = ROOT / "target/release/examples/graph_bare"
 STAGES_UP_TO_GRAPH = [["assets"], ["lift"], ["retrieve"], ["place"], ["pack"], ["demo", "annotate"],
                       ["ingest"], ["check"], ["graph"]]
 
@@ -147,14 +157,17 @@ def timed_process(cmd, repeat, prepare=None):
     return walls, cpus
 
 
-def report(label, python_runs, mesa_runs, what):
-    """Prints min and median per scene (ms) of both sides and the python / mesa ratios."""
+def report(label, python_runs, mesa_runs, what, names=("python", "mesa")):
+    """Prints min and median per scene (ms) of both sides and the ratios of the first to the
+    second (python / mesa unless `names` says otherwise)."""
     py_min, py_med = best_median_ms(python_runs)
     me_min, me_med = best_median_ms(mesa_runs)
+    first, second = names
+    width = max(len(first), len(second)) + 1
     print(f"{label}: {what}")
-    print(f"  python: {py_min:9.4f} ms per scene (min of {len(python_runs)}; median {py_med:.4f})")
-    print(f"  mesa:   {me_min:9.4f} ms per scene (min of {len(mesa_runs)}; median {me_med:.4f})")
-    print(f"  ratio python / mesa: {py_min / me_min:.1f}x min to min, {py_med / me_med:.1f}x median to median")
+    print(f"  {first + ':':{width}} {py_min:9.4f} ms per scene (min of {len(python_runs)}; median {py_med:.4f})")
+    print(f"  {second + ':':{width}} {me_min:9.4f} ms per scene (min of {len(mesa_runs)}; median {me_med:.4f})")
+    print(f"  ratio {first} / {second}: {py_min / me_min:.1f}x min to min, {py_med / me_med:.1f}x median to median")
 
 
 def main():
@@ -165,11 +178,15 @@ def main():
     parser.add_argument("--repeat", type=int, default=5, help="timed runs on each side")
     parser.add_argument("--mesa", default=str(ROOT / "target/release/mesa"))
     parser.add_argument("--example", default=str(EXAMPLE), help="the built graph_timing example")
+    parser.add_argument("--bare", default=str(BARE), help="the built graph_bare example")
     args = parser.parse_args()
     mesa = Path(args.mesa)
     example = Path(args.example)
+    bare = Path(args.bare)
     if not example.exists():
         run(["cargo", "build", "--release", "-q", "-p", "mesa-stages", "--example", "graph_timing"], cwd=ROOT)
+    if not bare.exists():
+        run(["cargo", "build", "--release", "-q", "-p", "mesa-pipeline", "--example", "graph_bare"], cwd=ROOT)
 
     with tempfile.TemporaryDirectory(prefix="compare_graph_") as tmp:
         tmp = Path(tmp)
@@ -231,6 +248,10 @@ def main():
 
         python_fresh_wall, python_fresh_cpu = timed_process(python_cmd, args.repeat, clear_python)
         mesa_fresh_wall, mesa_fresh_cpu = timed_process(quiet(mesa, "graph", dataset), args.repeat, clear_mesa)
+        # c. The stage's work in a bare Rust loop, without the runner: the floor under b.
+        bare_compare_wall, bare_compare_cpu = timed_process([bare, dataset, "--compare"], args.repeat)
+        bare_out = tmp / "bare_out"
+        bare_write_wall, bare_write_cpu = timed_process([bare, dataset, "--out", bare_out], args.repeat)
         # What process start-up alone costs (included in b).
         python_start = min(timed(lambda: run_quietly([sys.executable, "-c", "import numpy, shapely"]), args.repeat))
         mesa_start = min(timed(lambda: run_quietly([mesa, "--version"]), args.repeat))
@@ -251,6 +272,19 @@ def main():
                "as b, the outputs (and mesa's graph markers) removed before each run")
         report("b'. dataset stage, fresh outputs, CPU time", [t / n for t in python_fresh_cpu],
                [t / n for t in mesa_fresh_cpu], "the same runs")
+        report("c. the stage's work in a bare Rust loop, wall time", [t / n for t in python_wall],
+               [t / n for t in bare_compare_wall],
+               "pipeline/examples/graph_bare.rs --compare: each layout read, its graph extracted, graph.json "
+               "and graph.txt made and compared with the files there; no lock, marker, digest or sweep",
+               names=("python", "bare loop"))
+        report("c. the same, CPU time", [t / n for t in python_cpu], [t / n for t in bare_compare_cpu],
+               "the same runs", names=("python", "bare loop"))
+        report("c. what mesa's runner adds, wall time", [t / n for t in mesa_wall], [t / n for t in bare_compare_wall],
+               "`mesa graph --force` (b) against the bare loop", names=("mesa", "bare loop"))
+        report("c'. the bare loop writing its files, wall time", [t / n for t in python_wall],
+               [t / n for t in bare_write_wall],
+               "graph_bare.rs --out <separate folder>: the files truncated and rewritten with std::fs::write, "
+               "as the Python side writes its own", names=("python", "bare loop"))
         print(f"  process start-up, included in b (min of {args.repeat}): python + import numpy, shapely "
               f"{1e3 * python_start:.0f} ms; mesa --version {1e3 * mesa_start:.0f} ms")
     return 0 if not differing else 1

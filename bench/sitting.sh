@@ -26,7 +26,7 @@ frame="${M2T2_FRAME:-$root/../shared/realdata/rgbd/m2t2_real/00}"
 mkdir -p "$out"
 out="$(cd "$out" && pwd)"
 cd "$root"
-cargo build --release -q -p mesa-pipeline
+cargo build --release -q -p mesa-pipeline --bins --examples
 cargo build --release -q -p mesa-stages --examples
 mesa="$root/target/release/mesa"
 
