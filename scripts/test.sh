@@ -2,8 +2,9 @@
 # Runs mesa's test suite. First installs, once, what the tests need that cargo does not bring:
 #   - a Python virtualenv with trimesh (PLY files are checked with it; with python-fcl, rtree
 #     and scipy it is the exact-mesh reference of `mesa check`; mujoco drops the checked
-#     scenes) and datasets (the
-#     training records are loaded with it, as LLaMA-Factory and TRL do): .venv-tools/
+#     scenes), datasets (the training records are loaded with it, as LLaMA-Factory and TRL
+#     do) and shapely (with numpy, the Python scene-graph rules that `mesa graph` is compared
+#     with): .venv-tools/
 #   - Blender 4.3 as a Python module (bpy, numpy<2) in its own virtualenv: .venv-blender/
 #   - from npm, the Khronos glTF validator (every GLB we write is validated) and gltf-transform
 #     (KHR_mesh_quantization and Draco test files): scripts/node_modules/
@@ -17,7 +18,7 @@ if [ ! -d ../shared/realdata ] && [ -z "${MESA_SHARED:-}" ]; then
 fi
 
 venv="$root/.venv-tools"
-if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import trimesh, numpy, datasets, fcl, rtree, scipy, mujoco, compress_pickle, pybullet, pxr, PIL" 2>/dev/null; then
+if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import trimesh, numpy, datasets, fcl, rtree, scipy, mujoco, compress_pickle, pybullet, pxr, PIL, shapely" 2>/dev/null; then
   echo "test.sh: installing trimesh and datasets into $venv" >&2
   python3 -m venv "$venv"
   "$venv/bin/pip" install --quiet --disable-pip-version-check --no-cache-dir -r scripts/requirements-tools.txt
