@@ -7,8 +7,8 @@ same layouts and writing the same graph.txt and graph.json. Before timing, every
 graph.txt from Python is checked against mesa's, byte for byte (graph.json too: same bytes, or
 else the same structure with numbers equal within 1e-9).
 
-Three comparisons, every side timed the same way: a warm-up, then `--repeat` timed runs; the min and
-the median over the runs, in ms per scene, and the ratio python / mesa of each:
+Three comparisons, every side timed the same way: a warm-up, then `--repeat` timed runs; the
+min and the median over the runs, in ms per scene, and the ratio python / mesa of each:
 
   a. in process: the layouts already parsed and the container flags decided, the graph of
      every scene extracted and its text produced, no file I/O. mesa: the example
@@ -234,6 +234,9 @@ def main():
                       "--out", stage_out]
         python_wall, python_cpu = timed_process(python_cmd, args.repeat)
         mesa_wall, mesa_cpu = timed_process(quiet(mesa, "graph", dataset, "--force"), args.repeat)
+        # c. The stage's work in a bare Rust loop, without the runner: the floor under b (timed
+        # right after mesa's side of b, which it is compared with).
+        bare_compare_wall, bare_compare_cpu = timed_process([bare, dataset, "--compare"], args.repeat)
 
         # b'. The same with fresh outputs: before each run, both sides' graph files (and
         # mesa's graph markers) are removed, so each run creates every file (a forced rerun
@@ -248,8 +251,6 @@ def main():
 
         python_fresh_wall, python_fresh_cpu = timed_process(python_cmd, args.repeat, clear_python)
         mesa_fresh_wall, mesa_fresh_cpu = timed_process(quiet(mesa, "graph", dataset), args.repeat, clear_mesa)
-        # c. The stage's work in a bare Rust loop, without the runner: the floor under b.
-        bare_compare_wall, bare_compare_cpu = timed_process([bare, dataset, "--compare"], args.repeat)
         bare_out = tmp / "bare_out"
         bare_write_wall, bare_write_cpu = timed_process([bare, dataset, "--out", bare_out], args.repeat)
         # What process start-up alone costs (included in b).
