@@ -21,7 +21,8 @@
 //! - equal distances (objects on a grid, twins at one spot) and yaws on the facing sectors'
 //!   22.5° boundaries;
 //! - thin objects, and objects reaching out of the zone;
-//! - tilted rotations, and `z_rotation` present or absent.
+//! - tilted rotations, and `z_rotation` present or absent;
+//! - every third layout in a model's form (a yaw per object instead of a rotation).
 //!
 //! Every layout's `mesa graph --layout` output must be byte-identical to the reference's
 //! text. The control test moves one object of a layout for the reference only, and requires
@@ -133,8 +134,17 @@ fn draw_size(rng: &mut ChaCha8Rng, category: &str) -> [f64; 3] {
     size
 }
 
-/// One layout of `n` objects in the dataset form, as JSON.
-fn layout(rng: &mut ChaCha8Rng, n: usize) -> Value {
+/// The forms of a layout file that `mesa graph --layout` reads and the reference reads too.
+#[derive(Clone, Copy)]
+enum Form {
+    /// Quaternion rotations (some tilted), `z_rotation` present or absent, asset uids.
+    Dataset,
+    /// A model's output: a yaw (`z_rotation`) per object and a description.
+    Llm,
+}
+
+/// One layout of `n` objects in `form`, as JSON.
+fn layout(rng: &mut ChaCha8Rng, n: usize, form: Form) -> Value {
     // The table frame's origin is the zone's proximal-left corner.
     let zone = [
         0.0,
@@ -235,6 +245,15 @@ fn layout(rng: &mut ChaCha8Rng, n: usize) -> Value {
         .iter()
         .enumerate()
         .map(|(i, o)| {
+            if let Form::Llm = form {
+                return json!({
+                    "instance": o.instance,
+                    "size": o.size,
+                    "position": o.position,
+                    "z_rotation": o.yaw_deg,
+                    "description": format!("object {i}"),
+                });
+            }
             let twist = yaw_quat(o.yaw_deg);
             let tilted = rng.random_bool(0.08);
             let rotation = if tilted {
@@ -263,7 +282,12 @@ fn layout(rng: &mut ChaCha8Rng, n: usize) -> Value {
             object
         })
         .collect();
-    json!({"schema": "mesa.layout/1", "item_placement_zone": zone, "objects": objects})
+    match form {
+        Form::Dataset => {
+            json!({"schema": "mesa.layout/1", "item_placement_zone": zone, "objects": objects})
+        }
+        Form::Llm => json!({"item_placement_zone": zone, "objects": objects}),
+    }
 }
 
 /// The object counts of the generated layouts: mostly small, then around the 64-object
@@ -281,8 +305,13 @@ fn write_layouts(dir: &Path, seed: u64) -> Vec<PathBuf> {
         .into_iter()
         .enumerate()
         .map(|(i, n)| {
-            let path = dir.join(format!("layout_{i:03}_{n}.json"));
-            let text = serde_json::to_string_pretty(&layout(&mut rng, n)).expect("json");
+            // Every third layout in a model's form.
+            let (form, name) = match i % 3 {
+                2 => (Form::Llm, "llm"),
+                _ => (Form::Dataset, "layout"),
+            };
+            let path = dir.join(format!("{name}_{i:03}_{n}.json"));
+            let text = serde_json::to_string_pretty(&layout(&mut rng, n, form)).expect("json");
             std::fs::write(&path, text).expect("write layout");
             path
         })
