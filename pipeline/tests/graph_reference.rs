@@ -39,6 +39,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use common::{mesa, python_with};
+use mesa_stages::mesh::{quat_from_axis_angle, quat_mul};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::{json, Value};
@@ -63,24 +64,6 @@ const CATEGORIES: [&str; 16] = [
     "remote",
     "candle",
 ];
-
-/// A quaternion `[x, y, z, w]` turning by `yaw_deg` about +z.
-fn yaw_quat(yaw_deg: f64) -> [f64; 4] {
-    let half = yaw_deg.to_radians() / 2.0;
-    [0.0, 0.0, half.sin(), half.cos()]
-}
-
-/// `a` then `b` (Hamilton product of `[x, y, z, w]` quaternions).
-fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
-    let [ax, ay, az, aw] = a;
-    let [bx, by, bz, bw] = b;
-    [
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-    ]
-}
 
 /// One object as it is being generated.
 struct Object {
@@ -254,17 +237,17 @@ fn layout(rng: &mut ChaCha8Rng, n: usize, form: Form) -> Value {
                     "description": format!("object {i}"),
                 });
             }
-            let twist = yaw_quat(o.yaw_deg);
+            let twist = quat_from_axis_angle([0.0, 0.0, 1.0], o.yaw_deg.to_radians());
             let tilted = rng.random_bool(0.08);
             let rotation = if tilted {
-                // A tilt about x or y after the yaw: the graph keeps the yaw only.
-                let tilt = rng.random_range(5.0f64..95.0).to_radians() / 2.0;
-                let about = if rng.random_bool(0.5) {
-                    [tilt.sin(), 0.0, 0.0, tilt.cos()]
+                // A tilt about x or y before the yaw: the graph keeps the yaw only.
+                let tilt = rng.random_range(5.0f64..95.0).to_radians();
+                let axis = if rng.random_bool(0.5) {
+                    [1.0, 0.0, 0.0]
                 } else {
-                    [0.0, tilt.sin(), 0.0, tilt.cos()]
+                    [0.0, 1.0, 0.0]
                 };
-                quat_mul(twist, about)
+                quat_mul(twist, quat_from_axis_angle(axis, tilt))
             } else {
                 twist
             };
