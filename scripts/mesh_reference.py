@@ -21,7 +21,8 @@ such a scene, glTF Y-up). Output: JSON on standard output,
 - The fall of an object: how far it could drop straight down before its mesh meets the table
   top (z = 0) or another mesh: rays down from its vertices and samples onto the others, rays
   up from theirs onto it, and its lowest point over the table; 0 when some of its points lie
-  inside another object.
+  inside another object. Only the meshes that reach below its lowest point count: one that
+  stands on it or is sunk into its top holds nothing up.
 
 Pairs whose bounding boxes are farther apart than the tolerance are left out (they are
 separated). Everything is deterministic (fixed sampling seed).
@@ -220,7 +221,9 @@ def falls(objects):
                 continue
             other = objects[other_name]
             xy = np.maximum(o.bounds[0][:2] - other.bounds[1][:2], other.bounds[0][:2] - o.bounds[1][:2])
-            if np.max(xy) > 0 or other.bounds[0][2] >= o.bounds[1][2]:
+            # Only what reaches below its lowest point can hold it up: an object standing on
+            # it, or sunk into its top, presses it down.
+            if np.max(xy) > 0 or other.bounds[0][2] >= o.bounds[0][2]:
                 continue
             if float(o.bounds[0][2] - other.bounds[1][2]) >= gap:
                 continue

@@ -540,6 +540,9 @@ fn on_meshes<'x>(
 /// How far `body` could fall before touching the table top or one of `others` (index,
 /// body), and onto what; 0 when it already rests on something.
 ///
+/// Only the others that reach below its lowest point can hold it up: one standing on it, or
+/// sunk into its top, presses it down.
+///
 /// It rests on the table when its lowest point is within `touch_m` of the table top (or below
 /// it), and on another object when some part of it is within `touch_m` of a part of the other
 /// in a direction pointing down (a fruit leaning on another fruit's side rests on it). Else it
@@ -554,10 +557,14 @@ pub fn fall_of<'a>(
     others: impl Iterator<Item = (usize, &'a Body)> + Clone,
     touch_m: f64,
 ) -> (f64, Support) {
-    let mut gap = body.judged_bounds().min[2].max(0.0);
+    let lowest = body.judged_bounds().min[2];
+    let mut gap = lowest.max(0.0);
     if gap <= touch_m {
         return (0.0, Support::Table);
     }
+    // Without this, parts raised by `touch_m` into an object standing on the body, or points
+    // inside it, counted as resting on it.
+    let others = others.filter(move |(_, other)| other.judged_bounds().min[2] < lowest);
     // Pairs with a loose object are judged on their meshes.
     let mut over = Support::Table;
     let mut steep_on_meshes: Vec<usize> = Vec::new();

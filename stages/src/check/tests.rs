@@ -238,6 +238,51 @@ fn a_book_above_another_floats_over_it_and_rests_once_dropped() {
     assert_abs_diff_eq!(f.floating[0].gap_m, 0.02, epsilon = 1e-6);
 }
 
+/// A book 1 cm over the table with another standing on it, touching or sunk into its top by
+/// up to 1.5 mm: the upper book presses the lower one down and holds nothing up, so the
+/// lower one floats 1 cm over the table and the upper one rests on it. Before, the upper
+/// book's parts, met by the lower book's parts raised by the contact tolerance (or points
+/// inside it), counted as holding the lower one up.
+#[test]
+fn an_object_standing_on_a_floating_one_does_not_hold_it_up() {
+    let book = cuboid([0.2, 0.15, 0.03]);
+    for sunk in [0.0, 0.0005, 0.0015] {
+        let (_, f) = check(&[
+            at("book_0", &book, [0.5, 0.3, 0.015 + 0.01]),
+            at("book_1", &book, [0.52, 0.3, 0.045 + 0.01 - sunk]),
+        ]);
+        let floating: Vec<(usize, Support)> =
+            f.floating.iter().map(|x| (x.object, x.over)).collect();
+        assert_eq!(
+            floating,
+            vec![(0, Support::Table)],
+            "sunk {sunk} m: {:?}",
+            f.falls
+        );
+        assert_abs_diff_eq!(f.floating[0].gap_m, 0.01, epsilon = 1e-6);
+    }
+    // Control: with the lower book on the table, both rest.
+    let (_, f) = check(&[
+        at("book_0", &book, [0.5, 0.3, 0.015]),
+        at("book_1", &book, [0.52, 0.3, 0.045]),
+    ]);
+    assert!(f.floating.is_empty(), "{:?}", f.floating);
+}
+
+/// The same on the meshes: a ball 3 mm over the loose pencil's mesh, with a book standing on
+/// the ball; the ball still floats over the pencil, and the book rests on the ball.
+#[test]
+fn an_object_standing_on_a_floating_one_does_not_hold_it_up_on_the_meshes() {
+    let mut items = loose_pencil_scene(true);
+    let book = cuboid([0.2, 0.15, 0.03]);
+    // Ball 1 is 2 cm across with its centre at 0.043 m: its top at 0.053 m.
+    items.push(at("book_1", &book, [0.6, 0.3, 0.053 + 0.015]));
+    let (_, f) = check(&items);
+    let floating: Vec<(usize, Support)> = f.floating.iter().map(|x| (x.object, x.over)).collect();
+    assert_eq!(floating, vec![(3, Support::Object(0))], "{:?}", f.falls);
+    assert_abs_diff_eq!(f.floating[0].gap_m, 0.003, epsilon = 2e-4);
+}
+
 #[test]
 fn a_turned_slim_object_beside_another_does_not_collide() {
     // A 30 × 2 × 2 cm stick turned 45°: its bounding box is 22.6 cm square. A 6 cm cube in
