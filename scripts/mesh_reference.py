@@ -21,8 +21,9 @@ such a scene, glTF Y-up). Output: JSON on standard output,
 - The fall of an object: how far it could drop straight down before its mesh meets the table
   top (z = 0) or another mesh: rays down from its vertices and samples onto the others, rays
   up from theirs onto it, and its lowest point over the table; 0 when some of its points lie
-  inside another object. Only the meshes that reach below its lowest point count: one that
-  stands on it or is sunk into its top holds nothing up.
+  inside another object or its surface crosses the other's (a rim or a thin wall that no
+  point is inside). Only the meshes that reach below its lowest point count: one that stands
+  on it or is sunk into its top holds nothing up.
 
 Pairs whose bounding boxes are farther apart than the tolerance are left out (they are
 separated). Everything is deterministic (fixed sampling seed).
@@ -227,8 +228,9 @@ def falls(objects):
                 continue
             if float(o.bounds[0][2] - other.bounds[1][2]) >= gap:
                 continue
-            # Sunk into the other: rests.
-            if inside(o.points, other).any():
+            # Sunk into the other (points inside it, or its surface crossing the other's, as a
+            # thin rim or wall that no point is inside): rests.
+            if inside(o.points, other).any() or intersect(o, other):
                 gap = 0.0
                 break
             down = np.tile([0.0, 0.0, -1.0], (len(o.points), 1))

@@ -107,6 +107,15 @@ fn findings_of(report: &CheckArtifact) -> CheckFindings {
     }
 }
 
+/// The scene id of a scene folder (its name).
+fn scene_name(scene: &Path) -> String {
+    scene
+        .file_name()
+        .expect("a scene folder")
+        .to_string_lossy()
+        .into_owned()
+}
+
 /// Runs the demo of `seed` (12 scenes) up to ingest, in `root/seed<seed>`.
 fn ingested_demo(root: &Path, seed: u64) -> PathBuf {
     let dir = root.join(format!("seed{seed}"));
@@ -133,11 +142,7 @@ fn checked_layouts(root: &Path, seed: u64) -> (PathBuf, Vec<Checked>) {
             &dir,
         );
         for scene in scene_dirs(&dir) {
-            let name = scene
-                .file_name()
-                .expect("a scene folder")
-                .to_string_lossy()
-                .into_owned();
+            let name = scene_name(&scene);
             let report_path = scene.join("qa/check.json");
             if !report_path.is_file() {
                 continue;
@@ -536,11 +541,7 @@ fn check_agrees_with_the_meshes_on_untidy_layouts() {
         ok(&["check", "--layout", "refined", "--progress", "off"], &dir);
         let mut checked = Vec::new();
         for scene in scene_dirs(&dir) {
-            let name = scene
-                .file_name()
-                .expect("a scene folder")
-                .to_string_lossy()
-                .into_owned();
+            let name = scene_name(&scene);
             let report: CheckArtifact = read_json(&scene.join("qa/check.json"));
             checked.push(Checked {
                 key: format!("untidy{round}/{name}"),
