@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command as Process;
 use std::sync::OnceLock;
 
-use common::mesa;
+use common::{copy_tree, mesa};
 use mesa_schemas::annotation::{IngestDiffArtifact, PackIndexArtifact};
 use mesa_schemas::artifacts::TruthInstances;
 use mesa_schemas::layout::DatasetLayout;
@@ -117,7 +117,7 @@ fn ingest_scene(
     let scene = dir.path().join(rel);
     let from = packed().join(rel);
     for sub in ["coarse", "pack"] {
-        copy_dir(&from.join(sub), &scene.join(sub));
+        copy_tree(&from.join(sub), &scene.join(sub));
     }
     std::fs::create_dir_all(scene.join("refined")).expect("mkdir");
     std::fs::copy(refined, scene.join(format!("refined/{id}.glb"))).expect("copy");
@@ -134,19 +134,6 @@ fn ingest_scene(
     let layout = read(&scene.join("refined/layout.json"));
     let diff = read(&scene.join("refined/diff.json"));
     (dir, layout, diff)
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("mkdir");
-    for entry in std::fs::read_dir(from).expect("read dir") {
-        let path = entry.expect("entry").path();
-        let target = to.join(path.file_name().expect("name"));
-        if path.is_dir() {
-            copy_dir(&path, &target);
-        } else {
-            std::fs::copy(&path, &target).expect("copy");
-        }
-    }
 }
 
 fn coarse() -> DatasetLayout {

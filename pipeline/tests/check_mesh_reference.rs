@@ -37,7 +37,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 
-use common::{dataset_shapes, mesa, read_json, scene_dirs};
+use common::{copy_tree, dataset_shapes, mesa, read_json, scene_dirs};
 use std::sync::Arc;
 
 use mesa_schemas::artifacts::{AssetIndexArtifact, CheckArtifact, CheckFindings};
@@ -563,20 +563,6 @@ fn check_agrees_with_the_meshes_on_untidy_layouts() {
         "only {reported} findings on 24 untidy layouts"
     );
     assert!(problems.is_empty(), "{} disagreements", problems.len());
-}
-
-/// Copies the folder `from` to `to`, files and subfolders.
-fn copy_tree(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("mkdir");
-    for entry in std::fs::read_dir(from).expect("read_dir") {
-        let entry = entry.expect("entry");
-        let target = to.join(entry.file_name());
-        if entry.file_type().expect("type").is_dir() {
-            copy_tree(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), &target).expect("copy");
-        }
-    }
 }
 
 /// Whether the reference's Python has MuJoCo (SKIPPED, or a failure under

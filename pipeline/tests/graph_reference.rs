@@ -154,7 +154,7 @@ fn layout(rng: &mut ChaCha8Rng, n: usize, form: Form) -> Value {
             ]
         };
         let position = match (objects.is_empty(), rng.random_range(0..8)) {
-            (true, _) | (false, 0 | 1) => free(rng, &size),
+            (true, _) => free(rng, &size),
             (false, 2) => {
                 // On a grid: equal distances between neighbours.
                 let (i, j) = (rng.random_range(0..8), rng.random_range(0..5));
@@ -215,6 +215,7 @@ fn layout(rng: &mut ChaCha8Rng, n: usize, form: Form) -> Value {
                 size = twin.size;
                 twin.position
             }
+            // Three draws in eight: anywhere.
             _ => free(rng, &size),
         };
         objects.push(Object {

@@ -22,10 +22,14 @@
 //! Without root, slurm-wlm or munge the test says SKIPPED, and fails instead when
 //! `MESA_REQUIRE_TOOLS` is set, as in CI (`.ci/run` installs the packages).
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
+
+use common::copy_tree;
 
 /// Every stage, in the order `run_all.sh` submits them.
 const STAGES: [&str; 14] = [
@@ -146,19 +150,6 @@ fn job_ids(stdout: &str) -> BTreeMap<String, String> {
             Some((stage.to_owned(), job.to_owned()))
         })
         .collect()
-}
-
-fn copy_tree(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("mkdir");
-    for entry in std::fs::read_dir(from).expect("read_dir") {
-        let entry = entry.expect("entry");
-        let target = to.join(entry.file_name());
-        if entry.path().is_dir() {
-            copy_tree(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), &target).expect("copy");
-        }
-    }
 }
 
 /// Every file of a dataset but the run summaries (`.mesa/runs/`), `mesa run`'s record of

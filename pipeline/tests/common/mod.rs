@@ -533,6 +533,20 @@ pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> T {
     .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+/// Copies the folder `from` to `to`, files and subfolders.
+pub fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("mkdir");
+    for entry in std::fs::read_dir(from).expect("read_dir") {
+        let path = entry.expect("entry").path();
+        let target = to.join(path.file_name().expect("name"));
+        if path.is_dir() {
+            copy_tree(&path, &target);
+        } else {
+            std::fs::copy(&path, &target).expect("copy");
+        }
+    }
+}
+
 /// Every scene folder of a dataset (`scenes/<table_type>/<scene_id>`), sorted.
 pub fn scene_dirs(dir: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
