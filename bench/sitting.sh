@@ -32,7 +32,10 @@ mesa="$root/target/release/mesa"
 
 stamp() { echo "$(date -u +%FT%TZ) $(cut -d' ' -f1-3 /proc/loadavg) $*" | tee -a "$out/sitting.log"; }
 
-stamp "start: $(git rev-parse --short HEAD)$(git diff --quiet || echo ' (uncommitted changes)')"
+# The machine, with the commit: the ratios move with the CPU (docs/performance.md gives sittings
+# on an AMD EPYC and an Intel Xeon).
+machine="$(grep -m1 '^model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//'), $(nproc) CPUs, Linux $(uname -r)"
+stamp "start: $(git rev-parse --short HEAD)$(git diff --quiet || echo ' (uncommitted changes)') on $machine"
 for i in $(seq 1 "$rounds"); do
   stamp "round $i: lift, synthetic"
   "$py" bench/compare_open3d.py > "$out/open3d_syn_$i.txt" 2>&1
