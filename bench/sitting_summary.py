@@ -109,10 +109,16 @@ def slow_runs(timings):
     known = [t for t in timings if t]
     if len(known) < 2:
         return []
-    best_mesa = min(m for m, _ in known)
-    best_peer = min(p for _, p in known)
-    return [(i, m, best_mesa) for i, t in enumerate(timings, 1) if t
-            for m, p in [t] if m >= SLOW_RUN * best_mesa and p <= PEER_STEADY * best_peer]
+    best_mesa = min(mesa for mesa, _ in known)
+    best_peer = min(peer for _, peer in known)
+    slow = []
+    for run, timing in enumerate(timings, 1):
+        if timing is None:
+            continue
+        mesa, peer = timing
+        if mesa >= SLOW_RUN * best_mesa and peer <= PEER_STEADY * best_peer:
+            slow.append((run, mesa, best_mesa))
+    return slow
 
 
 def ms(value: float) -> str:

@@ -723,7 +723,8 @@ fn window_scores(
     // For the block from cell `a`, distances[j][t] is the distance from cell `a − o + t` to
     // cell `a + t` (o = after[j]), NaN when either holds no point.
     // A box smaller than a block gets rows of its own size: most objects' boxes hold a few
-    // thousand cells, and twelve rows of a whole block each were zeroed for every object.
+    // thousand cells, and a whole block's rows (one per offset after the centre, twelve for
+    // the default window) were zeroed for every object.
     let block = BLOCK.min(hi - lo);
     let mut distances: Vec<Vec<f64>> = after.iter().map(|&o| vec![0.0; block + o]).collect();
     for a in (lo..hi).step_by(BLOCK) {
