@@ -10,6 +10,7 @@ use image::{DynamicImage, ImageReader};
 use mesa_schemas::artifacts::{CalibrationKind, DepthCalibration, InstanceEntry, InstancesJson};
 use serde_json::Value;
 
+use super::depth_png::read_depth_png;
 use super::{LiftConfig, LiftError};
 
 /// A depth map in metres; `NaN` where there is no measurement.
@@ -107,7 +108,7 @@ impl Masks {
     }
 }
 
-fn image_error(path: &Path, e: impl std::fmt::Display) -> LiftError {
+pub(super) fn image_error(path: &Path, e: impl std::fmt::Display) -> LiftError {
     LiftError::input(
         path,
         "$",
@@ -142,16 +143,7 @@ pub fn read_png(path: &Path, limit: PngLimit) -> Result<DynamicImage, LiftError>
         .map_err(|e| image_error(path, e))?;
     match limit {
         PngLimit::MaxPixels(max) if u64::from(w) * u64::from(h) > max => {
-            return Err(LiftError::input(
-                path,
-                "size",
-                format!(
-                    "is {w}×{h} = {} pixels, more than [lift] max_image_pixels = {max}",
-                    u64::from(w) * u64::from(h)
-                ),
-                "downscale the image (and the other inputs of the scene with it), or raise \
-                 max_image_pixels in mesa.toml",
-            ));
+            return Err(too_many_pixels(path, w, h, max));
         }
         PngLimit::Size(width, height) => check_size(path, w as usize, h as usize, width, height)?,
         PngLimit::MaxPixels(_) => {}
@@ -163,6 +155,20 @@ pub fn read_png(path: &Path, limit: PngLimit) -> Result<DynamicImage, LiftError>
     limits.max_alloc = Some((u64::from(w) * u64::from(h)).saturating_mul(8) + (1 << 20));
     reader.limits(limits);
     reader.decode().map_err(|e| image_error(path, e))
+}
+
+/// The error for an image of `w` × `h` pixels, more than `max_image_pixels` (`max`).
+pub(super) fn too_many_pixels(path: &Path, w: u32, h: u32, max: u64) -> LiftError {
+    LiftError::input(
+        path,
+        "size",
+        format!(
+            "is {w}×{h} = {} pixels, more than [lift] max_image_pixels = {max}",
+            u64::from(w) * u64::from(h)
+        ),
+        "downscale the image (and the other inputs of the scene with it), or raise \
+         max_image_pixels in mesa.toml",
+    )
 }
 
 /// Reads `input/depth.png` (16-bit, `depth_png_scale_m` metres per unit) or
@@ -196,28 +202,20 @@ pub fn read_depth(
             ))
         }
         (true, false) => {
-            let image = read_png(&png, PngLimit::MaxPixels(config.max_image_pixels))?;
-            let DynamicImage::ImageLuma16(buffer) = image else {
-                return Err(LiftError::input(
-                    &png,
-                    "$",
-                    format!("is {:?}, not a 16-bit single-channel PNG", image.color()),
-                    "write depth as 16-bit grayscale (uint16 millimetres), or as depth.npy",
-                ));
-            };
-            let (w, h) = buffer.dimensions();
             let scale = config.depth_png_scale_m as f32;
-            let units = buffer.as_raw();
-            let values = if camera.calibration.is_none() {
-                // The validity pass below, done in the same pass (same values, one walk of
-                // the depth map instead of two).
-                let (values, valid) = valid_metres(units, scale);
-                counted = Some(valid);
-                values
+            // Through `read_depth_png` the values come out as lift keeps them; a calibration
+            // is applied to the raw metres, so a calibrated depth.png takes the general path.
+            let direct = if camera.calibration.is_none() {
+                read_depth_png(&png, config.max_image_pixels, scale)?
             } else {
-                units.iter().map(|&v| metres(v, scale)).collect()
+                None
             };
-            (w as usize, h as usize, values, png)
+            if let Some(depth) = direct {
+                counted = Some(depth.valid);
+                (depth.width, depth.height, depth.metres, png)
+            } else {
+                read_depth_image(&png, camera, config, &mut counted)?
+            }
         }
         (false, true) => {
             let (w, h, values) = read_npy_depth(&npy)?;
@@ -256,6 +254,39 @@ pub fn read_depth(
     ))
 }
 
+/// A depth.png that [`read_depth_png`] leaves to the general reader, through `image`: an
+/// interlaced one, or one with transparency (refused: not single-channel), or not 16-bit
+/// grayscale at all (refused, naming what it is).
+fn read_depth_image(
+    png: &Path,
+    camera: &Camera,
+    config: &LiftConfig,
+    counted: &mut Option<usize>,
+) -> Result<(usize, usize, Vec<f32>, PathBuf), LiftError> {
+    let image = read_png(png, PngLimit::MaxPixels(config.max_image_pixels))?;
+    let DynamicImage::ImageLuma16(buffer) = image else {
+        return Err(LiftError::input(
+            png,
+            "$",
+            format!("is {:?}, not a 16-bit single-channel PNG", image.color()),
+            "write depth as 16-bit grayscale (uint16 millimetres), or as depth.npy",
+        ));
+    };
+    let (w, h) = buffer.dimensions();
+    let scale = config.depth_png_scale_m as f32;
+    let units = buffer.as_raw();
+    let values = if camera.calibration.is_none() {
+        // The validity pass below, done in the same pass (same values, one walk of
+        // the depth map instead of two).
+        let (values, valid) = valid_metres(units, scale);
+        *counted = Some(valid);
+        values
+    } else {
+        units.iter().map(|&v| metres(v, scale)).collect()
+    };
+    Ok((w as usize, h as usize, values, png.to_owned()))
+}
+
 /// A depth.png's value in metres: 0 is "no measurement" (NaN).
 #[inline(always)]
 fn metres(v: u16, scale: f32) -> f32 {
@@ -270,7 +301,7 @@ fn metres(v: u16, scale: f32) -> f32 {
 /// many are valid. Counted a block at a time in 32 bits, so that the loop vectorises whole;
 /// compiled for AVX2 as well (eight values a vector instead of four), chosen at run time.
 #[multiversion::multiversion(targets("x86_64+avx2"))]
-fn valid_metres(units: &[u16], scale: f32) -> (Vec<f32>, usize) {
+pub(super) fn valid_metres(units: &[u16], scale: f32) -> (Vec<f32>, usize) {
     let mut values = Vec::with_capacity(units.len());
     let mut valid = 0usize;
     for block in units.chunks(4096) {
@@ -283,6 +314,23 @@ fn valid_metres(units: &[u16], scale: f32) -> (Vec<f32>, usize) {
         valid += count as usize;
     }
     (values, valid)
+}
+
+/// [`valid_metres`] of a row of big-endian 16-bit values (as a PNG stores them), appended to
+/// `values`; returns how many are valid.
+#[multiversion::multiversion(targets("x86_64+avx2"))]
+pub(super) fn extend_valid_metres(big_endian: &[u8], scale: f32, values: &mut Vec<f32>) -> usize {
+    let mut valid = 0usize;
+    for block in big_endian.chunks(8192) {
+        let mut count = 0u32;
+        values.extend(block.chunks_exact(2).map(|pair| {
+            let (d, ok) = valid_depth(metres(u16::from_be_bytes([pair[0], pair[1]]), scale));
+            count += u32::from(ok);
+            d
+        }));
+        valid += count as usize;
+    }
+    valid
 }
 
 /// A depth as lift keeps it, and whether it is a measurement: anything but a positive finite
