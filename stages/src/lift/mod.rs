@@ -805,6 +805,13 @@ type PixelPoint = (u32, Vector3<f64>);
 
 /// The connectivity rule of the module docs: returns the kept points, their grid (same box)
 /// and how many points were dropped.
+///
+/// The components are found over runs, not points: each row of the box is cut into runs of
+/// points joined to their left neighbour, and only the joins between rows go through the
+/// union-find, over the runs (two rows' overlapping runs join many times over, and a join of
+/// the pair just joined is skipped). Only the partition matters to the rule (which points are
+/// kept, in their order), and it is the one joining every pair of neighbours gives: the test
+/// reference is that, point by point.
 fn keep_main_components(
     points: Vec<PixelPoint>,
     grid: Vec<u32>,
@@ -812,7 +819,43 @@ fn keep_main_components(
     config: &LiftConfig,
 ) -> (Vec<PixelPoint>, Vec<u32>, usize) {
     let n = points.len();
-    let mut parent: Vec<u32> = (0..n as u32).collect();
+    // The depth of every cell, NaN where there is none (NaN joins nothing, as below).
+    let z: Vec<f64> = grid
+        .iter()
+        .map(|&i| {
+            if i == u32::MAX {
+                f64::NAN
+            } else {
+                points[i as usize].1.z
+            }
+        })
+        .collect();
+    let (jump, relative) = (config.component_jump_m, config.component_jump_relative);
+    let joined = |a: f64, b: f64| (a - b).abs() <= jump.max(relative * a.min(b));
+    const NONE: u32 = u32::MAX;
+    let mut run_of = vec![NONE; grid.len()];
+    let mut run_sizes: Vec<usize> = Vec::new();
+    for (row, (cells, runs)) in grid
+        .chunks_exact(bw)
+        .zip(run_of.chunks_exact_mut(bw))
+        .enumerate()
+    {
+        let depths = &z[row * bw..(row + 1) * bw];
+        let mut current = NONE;
+        for (u, (&i, run)) in cells.iter().zip(runs.iter_mut()).enumerate() {
+            if i == NONE {
+                current = NONE;
+                continue;
+            }
+            if current == NONE || !joined(depths[u - 1], depths[u]) {
+                current = run_sizes.len() as u32;
+                run_sizes.push(0);
+            }
+            *run = current;
+            run_sizes[current as usize] += 1;
+        }
+    }
+    let mut parent: Vec<u32> = (0..run_sizes.len() as u32).collect();
     fn find(parent: &mut [u32], mut i: u32) -> u32 {
         while parent[i as usize] != i {
             parent[i as usize] = parent[parent[i as usize] as usize];
@@ -820,45 +863,42 @@ fn keep_main_components(
         }
         i
     }
-    let joined = |a: &Vector3<f64>, b: &Vector3<f64>| {
-        let limit = config
-            .component_jump_m
-            .max(config.component_jump_relative * a.z.min(b.z));
-        (a.z - b.z).abs() <= limit
-    };
-    for (cell, &i) in grid.iter().enumerate() {
-        if i == u32::MAX {
+    let mut last = (NONE, NONE);
+    for (cell, (&a, &b)) in run_of
+        .iter()
+        .zip(&run_of[bw.min(run_of.len())..])
+        .enumerate()
+    {
+        if a == NONE || b == NONE || (a, b) == last || !joined(z[cell], z[cell + bw]) {
             continue;
         }
-        let right = (cell % bw + 1 < bw).then(|| grid[cell + 1]);
-        let down = grid.get(cell + bw).copied();
-        for j in [right, down].into_iter().flatten() {
-            if j != u32::MAX && joined(&points[i as usize].1, &points[j as usize].1) {
-                let (a, b) = (find(&mut parent, i), find(&mut parent, j));
-                if a != b {
-                    // The smaller root wins, so the result does not depend on visiting order.
-                    let (lo, hi) = (a.min(b), a.max(b));
-                    parent[hi as usize] = lo;
-                }
-            }
+        let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+        if ra != rb {
+            parent[ra.max(rb) as usize] = ra.min(rb);
         }
+        last = (a, b);
     }
-    let roots: Vec<u32> = (0..n as u32).map(|i| find(&mut parent, i)).collect();
-    // Component sizes by root (a root is a point's index): a count per point, zero for
-    // non-roots.
-    let mut sizes = vec![0usize; n];
-    for &r in &roots {
-        sizes[r as usize] += 1;
+    // Component sizes by root run.
+    let mut sizes = vec![0usize; run_sizes.len()];
+    for run in 0..run_sizes.len() as u32 {
+        let root = find(&mut parent, run);
+        sizes[root as usize] += run_sizes[run as usize];
     }
     let largest = sizes.iter().copied().max().unwrap_or(0);
     let minimum = (config.component_min_fraction * largest as f64).ceil() as usize;
     if sizes.iter().all(|&s| s == 0 || s >= minimum) {
         return (points, grid, 0);
     }
+    let mut keep = vec![false; n];
+    for (&i, &run) in grid.iter().zip(&run_of) {
+        if i != NONE {
+            keep[i as usize] = sizes[find(&mut parent, run) as usize] >= minimum;
+        }
+    }
     let mut remap = vec![u32::MAX; n];
     let mut kept = Vec::with_capacity(n);
     for (i, point) in points.into_iter().enumerate() {
-        if sizes[roots[i] as usize] >= minimum {
+        if keep[i] {
             remap[i] = kept.len() as u32;
             kept.push(point);
         }
@@ -1693,6 +1733,113 @@ mod tests {
         // Control: walking the window in another order changes the last bits in many cases,
         // so the comparison above does check the order of adding.
         assert!(order_matters > 50, "{order_matters}");
+    }
+
+    /// The connectivity rule as it was first written: a union-find over the points, every
+    /// pair of neighbours joined.
+    fn components_point_by_point(
+        points: Vec<PixelPoint>,
+        grid: Vec<u32>,
+        bw: usize,
+        config: &LiftConfig,
+    ) -> (Vec<PixelPoint>, Vec<u32>, usize) {
+        let n = points.len();
+        let mut parent: Vec<u32> = (0..n as u32).collect();
+        fn find(parent: &mut [u32], mut i: u32) -> u32 {
+            while parent[i as usize] != i {
+                parent[i as usize] = parent[parent[i as usize] as usize];
+                i = parent[i as usize];
+            }
+            i
+        }
+        let joined = |a: &Vector3<f64>, b: &Vector3<f64>| {
+            let limit = config
+                .component_jump_m
+                .max(config.component_jump_relative * a.z.min(b.z));
+            (a.z - b.z).abs() <= limit
+        };
+        for (cell, &i) in grid.iter().enumerate() {
+            if i == u32::MAX {
+                continue;
+            }
+            let right = (cell % bw + 1 < bw).then(|| grid[cell + 1]);
+            let down = grid.get(cell + bw).copied();
+            for j in [right, down].into_iter().flatten() {
+                if j != u32::MAX && joined(&points[i as usize].1, &points[j as usize].1) {
+                    let (a, b) = (find(&mut parent, i), find(&mut parent, j));
+                    if a != b {
+                        // The smaller root wins, so the result does not depend on visiting order.
+                        let (lo, hi) = (a.min(b), a.max(b));
+                        parent[hi as usize] = lo;
+                    }
+                }
+            }
+        }
+        let roots: Vec<u32> = (0..n as u32).map(|i| find(&mut parent, i)).collect();
+        // Component sizes by root (a root is a point's index): a count per point, zero for
+        // non-roots.
+        let mut sizes = vec![0usize; n];
+        for &r in &roots {
+            sizes[r as usize] += 1;
+        }
+        let largest = sizes.iter().copied().max().unwrap_or(0);
+        let minimum = (config.component_min_fraction * largest as f64).ceil() as usize;
+        if sizes.iter().all(|&s| s == 0 || s >= minimum) {
+            return (points, grid, 0);
+        }
+        let mut remap = vec![u32::MAX; n];
+        let mut kept = Vec::with_capacity(n);
+        for (i, point) in points.into_iter().enumerate() {
+            if sizes[roots[i] as usize] >= minimum {
+                remap[i] = kept.len() as u32;
+                kept.push(point);
+            }
+        }
+        let dropped = n - kept.len();
+        let grid = grid
+            .into_iter()
+            .map(|i| if i == u32::MAX { i } else { remap[i as usize] })
+            .collect();
+        (kept, grid, dropped)
+    }
+
+    #[test]
+    fn components_by_runs_are_the_point_by_point_union_find() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let config = LiftConfig::default();
+        let (mut dropping, mut several) = (0, 0);
+        for case in 0..400 {
+            let (bw, bh) = (rng.random_range(1..60usize), rng.random_range(1..50usize));
+            let fill: f64 = rng.random_range(0.3..1.0);
+            // A surface of a few depth levels in bands across and down the box (steps beyond
+            // the jump split it), noise within, and some cells a little off it: those join
+            // some of their neighbours and not others, so two runs can meet in joined and
+            // unjoined cells.
+            let levels: Vec<f64> = (0..rng.random_range(1..5))
+                .map(|_| rng.random_range(0.4..1.2))
+                .collect();
+            let off: f64 = rng.random_range(0.0..0.3);
+            let (mut points, mut grid) = (Vec::new(), vec![u32::MAX; bw * bh]);
+            for (cell, slot) in grid.iter_mut().enumerate() {
+                if rng.random::<f64>() < fill {
+                    let band = ((cell % bw) * levels.len() / bw + cell / bw / 7) % levels.len();
+                    let noise = if rng.random::<f64>() < off { 0.016 } else { 0.003 };
+                    let z = levels[band] + rng.random_range(-noise..noise);
+                    *slot = points.len() as u32;
+                    points.push((cell as u32, Vector3::new(0.0, 0.0, z)));
+                }
+            }
+            let fast = keep_main_components(points.clone(), grid.clone(), bw, &config);
+            let slow = components_point_by_point(points, grid, bw, &config);
+            let pixels = |kept: &[PixelPoint]| kept.iter().map(|p| p.0).collect::<Vec<_>>();
+            assert_eq!(pixels(&fast.0), pixels(&slow.0), "case {case}: {bw}x{bh}");
+            assert_eq!((&fast.1, fast.2), (&slow.1, slow.2), "case {case}");
+            dropping += usize::from(slow.2 > 0);
+            several += usize::from(levels.len() > 1);
+        }
+        // Controls: many cases drop points (the rule acts), others keep every point.
+        assert!(dropping > 40 && dropping < 360, "{dropping} of 400");
+        assert!(several > 200, "{several}");
     }
 
     #[test]
