@@ -229,6 +229,22 @@ pub fn decode_png(bytes: &[u8]) -> Result<DecodedImage, ImageError> {
     })
 }
 
+/// A PNG's image data as stored: its IDAT chunks' contents inflated, each row its filter type
+/// byte and its filtered bytes (for tests of what encoders wrote, read without `png`).
+#[cfg(test)]
+pub(crate) fn inflated_image_data(png_bytes: &[u8]) -> Vec<u8> {
+    let mut at = 8;
+    let mut idat = Vec::new();
+    while at + 8 <= png_bytes.len() {
+        let len = u32::from_be_bytes(png_bytes[at..at + 4].try_into().expect("4")) as usize;
+        if &png_bytes[at + 4..at + 8] == b"IDAT" {
+            idat.extend_from_slice(&png_bytes[at + 8..at + 8 + len]);
+        }
+        at += 12 + len;
+    }
+    fdeflate::decompress_to_vec(&idat).expect("zlib")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -254,16 +270,7 @@ mod tests {
 
     /// The filter type byte of each row of an 8-bit RGB PNG (its IDAT chunks inflated).
     fn row_filters(png_bytes: &[u8], width: usize, height: usize) -> Vec<u8> {
-        let mut at = 8;
-        let mut idat = Vec::new();
-        while at + 8 <= png_bytes.len() {
-            let len = u32::from_be_bytes(png_bytes[at..at + 4].try_into().expect("4")) as usize;
-            if &png_bytes[at + 4..at + 8] == b"IDAT" {
-                idat.extend_from_slice(&png_bytes[at + 8..at + 8 + len]);
-            }
-            at += 12 + len;
-        }
-        let raw = fdeflate::decompress_to_vec(&idat).expect("zlib");
+        let raw = inflated_image_data(png_bytes);
         (0..height).map(|y| raw[y * (1 + 3 * width)]).collect()
     }
 

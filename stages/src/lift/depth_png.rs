@@ -17,7 +17,8 @@
 //!   this keeps one row.
 //!
 //! Any other PNG (another colour type or bit depth, interlaced, with a `tRNS` chunk, which
-//! `image` turns into an alpha channel) is left to the general reader ([`super::inputs`]),
+//! `image` turns into an alpha channel), or another format under the name, is left to the
+//! general reader ([`super::inputs`]),
 //! which decodes it, or names what it is when it is not a depth map. The result is the general
 //! reader's to the bit (`tests`: every filter type, odd widths, image data split over many
 //! chunks, the real depth maps of `../shared/realdata`).
@@ -55,6 +56,12 @@ pub(super) fn read_depth_png(
         decoder: StreamingDecoder::new(),
     };
     let decode_error = |e: DecodingError| image_error(path, e);
+    // Another format under a .png name (`image` guesses formats from their first bytes): the
+    // general reader's, which names what it is.
+    let start = reader.file.fill_buf().map_err(|e| image_error(path, e))?;
+    if !start.starts_with(b"\x89PNG\r\n\x1a\n") {
+        return Ok(None);
+    }
     while reader.decoder.info().is_none() {
         reader.next(None).map_err(decode_error)?;
     }
@@ -230,6 +237,7 @@ fn paeth(a: i32, b: i32, c: i32) -> i32 {
 mod tests {
     use super::super::inputs::{read_png, valid_metres, PngLimit};
     use super::*;
+    use crate::image_io::inflated_image_data;
     use png::Filter;
     use rand::{Rng, SeedableRng};
     use std::path::PathBuf;
@@ -313,16 +321,7 @@ mod tests {
     /// Each row's filter type, from the file's inflated image data (a test of the files the
     /// tests write, independent of the readers compared).
     fn filter_types(file: &[u8], (width, height): (usize, usize)) -> Vec<u8> {
-        let mut at = 8;
-        let mut data = Vec::new();
-        while at + 8 <= file.len() {
-            let len = u32::from_be_bytes(file[at..at + 4].try_into().expect("4")) as usize;
-            if &file[at + 4..at + 8] == b"IDAT" {
-                data.extend_from_slice(&file[at + 8..at + 8 + len]);
-            }
-            at += 12 + len;
-        }
-        let raw = fdeflate::decompress_to_vec(&data).expect("inflate");
+        let raw = inflated_image_data(file);
         (0..height).map(|v| raw[v * (2 * width + 1)]).collect()
     }
 
@@ -398,8 +397,8 @@ mod tests {
                         // Control: the filtered bytes are not the values, so rows left
                         // filtered (or unfiltered wrongly) would not compare equal.
                         let raw: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
-                        let inflated_rows = unfiltered_bytes_of(&file, (width, height));
-                        transformed += usize::from(inflated_rows != raw);
+                        let stored = stored_row_bytes(&file, (width, height));
+                        transformed += usize::from(stored != raw);
                         cases += 1;
                     }
                 }
@@ -413,17 +412,8 @@ mod tests {
     }
 
     /// The rows' bytes as stored (still filtered), without their filter-type bytes.
-    fn unfiltered_bytes_of(file: &[u8], (width, height): (usize, usize)) -> Vec<u8> {
-        let mut at = 8;
-        let mut data = Vec::new();
-        while at + 8 <= file.len() {
-            let len = u32::from_be_bytes(file[at..at + 4].try_into().expect("4")) as usize;
-            if &file[at + 4..at + 8] == b"IDAT" {
-                data.extend_from_slice(&file[at + 8..at + 8 + len]);
-            }
-            at += 12 + len;
-        }
-        let raw = fdeflate::decompress_to_vec(&data).expect("inflate");
+    fn stored_row_bytes(file: &[u8], (width, height): (usize, usize)) -> Vec<u8> {
+        let raw = inflated_image_data(file);
         (0..height)
             .flat_map(|v| raw[v * (2 * width + 1) + 1..(v + 1) * (2 * width + 1)].to_vec())
             .collect()
@@ -605,6 +595,13 @@ mod tests {
         image::ImageBuffer::<image::Rgb<u16>, _>::new(3, 2)
             .save(&path)
             .expect("save");
+        assert!(through_rows(&path).expect("reads").is_none());
+        // A JPEG named depth.png, and a file too short to be anything.
+        let jpeg = dir.path().join("photo.jpg");
+        image::GrayImage::new(3, 2).save(&jpeg).expect("save");
+        std::fs::copy(&jpeg, &path).expect("copy");
+        assert!(through_rows(&path).expect("reads").is_none());
+        std::fs::write(&path, b"\x89PN").expect("write");
         assert!(through_rows(&path).expect("reads").is_none());
     }
 }

@@ -255,8 +255,8 @@ pub fn read_depth(
 }
 
 /// A depth.png that [`read_depth_png`] leaves to the general reader, through `image`: an
-/// interlaced one, or one with transparency (refused: not single-channel), or not 16-bit
-/// grayscale at all (refused, naming what it is).
+/// interlaced one, a calibrated one, one with transparency (refused: not single-channel), or
+/// one that is not 16-bit grayscale or not a PNG at all (refused, naming what it is).
 fn read_depth_image(
     png: &Path,
     camera: &Camera,

@@ -1823,7 +1823,11 @@ mod tests {
             for (cell, slot) in grid.iter_mut().enumerate() {
                 if rng.random::<f64>() < fill {
                     let band = ((cell % bw) * levels.len() / bw + cell / bw / 7) % levels.len();
-                    let noise = if rng.random::<f64>() < off { 0.016 } else { 0.003 };
+                    let noise = if rng.random::<f64>() < off {
+                        0.016
+                    } else {
+                        0.003
+                    };
                     let z = levels[band] + rng.random_range(-noise..noise);
                     *slot = points.len() as u32;
                     points.push((cell as u32, Vector3::new(0.0, 0.0, z)));
