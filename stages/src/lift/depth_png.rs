@@ -13,15 +13,15 @@
 //!   (below), a pixel costs about half as much; a synthetic 1024² depth map, a third of whose
 //!   rows are Paeth-filtered, unfilters in 1.25 ms instead of 1.95 ms.
 //! - No images in between. Through `image`, a depth map was decoded into a zeroed byte buffer,
-//!   copied into a `u16` image, then converted into metres: three full-size buffers where
-//!   this keeps one row.
+//!   copied into a `u16` image, then converted into metres; here each inflated row goes
+//!   straight into metres.
 //!
 //! Any other PNG (another colour type or bit depth, interlaced, with a `tRNS` chunk, which
 //! `image` turns into an alpha channel), or another format under the name, is left to the
-//! general reader ([`super::inputs`]),
-//! which decodes it, or names what it is when it is not a depth map. The result is the general
-//! reader's to the bit (`tests`: every filter type, odd widths, image data split over many
-//! chunks, the real depth maps of `../shared/realdata`).
+//! general reader ([`super::inputs`]), which decodes it, or names what it is when it is not a
+//! depth map. The result is the general reader's to the bit (`inputs`' `depth_png_tests`: every
+//! filter type, odd widths, image data split over many chunks, the real depth maps of
+//! `../shared/realdata`).
 
 use std::fs::File;
 use std::io::{BufRead, BufReader, ErrorKind};
@@ -29,8 +29,16 @@ use std::path::Path;
 
 use png::{chunk, BitDepth, ColorType, Decoded, DecodingError, StreamingDecoder, UnfilterRegion};
 
-use super::inputs::{extend_valid_metres, image_error, too_many_pixels};
-use super::LiftError;
+/// Why a depth PNG was not read; the caller ([`super::inputs`]) words it for the user.
+#[derive(Debug)]
+pub(super) enum PngFault {
+    /// The file cannot be opened.
+    Open(std::io::Error),
+    /// The file is not a complete, valid PNG: what is wrong.
+    Decode(String),
+    /// Its header asks for more than the allowed pixels: width and height.
+    TooManyPixels(u32, u32),
+}
 
 /// A depth map read from a PNG: row-major metres (NaN where there is no measurement) and how
 /// many are measurements.
@@ -41,24 +49,27 @@ pub(super) struct DepthPng {
     pub valid: usize,
 }
 
-/// Reads `path` when it is a non-interlaced 16-bit grayscale PNG without transparency, at
-/// `scale` metres a unit, refusing it on its header when it has more than `max_pixels` pixels.
-/// `Ok(None)`: another kind of PNG, for the general reader.
+/// Reads `path` when it is a non-interlaced 16-bit grayscale PNG without transparency,
+/// refusing it on its header when it has more than `max_pixels` pixels. `to_metres` appends a
+/// row's big-endian values to the depth map as metres and returns how many are measurements.
+/// `Ok(None)`: another kind of PNG, or not a PNG, for the general reader.
 pub(super) fn read_depth_png(
     path: &Path,
     max_pixels: u64,
-    scale: f32,
-) -> Result<Option<DepthPng>, LiftError> {
-    let file = File::open(path)
-        .map_err(|e| LiftError::input(path, "$", format!("cannot open: {e}"), "check the path"))?;
+    mut to_metres: impl FnMut(&[u8], &mut Vec<f32>) -> usize,
+) -> Result<Option<DepthPng>, PngFault> {
+    let file = File::open(path).map_err(PngFault::Open)?;
     let mut reader = Reader {
         file: BufReader::with_capacity(64 * 1024, file),
         decoder: StreamingDecoder::new(),
     };
-    let decode_error = |e: DecodingError| image_error(path, e);
+    let decode_error = |e: DecodingError| PngFault::Decode(e.to_string());
     // Another format under a .png name (`image` guesses formats from their first bytes): the
     // general reader's, which names what it is.
-    let start = reader.file.fill_buf().map_err(|e| image_error(path, e))?;
+    let start = reader
+        .file
+        .fill_buf()
+        .map_err(|e| PngFault::Decode(e.to_string()))?;
     if !start.starts_with(b"\x89PNG\r\n\x1a\n") {
         return Ok(None);
     }
@@ -68,7 +79,7 @@ pub(super) fn read_depth_png(
     let info = reader.decoder.info().expect("the header was read");
     let (width, height) = (info.width, info.height);
     if u64::from(width) * u64::from(height) > max_pixels {
-        return Err(too_many_pixels(path, width, height, max_pixels));
+        return Err(PngFault::TooManyPixels(width, height));
     }
     if (info.color_type, info.bit_depth, info.interlaced)
         != (ColorType::Grayscale, BitDepth::Sixteen, false)
@@ -80,7 +91,9 @@ pub(super) fn read_depth_png(
         match reader.next(None).map_err(decode_error)? {
             Decoded::ChunkBegin(_, chunk::IDAT) => break,
             Decoded::ChunkComplete(chunk::IEND) => {
-                return Err(image_error(path, "the file has no image data (IDAT)"))
+                return Err(PngFault::Decode(
+                    "the file has no image data (IDAT)".to_owned(),
+                ))
             }
             _ => {}
         }
@@ -110,10 +123,9 @@ pub(super) fn read_depth_png(
         let end = (v + 1) * row_len;
         while region.filled < end {
             if flushed {
-                return Err(image_error(
-                    path,
-                    format!("the image data ends after {v} of its {height} rows"),
-                ));
+                return Err(PngFault::Decode(format!(
+                    "the image data ends after {v} of its {height} rows"
+                )));
             }
             let decoded = reader
                 .next(Some(&mut region.as_buf(&mut filtered)))
@@ -123,15 +135,12 @@ pub(super) fn read_depth_png(
         let line = &filtered[end - row_len..end];
         row.copy_from_slice(&line[1..]);
         if !unfilter(line[0], &previous, &mut row) {
-            return Err(image_error(
-                path,
-                format!(
-                    "row {v} has filter type {}, which PNG does not define (0 to 4)",
-                    line[0]
-                ),
-            ));
+            return Err(PngFault::Decode(format!(
+                "row {v} has filter type {}, which PNG does not define (0 to 4)",
+                line[0]
+            )));
         }
-        valid += extend_valid_metres(&row, scale, &mut metres);
+        valid += to_metres(&row, &mut metres);
         std::mem::swap(&mut previous, &mut row);
     }
     // The rest of the image data, so that its last chunk's CRC is checked as `png` checks it.
@@ -235,14 +244,7 @@ fn paeth(a: i32, b: i32, c: i32) -> i32 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::inputs::{read_png, valid_metres, PngLimit};
     use super::*;
-    use crate::image_io::inflated_image_data;
-    use png::Filter;
-    use rand::{Rng, SeedableRng};
-    use std::path::PathBuf;
-
-    const SCALE: f32 = 0.001;
 
     /// The predictor as the PNG specification writes it.
     fn paeth_reference(a: i32, b: i32, c: i32) -> i32 {
@@ -270,338 +272,5 @@ mod tests {
             }
         }
         assert!(differ > 1 << 22, "{differ}");
-    }
-
-    /// A 16-bit grayscale PNG of `values`, every row filtered with `filter`, its image data in
-    /// IDAT chunks of at most `chunk` bytes.
-    fn encode(
-        (width, height): (u32, u32),
-        values: &[u16],
-        filter: Filter,
-        chunk: usize,
-        trns: bool,
-    ) -> Vec<u8> {
-        let mut out = Vec::new();
-        let mut encoder = png::Encoder::new(&mut out, width, height);
-        encoder.set_color(ColorType::Grayscale);
-        encoder.set_depth(BitDepth::Sixteen);
-        encoder.set_filter(filter);
-        if trns {
-            encoder.set_trns(vec![0u8, 0]);
-        }
-        let mut writer = encoder.write_header().expect("header");
-        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
-        let mut stream = writer.stream_writer_with_size(chunk).expect("stream");
-        std::io::Write::write_all(&mut stream, &bytes).expect("data");
-        stream.finish().expect("finish");
-        writer.finish().expect("end");
-        out
-    }
-
-    /// A depth map as read: width, height, the metres' bits, how many are valid.
-    type Read = (usize, usize, Vec<u32>, usize);
-
-    /// The general reader's values: `image`'s decoding, then [`valid_metres`].
-    fn through_image(path: &Path) -> Result<Read, LiftError> {
-        let image = read_png(path, PngLimit::MaxPixels(u64::MAX))?;
-        let image = image.as_luma16().expect("16-bit grayscale");
-        let (values, valid) = valid_metres(image.as_raw(), SCALE);
-        let bits = values.iter().map(|v| v.to_bits()).collect();
-        Ok((image.width() as usize, image.height() as usize, bits, valid))
-    }
-
-    /// [`read_depth_png`]'s values.
-    fn through_rows(path: &Path) -> Result<Option<Read>, LiftError> {
-        Ok(read_depth_png(path, u64::MAX, SCALE)?.map(|d| {
-            let bits = d.metres.iter().map(|v| v.to_bits()).collect();
-            (d.width, d.height, bits, d.valid)
-        }))
-    }
-
-    /// Each row's filter type, from the file's inflated image data (a test of the files the
-    /// tests write, independent of the readers compared).
-    fn filter_types(file: &[u8], (width, height): (usize, usize)) -> Vec<u8> {
-        let raw = inflated_image_data(file);
-        (0..height).map(|v| raw[v * (2 * width + 1)]).collect()
-    }
-
-    fn values_of(pattern: usize, (width, height): (usize, usize), rng: &mut impl Rng) -> Vec<u16> {
-        (0..width * height)
-            .map(|p| {
-                let (u, v) = (p % width, p / width);
-                match pattern {
-                    // Any value, zeros ("no measurement") among them.
-                    0 => {
-                        if rng.random_range(0..8) == 0 {
-                            0
-                        } else {
-                            rng.random()
-                        }
-                    }
-                    // A slanted table with noise and holes: what depth maps look like, and
-                    // where Paeth's three neighbours differ.
-                    1 => {
-                        if rng.random_range(0..20) == 0 {
-                            0
-                        } else {
-                            (600 + 3 * u + 7 * v) as u16 + rng.random_range(0..4)
-                        }
-                    }
-                    // Large steps across byte boundaries (255 → 256 and back).
-                    _ => (250 + ((u * 37 + v * 101) % 13) * 255) as u16,
-                }
-            })
-            .collect()
-    }
-
-    #[test]
-    fn every_filter_type_reads_as_the_general_reader_reads_it() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let path = dir.path().join("depth.png");
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        let filters = [
-            (Filter::NoFilter, Some(0u8)),
-            (Filter::Sub, Some(1)),
-            (Filter::Up, Some(2)),
-            (Filter::Avg, Some(3)),
-            (Filter::Paeth, Some(4)),
-            (Filter::Adaptive, None),
-        ];
-        let mut seen = [0usize; 5];
-        let mut transformed = 0;
-        let mut cases = 0;
-        for (width, height) in [(1, 1), (1, 9), (9, 1), (2, 2), (7, 3), (33, 17), (257, 40)] {
-            for pattern in 0..3 {
-                let values = values_of(pattern, (width, height), &mut rng);
-                for &(filter, expected) in &filters {
-                    // Image data in one chunk, and split over chunks of 7 bytes.
-                    for chunk in [1 << 20, 7] {
-                        let size = (width as u32, height as u32);
-                        let file = encode(size, &values, filter, chunk, false);
-                        std::fs::write(&path, &file).expect("write");
-                        let types = filter_types(&file, (width, height));
-                        if let Some(expected) = expected {
-                            // The encoder leaves the first row of a Up or Paeth image
-                            // unchanged or filters it as it likes; the others are `expected`.
-                            assert!(types[1..].iter().all(|&t| t == expected), "{types:?}");
-                        }
-                        for &t in &types {
-                            seen[usize::from(t)] += 1;
-                        }
-                        let reference = through_image(&path).expect("image decodes");
-                        let rows = through_rows(&path).expect("decodes").expect("16-bit gray");
-                        assert_eq!(
-                            rows, reference,
-                            "{width}×{height}, pattern {pattern}, {filter:?}, chunks of {chunk}"
-                        );
-                        // Control: the filtered bytes are not the values, so rows left
-                        // filtered (or unfiltered wrongly) would not compare equal.
-                        let raw: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
-                        let stored = stored_row_bytes(&file, (width, height));
-                        transformed += usize::from(stored != raw);
-                        cases += 1;
-                    }
-                }
-            }
-        }
-        assert!(
-            seen.iter().all(|&n| n > 0),
-            "every filter type is exercised: {seen:?}"
-        );
-        assert!(transformed > cases / 2, "{transformed} of {cases}");
-    }
-
-    /// The rows' bytes as stored (still filtered), without their filter-type bytes.
-    fn stored_row_bytes(file: &[u8], (width, height): (usize, usize)) -> Vec<u8> {
-        let raw = inflated_image_data(file);
-        (0..height)
-            .flat_map(|v| raw[v * (2 * width + 1) + 1..(v + 1) * (2 * width + 1)].to_vec())
-            .collect()
-    }
-
-    fn rgbd() -> PathBuf {
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/realdata/rgbd")
-    }
-
-    #[test]
-    fn the_real_depth_maps_read_as_the_general_reader_reads_them() {
-        let dir = rgbd();
-        assert!(
-            dir.is_dir(),
-            "{} is missing (../shared beside the repository)",
-            dir.display()
-        );
-        let mut files = Vec::new();
-        let mut stack = vec![dir];
-        while let Some(dir) = stack.pop() {
-            for entry in std::fs::read_dir(&dir).expect("list") {
-                let path = entry.expect("entry").path();
-                let name = path
-                    .file_name()
-                    .expect("name")
-                    .to_string_lossy()
-                    .into_owned();
-                if path.is_dir() {
-                    stack.push(path);
-                } else if name.ends_with("depth.png") {
-                    files.push(path);
-                }
-            }
-        }
-        files.sort();
-        let mut rows_by_filter = [0usize; 5];
-        for path in &files {
-            let reference = through_image(path).expect("image decodes");
-            let rows = through_rows(path).expect("decodes").expect("16-bit gray");
-            assert!(rows == reference, "{}", path.display());
-            let file = std::fs::read(path).expect("read");
-            let types = filter_types(&file, (reference.0, reference.1));
-            for &t in &types {
-                rows_by_filter[usize::from(t)] += 1;
-            }
-        }
-        // graspnet_example, ucn_demo (2), ycbv_real (2), ycbv_syn (2).
-        assert!(files.len() >= 7, "{files:?}");
-        // Their writers filter every row with Sub (3,600 rows on 2026-12-01): the other filter
-        // types are the test above's.
-        assert!(rows_by_filter[1] > 0, "{rows_by_filter:?}");
-    }
-
-    /// The PNG CRC-32 of a chunk's type and data.
-    fn crc32(bytes: &[u8]) -> u32 {
-        let mut crc = !0u32;
-        for &byte in bytes {
-            crc ^= u32::from(byte);
-            for _ in 0..8 {
-                crc = if crc & 1 != 0 {
-                    (crc >> 1) ^ 0xEDB8_8320
-                } else {
-                    crc >> 1
-                };
-            }
-        }
-        !crc
-    }
-
-    /// A PNG of `width` × `height` 16-bit gray pixels whose image data is `raw` (filter bytes
-    /// included), compressed as one IDAT chunk.
-    fn raw_png(width: u32, height: u32, raw: &[u8]) -> Vec<u8> {
-        fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
-            out.extend_from_slice(&(data.len() as u32).to_be_bytes());
-            let start = out.len();
-            out.extend_from_slice(kind);
-            out.extend_from_slice(data);
-            let crc = crc32(&out[start..]);
-            out.extend_from_slice(&crc.to_be_bytes());
-        }
-        let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
-        let mut header = Vec::new();
-        header.extend_from_slice(&width.to_be_bytes());
-        header.extend_from_slice(&height.to_be_bytes());
-        header.extend_from_slice(&[16, 0, 0, 0, 0]);
-        chunk(&mut out, b"IHDR", &header);
-        if !raw.is_empty() {
-            chunk(&mut out, b"IDAT", &fdeflate::compress_to_vec(raw));
-        }
-        chunk(&mut out, b"IEND", &[]);
-        out
-    }
-
-    #[test]
-    fn broken_depth_pngs_are_errors_naming_the_file() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let path = dir.path().join("depth.png");
-        let (width, height) = (5u32, 4u32);
-        let row = |filter: u8| {
-            let mut row = vec![filter];
-            row.extend((0..width).flat_map(|u| (1000 + u as u16).to_be_bytes()));
-            row
-        };
-        let rows = |filters: [u8; 4]| -> Vec<u8> { filters.iter().flat_map(|&f| row(f)).collect() };
-
-        // Control: the hand-made file reads, and as the general reader reads it.
-        std::fs::write(&path, raw_png(width, height, &rows([0, 1, 2, 4]))).expect("write");
-        let read = through_rows(&path).expect("decodes").expect("16-bit gray");
-        assert_eq!(read, through_image(&path).expect("image decodes"));
-
-        let cases: [(&str, Vec<u8>, &str); 4] = [
-            (
-                "a filter type PNG does not define",
-                raw_png(width, height, &rows([0, 1, 5, 0])),
-                "row 2 has filter type 5",
-            ),
-            (
-                "rows missing",
-                raw_png(
-                    width,
-                    height,
-                    &rows([0, 1, 2, 4])[..2 * (2 * width as usize + 1)],
-                ),
-                "ends after 2 of its 4 rows",
-            ),
-            (
-                "no image data",
-                raw_png(width, height, &[]),
-                "no image data",
-            ),
-            (
-                "the file cut short",
-                raw_png(width, height, &rows([0, 1, 2, 4]))[..60].to_vec(),
-                "cannot decode",
-            ),
-        ];
-        for (what, file, says) in cases {
-            std::fs::write(&path, &file).expect("write");
-            let message = match through_rows(&path) {
-                Err(e) => e.to_string(),
-                Ok(_) => panic!("{what}: read"),
-            };
-            assert!(message.contains("depth.png"), "{what}: {message}");
-            assert!(
-                message.contains("cannot decode the image"),
-                "{what}: {message}"
-            );
-            assert!(message.contains(says), "{what}: {message}");
-            // The general reader refuses it too.
-            assert!(through_image(&path).is_err(), "{what}");
-        }
-
-        // A header asking for more pixels than allowed: refused before any image data.
-        std::fs::write(&path, raw_png(100_000, 100_000, &[])).expect("write");
-        let message = match read_depth_png(&path, 1 << 20, SCALE) {
-            Err(e) => e.to_string(),
-            Ok(_) => panic!("read"),
-        };
-        assert!(
-            message.contains("more than [lift] max_image_pixels"),
-            "{message}"
-        );
-    }
-
-    #[test]
-    fn other_pngs_are_left_to_the_general_reader() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let path = dir.path().join("depth.png");
-        // With transparency, `image` gives two channels: not a depth map's PNG.
-        let values = [1000u16, 0, 1200, 1300];
-        std::fs::write(&path, encode((2, 2), &values, Filter::Sub, 1 << 20, true)).expect("write");
-        assert!(through_rows(&path).expect("reads").is_none());
-        // Control: the same image without the tRNS chunk is read here.
-        std::fs::write(&path, encode((2, 2), &values, Filter::Sub, 1 << 20, false)).expect("write");
-        assert!(through_rows(&path).expect("reads").is_some());
-        // 8-bit gray and 16-bit RGB.
-        image::GrayImage::new(3, 2).save(&path).expect("save");
-        assert!(through_rows(&path).expect("reads").is_none());
-        image::ImageBuffer::<image::Rgb<u16>, _>::new(3, 2)
-            .save(&path)
-            .expect("save");
-        assert!(through_rows(&path).expect("reads").is_none());
-        // A JPEG named depth.png, and a file too short to be anything.
-        let jpeg = dir.path().join("photo.jpg");
-        image::GrayImage::new(3, 2).save(&jpeg).expect("save");
-        std::fs::copy(&jpeg, &path).expect("copy");
-        assert!(through_rows(&path).expect("reads").is_none());
-        std::fs::write(&path, b"\x89PN").expect("write");
-        assert!(through_rows(&path).expect("reads").is_none());
     }
 }
