@@ -90,45 +90,53 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
 /// before the rename, about half a millisecond a file; a rerun whose outputs and markers come
 /// out the same pays a read instead.
 pub fn write_if_changed(path: &Path, bytes: &[u8]) -> io::Result<bool> {
-    if holds_exactly(path, bytes) {
-        return Ok(false);
-    }
-    write_atomic(path, bytes)?;
-    Ok(true)
+    Ok(write_if_changed_kept(path, bytes)?.is_none())
 }
 
-/// Whether `path` is a regular file (not a link) whose contents are `bytes` (a file of another
-/// size is not read).
+/// [`write_if_changed`], giving back the file it left alone: `Some` with the file still open
+/// and its metadata from before it was read when it held these bytes already (nothing was
+/// written), `None` when the bytes were written. The runner takes a kept output's digest from
+/// its remembered digests when the file's identity says it has not changed
+/// ([`crate::runner::digests`]).
+pub fn write_if_changed_kept(
+    path: &Path,
+    bytes: &[u8],
+) -> io::Result<Option<(fs::File, fs::Metadata)>> {
+    if let Some(kept) = holding(path, bytes) {
+        return Ok(Some(kept));
+    }
+    write_atomic(path, bytes)?;
+    Ok(None)
+}
+
+/// `path` open, with its metadata, when it is a regular file (not a link) whose contents are
+/// `bytes` (a file of another size is not read); `None` otherwise.
 ///
 /// The file is opened first ([`open_own_file`]: a link is refused by the open, a FIFO does not
 /// block it) and then statted through the open file, so the path is walked once, not twice:
 /// a scene's output sits eight folders down, and the walk was most of a `stat`'s cost.
-fn holds_exactly(path: &Path, bytes: &[u8]) -> bool {
-    let Ok(file) = open_own_file(path) else {
-        return false;
-    };
-    match file.metadata() {
-        Ok(meta) if meta.is_file() && meta.len() == bytes.len() as u64 => {}
-        _ => return false,
+fn holding(path: &Path, bytes: &[u8]) -> Option<(fs::File, fs::Metadata)> {
+    let file = open_own_file(path).ok()?;
+    let meta = file.metadata().ok()?;
+    if !meta.is_file() || meta.len() != bytes.len() as u64 {
+        return None;
     }
     let len = bytes.len() as u64;
     if len <= WHOLE_COMPARE_UP_TO {
         // Markers and most outputs: read whole in one call ([`read_sized`]).
-        return matches!(read_sized(&file, len, len), Ok(held) if held == bytes);
+        let same = matches!(read_sized(&file, len, len), Ok(held) if held == bytes);
+        return same.then_some((file, meta));
     }
-    let mut reader = io::BufReader::with_capacity(1 << 16, file);
+    let mut reader = io::BufReader::with_capacity(1 << 16, &file);
     let mut rest = bytes;
     loop {
-        let block = match reader.fill_buf() {
-            Ok(block) => block,
-            Err(_) => return false,
-        };
+        let block = reader.fill_buf().ok()?;
         if block.is_empty() {
-            return rest.is_empty();
+            return rest.is_empty().then_some((file, meta));
         }
         let n = block.len();
         if n > rest.len() || block != &rest[..n] {
-            return false;
+            return None;
         }
         rest = &rest[n..];
         reader.consume(n);
@@ -150,7 +158,7 @@ pub fn open_own_file(path: &Path) -> io::Result<fs::File> {
         .open(path)
 }
 
-/// Up to this size, [`holds_exactly`] reads a file whole to compare it; above it, block by
+/// Up to this size, [`holding`] reads a file whole to compare it; above it, block by
 /// block, so that comparing a scene's GLB does not hold a second copy of it in memory.
 const WHOLE_COMPARE_UP_TO: u64 = 1 << 20;
 

@@ -197,6 +197,91 @@ fn a_large_input_is_hashed_again_only_when_its_identity_changed() {
 }
 
 #[test]
+fn a_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digests() {
+    use mesa_pipeline::runner::digests::SETTLED_AFTER;
+    use sha2::Digest as _;
+    let sha = |bytes: &[u8]| format!("{:x}", sha2::Sha256::digest(bytes));
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), 1);
+    let scene = "scenes/office_table/office_table_0000";
+    let (input, output) = (
+        format!("{scene}/input/data.txt"),
+        format!("{scene}/echo/a.txt"),
+    );
+    let config = Config::default();
+    let forced = RunOptions {
+        force: true,
+        ..options(1)
+    };
+    let marker = || -> serde_json::Value {
+        common::read_json(
+            &dir.path()
+                .join(".mesa/markers/echo/office_table/office_table_0000.json"),
+        )
+    };
+    let digest = |kind: &str, rel: &str| marker()[kind][rel].as_str().expect("d").to_owned();
+    let remembered = dir
+        .path()
+        .join(".mesa/digests/echo/office_table/office_table_0000.txt");
+    let truth = |rel: &str| sha(&std::fs::read(dir.path().join(rel)).expect("read"));
+
+    // A first run writes no digests file for small files (it would cost more than it saves).
+    assert_eq!(run(dir.path(), &config, &options(1)).done, 1);
+    assert!(!remembered.exists(), "a first run remembers no small file");
+    let (truth_in, truth_out) = (truth(&input), truth(&output));
+    // A forced rerun within SETTLED_AFTER of the writes remembers nothing either.
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    assert!(
+        !remembered.exists(),
+        "files written a moment ago are not remembered"
+    );
+
+    // Once the files have settled, a forced rerun remembers the small input and the outputs
+    // that came out the same (all three of them).
+    std::thread::sleep(SETTLED_AFTER + Duration::from_millis(300));
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    let saved = std::fs::read_to_string(&remembered).expect("remembered");
+    assert_eq!(saved.lines().count(), 5, "{saved}");
+    assert!(saved.contains(&format!("{truth_in} ")), "{saved}");
+    assert!(saved.contains(&format!("{truth_out} ")), "{saved}");
+    assert_eq!(
+        (digest("inputs", &input), digest("outputs", &output)),
+        (truth_in.clone(), truth_out.clone())
+    );
+
+    // The remembered digests are the ones used: forged, they are what the next forced rerun's
+    // marker records (the files unread by the hash).
+    let (forged_in, forged_out) = ("ab".repeat(32), "cd".repeat(32));
+    let forged = saved
+        .replace(&truth_in, &forged_in)
+        .replace(&truth_out, &forged_out);
+    std::fs::write(&remembered, &forged).expect("forge");
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    assert_eq!(
+        (digest("inputs", &input), digest("outputs", &output)),
+        (forged_in.clone(), forged_out.clone())
+    );
+
+    // Control: the same bytes written again in place (a new ctime) are hashed again, input
+    // and output alike, and the truth comes back.
+    for rel in [&input, &output] {
+        let path = dir.path().join(rel);
+        let bytes = std::fs::read(&path).expect("read");
+        std::fs::write(&path, bytes).expect("rewrite");
+    }
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    assert_eq!(
+        (digest("inputs", &input), digest("outputs", &output)),
+        (truth_in, truth_out)
+    );
+    let now = std::fs::read_to_string(&remembered).unwrap_or_default();
+    assert!(
+        !now.contains(&forged_in) && !now.contains(&forged_out),
+        "{now}"
+    );
+}
+
+#[test]
 fn a_second_run_skips_everything_and_an_edit_redoes_exactly_that_scene() {
     let dir = tempfile::tempdir().expect("tempdir");
     make_dataset(dir.path(), 12);

@@ -21,7 +21,7 @@ use super::scene_files;
 use crate::exit::UsageError;
 use crate::fsio::{
     open_own_file, read_statted, sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic,
-    write_if_changed, DigestCache,
+    write_if_changed, write_if_changed_kept, DigestCache,
 };
 use crate::progress::Tick;
 
@@ -263,21 +263,17 @@ pub enum SceneState {
 struct Prepared {
     inputs: BTreeMap<String, String>,
     previous: Option<RunMarker>,
+    /// The digests remembered for the scene, with what hashing the inputs added; written back
+    /// by [`save_remembered`] after the scene (a run does; `mesa status`, which holds no lock,
+    /// only reads them).
+    remembered: RememberedDigests,
 }
 
-/// Where the digests of a scene's large inputs are remembered for a stage ([`digests`]).
+/// Where the digests of a scene's files are remembered for a stage ([`digests`]).
 ///
 /// [`digests`]: super::digests
 pub fn digests_path(dataset: &Path, stage: &str, scene: &Scene) -> PathBuf {
     per_scene_file(dataset, "digests", stage, scene, "txt")
-}
-
-/// Whether [`prepare`] writes back the digests it remembers (a run does; `mesa status`, which
-/// holds no lock, only reads them).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Remember {
-    Save,
-    ReadOnly,
 }
 
 fn prepare(
@@ -285,12 +281,17 @@ fn prepare(
     ctx: &StageContext<'_>,
     scene: &Scene,
     cache: &DigestCache,
-    remember: Remember,
 ) -> anyhow::Result<Prepared> {
     let previous = read_scene_marker(&marker_path(ctx.dataset, stage.name(), scene));
     let listed = stage.inputs(ctx, scene)?;
     let scene_prefix = scene.rel("");
     let mut remembered = RememberedDigests::at(digests_path(ctx.dataset, stage.name(), scene));
+    if previous
+        .as_ref()
+        .is_some_and(|m| m.status == MarkerStatus::Done)
+    {
+        remembered = remembered.for_rerun();
+    }
     let now = SystemTime::now();
     let mut inputs = BTreeMap::new();
     for rel in listed {
@@ -309,12 +310,25 @@ fn prepare(
         })?;
         inputs.insert(rel, digest);
     }
-    if remember == Remember::Save {
-        remembered.retain(&inputs);
-        // Only a shortcut (see `digests`): a file not written means hashing again next time.
-        let _ = remembered.save();
-    }
-    Ok(Prepared { inputs, previous })
+    Ok(Prepared {
+        inputs,
+        previous,
+        remembered,
+    })
+}
+
+/// Writes back the digests remembered for a scene, keeping only those of its `inputs` and of
+/// the `outputs` this run wrote or kept.
+fn save_remembered(
+    mut remembered: RememberedDigests,
+    inputs: &BTreeMap<String, String>,
+    outputs: Option<&BTreeMap<String, String>>,
+) {
+    remembered.retain(|rel| {
+        inputs.contains_key(rel) || outputs.is_some_and(|outputs| outputs.contains_key(rel))
+    });
+    // Only a shortcut (see `digests`): a file not written means hashing again next time.
+    let _ = remembered.save();
 }
 
 /// The error for a declared input that does not exist, with who writes it.
@@ -394,7 +408,7 @@ pub fn scene_state(
     if marker.status == MarkerStatus::Failed {
         return SceneState::Failed(marker.error.first().cloned().unwrap_or_default());
     }
-    match prepare(stage, ctx, scene, cache, Remember::ReadOnly) {
+    match prepare(stage, ctx, scene, cache) {
         Err(e) => SceneState::Stale(format!("{e:#}")),
         Ok(prepared) => match staleness(&marker, &prepared.inputs, config_digest, ctx.dataset) {
             None => SceneState::Done,
@@ -465,17 +479,22 @@ fn process_scene_here(
         warnings: Vec::new(),
         error: Vec::new(),
     };
-    let prepared = match prepare(stage, ctx, scene, cache, Remember::Save) {
+    let Prepared {
+        inputs,
+        previous,
+        mut remembered,
+    } = match prepare(stage, ctx, scene, cache) {
         Ok(p) => p,
         Err(e) => {
             let previous = read_marker(&marker_file);
             return fail(ctx, scene, &marker_file, base, previous.as_ref(), &e);
         }
     };
-    base.inputs = prepared.inputs.clone();
+    base.inputs = inputs.clone();
     if !force {
-        if let Some(previous) = &prepared.previous {
-            if staleness(previous, &prepared.inputs, config_digest, ctx.dataset).is_none() {
+        if let Some(previous) = &previous {
+            if staleness(previous, &inputs, config_digest, ctx.dataset).is_none() {
+                save_remembered(remembered, &inputs, Some(&previous.outputs));
                 return SceneOutcome::Skipped;
             }
         }
@@ -484,33 +503,27 @@ fn process_scene_here(
     let output = match result {
         Ok(Ok(output)) => output,
         Ok(Err(e)) => {
-            return fail(
-                ctx,
-                scene,
-                &marker_file,
-                base,
-                prepared.previous.as_ref(),
-                &e,
-            )
+            save_remembered(remembered, &inputs, None);
+            return fail(ctx, scene, &marker_file, base, previous.as_ref(), &e);
         }
         Err(payload) => {
+            save_remembered(remembered, &inputs, None);
             let error =
                 anyhow::anyhow!("this is a bug in mesa: please report it with this scene's inputs")
                     .context(format!(
                         "internal error: {}",
                         panic_message(payload.as_ref())
                     ));
-            return fail(
-                ctx,
-                scene,
-                &marker_file,
-                base,
-                prepared.previous.as_ref(),
-                &error,
-            );
+            return fail(ctx, scene, &marker_file, base, previous.as_ref(), &error);
         }
     };
-    match write_outputs(ctx, scene, &output, prepared.previous.as_ref()) {
+    let written = write_outputs(ctx, scene, &output, previous.as_ref(), &mut remembered);
+    save_remembered(
+        remembered,
+        &inputs,
+        written.as_ref().ok().map(|(outputs, _)| outputs),
+    );
+    match written {
         Ok((outputs, removed)) => {
             let mut output = output;
             for rel in removed {
@@ -531,23 +544,21 @@ fn process_scene_here(
                 },
             }
         }
-        Err(e) => fail(
-            ctx,
-            scene,
-            &marker_file,
-            base,
-            prepared.previous.as_ref(),
-            &e,
-        ),
+        Err(e) => fail(ctx, scene, &marker_file, base, previous.as_ref(), &e),
     }
 }
 
+/// Writes the outputs a scene's run made (those that come out the same are left as they are),
+/// removes those of the last run it no longer makes, and gives the digests of what it wrote
+/// or kept, with the outputs it removed.
 fn write_outputs(
     ctx: &StageContext<'_>,
     scene: &Scene,
     output: &SceneOutput,
     previous: Option<&RunMarker>,
+    remembered: &mut RememberedDigests,
 ) -> anyhow::Result<(BTreeMap<String, String>, Vec<String>)> {
+    let now = SystemTime::now();
     let mut written = BTreeMap::new();
     // Dead writers' temporary files are swept once per output folder (one listing), not once
     // per file.
@@ -560,9 +571,11 @@ fn write_outputs(
                 sweep_dead_tmp_in(dir).with_context(|| format!("{}: sweeping", dir.display()))?;
             }
         }
-        write_if_changed(&path, bytes)
+        let kept = write_if_changed_kept(&path, bytes)
             .with_context(|| format!("{}: cannot write", path.display()))?;
-        written.insert(scene.rel(rel), sha256_hex(bytes));
+        let rel = scene.rel(rel);
+        let digest = remembered.output_digest(&rel, bytes, kept, now);
+        written.insert(rel, digest);
     }
     // Outputs of an earlier run that this run no longer writes would be stale: removed, and
     // each named in a warning (a later stage may have read it).
@@ -662,7 +675,7 @@ fn fail(
 /// file again.
 fn read_scene_marker(path: &Path) -> Option<RunMarker> {
     // Opened without following a link, then statted through the open file: one walk of the
-    // path (as `holds_exactly` does for the outputs).
+    // path (as `holding` in fsio does for the outputs).
     let file = match open_own_file(path) {
         Ok(file) => file,
         // A link: read through it as before, and compared on disk when written.
