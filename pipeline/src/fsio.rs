@@ -94,14 +94,10 @@ pub fn write_if_changed(path: &Path, bytes: &[u8]) -> io::Result<bool> {
 }
 
 /// [`write_if_changed`], giving back the file it left alone: `Some` with the file still open
-/// and its metadata from before it was read when it held these bytes already (nothing was
-/// written), `None` when the bytes were written. The runner takes a kept output's digest from
-/// its remembered digests when the file's identity says it has not changed
-/// ([`crate::runner::digests`]).
-pub fn write_if_changed_kept(
-    path: &Path,
-    bytes: &[u8],
-) -> io::Result<Option<(fs::File, fs::Metadata)>> {
+/// when it held these bytes already (nothing was written), `None` when the bytes were written.
+/// The runner takes a kept output's digest from its remembered digests when the file's
+/// identity says it has not changed ([`crate::runner::digests`]).
+pub fn write_if_changed_kept(path: &Path, bytes: &[u8]) -> io::Result<Option<fs::File>> {
     if let Some(kept) = holding(path, bytes) {
         return Ok(Some(kept));
     }
@@ -109,13 +105,13 @@ pub fn write_if_changed_kept(
     Ok(None)
 }
 
-/// `path` open, with its metadata, when it is a regular file (not a link) whose contents are
-/// `bytes` (a file of another size is not read); `None` otherwise.
+/// `path` open when it is a regular file (not a link) whose contents are `bytes` (a file of
+/// another size is not read); `None` otherwise.
 ///
 /// The file is opened first ([`open_own_file`]: a link is refused by the open, a FIFO does not
 /// block it) and then statted through the open file, so the path is walked once, not twice:
 /// a scene's output sits eight folders down, and the walk was most of a `stat`'s cost.
-fn holding(path: &Path, bytes: &[u8]) -> Option<(fs::File, fs::Metadata)> {
+fn holding(path: &Path, bytes: &[u8]) -> Option<fs::File> {
     let file = open_own_file(path).ok()?;
     let meta = file.metadata().ok()?;
     if !meta.is_file() || meta.len() != bytes.len() as u64 {
@@ -125,14 +121,14 @@ fn holding(path: &Path, bytes: &[u8]) -> Option<(fs::File, fs::Metadata)> {
     if len <= WHOLE_COMPARE_UP_TO {
         // Markers and most outputs: read whole in one call ([`read_sized`]).
         let same = matches!(read_sized(&file, len, len), Ok(held) if held == bytes);
-        return same.then_some((file, meta));
+        return same.then_some(file);
     }
     let mut reader = io::BufReader::with_capacity(1 << 16, &file);
     let mut rest = bytes;
     loop {
         let block = reader.fill_buf().ok()?;
         if block.is_empty() {
-            return rest.is_empty().then_some((file, meta));
+            return rest.is_empty().then_some(file);
         }
         let n = block.len();
         if n > rest.len() || block != &rest[..n] {

@@ -15,11 +15,16 @@
 //! elsewhere) looks up its small inputs and the outputs that come out the same too
 //! ([`RememberedDigests::for_rerun`]), and remembers them once settled: a cheap stage's rerun
 //! hashed every layout and graph of the dataset again (`mesa graph --force`: 31 KB a scene,
-//! 16–20 µs of its 150). A small file is read whole either way (the stage gets the input's
-//! bytes; an output is compared with the new bytes), and its identity is taken before and
-//! after the read: the remembered digest is used only when both are the remembered identity,
-//! so the bytes read are the bytes that were hashed. An output kept this way holds exactly
-//! the new bytes, so the remembered digest is theirs.
+//! 10–20 µs of its 130). A small file is read whole either way (the stage gets the input's
+//! bytes; an output is compared with the new bytes), and its identity is taken through the
+//! open file after the read: the remembered digest is used when it is the remembered
+//! identity (which had settled when it was remembered, so any change since, during the read
+//! too, would have given a later `ctime`), and a digest is remembered only when that identity
+//! has settled as of a time taken before the read (a writer busy with the file during the
+//! read leaves a `ctime` too recent). An output kept this way holds exactly the new bytes, so
+//! the remembered digest is theirs. This costs a read of the digests file and a `stat` a file,
+//! about what hashing 30 KB does on the machines measured: a few per cent of a `mesa graph`
+//! rerun, more for a stage whose outputs are larger.
 //!
 //! **The identity** is the device, the inode, the size, the modification time and the status
 //! change time (`ctime`), to the nanosecond. Writing to a file, truncating it, replacing it by
@@ -202,20 +207,16 @@ impl RememberedDigests {
         if size < REMEMBER_FROM_BYTES {
             // Read whole, and the bytes handed to the stage that runs next on this thread
             // ([`scene_files`]): it reads what was hashed, without opening the file again.
-            let before = if self.small_too && listable {
-                Some(FileIdentity::of(&file.metadata()?))
-            } else {
-                None
-            };
             let cap = REMEMBER_FROM_BYTES.saturating_mul(2);
             let bytes = read_sized(&file, size, cap - 1)?;
             if bytes.len() as u64 >= cap {
                 // It grew while being read: hashed whole from the start, not handed over.
                 return sha256_reader(fs::File::open(path)?, HASHED_INPUT_LIMIT);
             }
-            let digest = match before {
-                Some(before) => self.known_or_hashed(rel, &bytes, before, &file, now)?,
-                None => sha256_hex(&bytes),
+            let digest = if self.small_too && listable {
+                self.known_or_hashed(rel, &bytes, &file, now)?
+            } else {
+                sha256_hex(&bytes)
             };
             scene_files::keep(path, bytes);
             return Ok(digest);
@@ -236,20 +237,19 @@ impl RememberedDigests {
     }
 
     /// The digest of an output the runner made, `bytes`: either written anew (`kept` is
-    /// `None`) or held already by the file `kept` gives, open, with its metadata from before
-    /// it was read ([`write_if_changed_kept`](crate::fsio::write_if_changed_kept)). On a rerun
-    /// a kept output's digest is the remembered one when its identity is unchanged (module
-    /// docs); otherwise `bytes` are hashed.
+    /// `None`) or held already by the file `kept` gives, still open
+    /// ([`write_if_changed_kept`](crate::fsio::write_if_changed_kept)). On a rerun a kept
+    /// output's digest is the remembered one when its identity is unchanged (module docs);
+    /// otherwise `bytes` are hashed. `now` is a time taken before the file was read.
     pub fn output_digest(
         &mut self,
         rel: &str,
         bytes: &[u8],
-        kept: Option<(fs::File, fs::Metadata)>,
+        kept: Option<fs::File>,
         now: SystemTime,
     ) -> String {
-        if let Some((file, meta)) = kept.filter(|_| self.small_too && !rel.contains('\n')) {
-            let before = FileIdentity::of(&meta);
-            if let Ok(digest) = self.known_or_hashed(rel, bytes, before, &file, now) {
+        if let Some(file) = kept.filter(|_| self.small_too && !rel.contains('\n')) {
+            if let Ok(digest) = self.known_or_hashed(rel, bytes, &file, now) {
                 return digest;
             }
         } else if let Some(entries) = &mut self.entries {
@@ -259,27 +259,25 @@ impl RememberedDigests {
         sha256_hex(bytes)
     }
 
-    /// The digest of `bytes`, just read from `file` of identity `before` (taken before the
-    /// read): the remembered one when the file's identity is still `before` and is the one
-    /// remembered with it, else hashed, and remembered when the file has settled.
+    /// The digest of `bytes`, just read from `file`: the remembered one when the file's
+    /// identity now is the one remembered with it, else hashed, and remembered when that
+    /// identity has settled as of `now`, a time taken before the read (module docs).
     fn known_or_hashed(
         &mut self,
         rel: &str,
         bytes: &[u8],
-        before: FileIdentity,
         file: &fs::File,
         now: SystemTime,
     ) -> io::Result<String> {
         let after = FileIdentity::of(&file.metadata()?);
-        if before == after {
-            if let Some((identity, digest)) = self.entries().get(rel) {
-                if *identity == before {
-                    return Ok(digest.clone());
-                }
+        if let Some((identity, digest)) = self.entries().get(rel) {
+            if *identity == after {
+                return Ok(digest.clone());
             }
         }
         let digest = sha256_hex(bytes);
-        self.note(rel, before, after, &digest, now);
+        // One identity, taken after the read: settled, it covers the read (module docs).
+        self.note(rel, after, after, &digest, now);
         Ok(digest)
     }
 
