@@ -236,9 +236,15 @@ fn a_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digests() {
         "files written a moment ago are not remembered"
     );
 
-    // Once the files have settled, a forced rerun remembers the small input and the outputs
-    // that came out the same (all three of them).
+    // Once the files have settled, a rerun with nothing to do still writes no digests file
+    // (a skipped scene costs what it did), and a forced rerun remembers the small input and
+    // the outputs that came out the same (all three of them).
     std::thread::sleep(SETTLED_AFTER + Duration::from_millis(300));
+    assert_eq!(run(dir.path(), &config, &options(1)).skipped, 1);
+    assert!(
+        !remembered.exists(),
+        "a skipped scene remembers no small file"
+    );
     assert_eq!(run(dir.path(), &config, &forced).done, 1);
     let saved = std::fs::read_to_string(&remembered).expect("remembered");
     assert_eq!(saved.lines().count(), 5, "{saved}");

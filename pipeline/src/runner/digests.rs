@@ -9,13 +9,13 @@
 //! size and times are those it recorded. So does this module, for the scene inputs of at
 //! least [`REMEMBER_FROM_BYTES`] at every run.
 //!
-//! **Small files, on a rerun.** A first run of a scene hashes its small inputs and its outputs
-//! and writes no digests file for them: writing one costs more than the hashing it saves. A
-//! rerun of a scene whose marker says done (`--force`, or a stage rerun after an edit
-//! elsewhere) looks up its small inputs and the outputs that come out the same too
-//! ([`RememberedDigests::for_rerun`]), and remembers them once settled: a cheap stage's rerun
-//! hashed every layout and graph of the dataset again (`mesa graph --force`: 31 KB a scene,
-//! 10–20 µs of its 130). A small file is read whole either way (the stage gets the input's
+//! **Small files, on a forced rerun.** A run hashes a scene's small inputs and its outputs and
+//! writes no digests file for them: writing one costs more than the hashing it saves, and a
+//! rerun with nothing to do (which skips every scene) would write one a scene and stage. A
+//! forced run (`--force`) over a scene whose marker says done looks up its small inputs and
+//! the outputs that come out the same too ([`RememberedDigests::for_rerun`]), and remembers
+//! them once settled: a cheap stage's forced rerun hashed every layout and graph of the
+//! dataset again (`mesa graph --force`: 31 KB a scene, 10–20 µs of its 130). A small file is read whole either way (the stage gets the input's
 //! bytes; an output is compared with the new bytes), and its identity is taken through the
 //! open file after the read: the remembered digest is used when it is the remembered
 //! identity (which had settled when it was remembered, so any change since, during the read
@@ -172,8 +172,8 @@ impl RememberedDigests {
         }
     }
 
-    /// The same, for a rerun of a scene done before: its small inputs and the outputs that
-    /// come out the same are looked up and remembered too (module docs).
+    /// The same, for a forced rerun of a scene done before: its small inputs and the outputs
+    /// that come out the same are looked up and remembered too (module docs).
     pub fn for_rerun(mut self) -> Self {
         self.small_too = true;
         self

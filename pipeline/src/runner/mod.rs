@@ -7,9 +7,9 @@
 //!   and every file are the same for any thread count);
 //! - skip-done: a done marker records the digests of the scene's inputs and of the stage's
 //!   configuration; a rerun skips scenes whose marker still matches, redoes changed ones, and
-//!   `--force` redoes all; the digest of a large input (and, on a rerun, of a small one or of
-//!   an output that comes out the same) that has not changed since it was last hashed is
-//!   taken from `.mesa/digests/` ([`digests`]), not hashed again;
+//!   `--force` redoes all; the digest of a large input (and, in a forced rerun, of a small
+//!   one or of an output that comes out the same) that has not changed since it was last
+//!   hashed is taken from `.mesa/digests/` ([`digests`]), not hashed again;
 //! - atomic writes: a stage returns its files in memory; the runner writes them only when the
 //!   scene succeeded, each through a temporary file and a rename, and the done marker last
 //!   (datatrove's rule: a relaunch trusts only completed markers);

@@ -276,19 +276,25 @@ pub fn digests_path(dataset: &Path, stage: &str, scene: &Scene) -> PathBuf {
     per_scene_file(dataset, "digests", stage, scene, "txt")
 }
 
+/// The scene's previous marker and the digests of its inputs. `forced`: a forced run, which on a
+/// scene done before looks up and remembers its small files' digests too ([`digests`]).
+///
+/// [`digests`]: super::digests
 fn prepare(
     stage: &dyn SceneStage,
     ctx: &StageContext<'_>,
     scene: &Scene,
     cache: &DigestCache,
+    forced: bool,
 ) -> anyhow::Result<Prepared> {
     let previous = read_scene_marker(&marker_path(ctx.dataset, stage.name(), scene));
     let listed = stage.inputs(ctx, scene)?;
     let scene_prefix = scene.rel("");
     let mut remembered = RememberedDigests::at(digests_path(ctx.dataset, stage.name(), scene));
-    if previous
-        .as_ref()
-        .is_some_and(|m| m.status == MarkerStatus::Done)
+    if forced
+        && previous
+            .as_ref()
+            .is_some_and(|m| m.status == MarkerStatus::Done)
     {
         remembered = remembered.for_rerun();
     }
@@ -408,7 +414,7 @@ pub fn scene_state(
     if marker.status == MarkerStatus::Failed {
         return SceneState::Failed(marker.error.first().cloned().unwrap_or_default());
     }
-    match prepare(stage, ctx, scene, cache) {
+    match prepare(stage, ctx, scene, cache, false) {
         Err(e) => SceneState::Stale(format!("{e:#}")),
         Ok(prepared) => match staleness(&marker, &prepared.inputs, config_digest, ctx.dataset) {
             None => SceneState::Done,
@@ -483,7 +489,7 @@ fn process_scene_here(
         inputs,
         previous,
         mut remembered,
-    } = match prepare(stage, ctx, scene, cache) {
+    } = match prepare(stage, ctx, scene, cache, force) {
         Ok(p) => p,
         Err(e) => {
             let previous = read_marker(&marker_file);
