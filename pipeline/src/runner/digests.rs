@@ -10,21 +10,21 @@
 //! least [`REMEMBER_FROM_BYTES`] at every run.
 //!
 //! **Small files, on a forced rerun.** A run hashes a scene's small inputs and its outputs and
-//! writes no digests file for them: writing one costs more than the hashing it saves, and a
-//! rerun with nothing to do (which skips every scene) would write one a scene and stage. A
-//! forced run (`--force`) over a scene whose marker says done looks up its small inputs and
-//! the outputs that come out the same too ([`RememberedDigests::for_rerun`]), and remembers
-//! them once settled: a cheap stage's forced rerun hashed every layout and graph of the
-//! dataset again (`mesa graph --force`: 31 KB a scene, 10–20 µs of its 130). A small file is read whole either way (the stage gets the input's
-//! bytes; an output is compared with the new bytes), and its identity is taken through the
-//! open file after the read: the remembered digest is used when it is the remembered
-//! identity (which had settled when it was remembered, so any change since, during the read
-//! too, would have given a later `ctime`), and a digest is remembered only when that identity
-//! has settled as of a time taken before the read (a writer busy with the file during the
-//! read leaves a `ctime` too recent). An output kept this way holds exactly the new bytes, so
-//! the remembered digest is theirs. This costs a read of the digests file and a `stat` a file,
-//! about what hashing 30 KB does on the machines measured: a few per cent of a `mesa graph`
-//! rerun, more for a stage whose outputs are larger.
+//! writes no digests file for them: writing one costs more than the hashing it saves, and a rerun
+//! with nothing to do (which skips every scene) would write one a scene and stage. A forced run
+//! (`--force`) over a scene whose marker says done looks up its small inputs and the outputs that
+//! come out the same too ([`RememberedDigests::for_rerun`]), and remembers them once settled: a
+//! cheap stage's forced rerun hashed every layout and graph of the dataset again (`mesa graph
+//! --force`: 31 KB a scene, 10–20 µs of its 130). A small file is read whole either way (the stage
+//! gets the input's bytes; an output is compared with the new bytes), and its identity is taken
+//! through the open file after the read: the remembered digest is used when it is the remembered
+//! identity (which had settled when it was remembered, so any change since, during the read too,
+//! would have given a later `ctime`), and a digest is remembered only when that identity has
+//! settled as of a time taken before the read (a writer busy with the file during the read leaves a
+//! `ctime` too recent). An output kept this way holds exactly the new bytes, so the remembered
+//! digest is theirs. This costs a read of the digests file and a `stat` a file, about what hashing
+//! 30 KB does on the machines measured: a few per cent of a `mesa graph` rerun, more for a stage
+//! whose outputs are larger.
 //!
 //! **The identity** is the device, the inode, the size, the modification time and the status
 //! change time (`ctime`), to the nanosecond. Writing to a file, truncating it, replacing it by
