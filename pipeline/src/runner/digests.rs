@@ -42,12 +42,12 @@
 //! a file system whose clock runs behind this machine's; delete `.mesa/digests/` to have every
 //! input hashed again.
 //!
-//! **Where.** One small text file a stage and scene (inputs and outputs), `.mesa/digests/<stage>/<table_type>/
-//! <scene_id>.txt`, out of the scene folder and the markers: file identities differ between
-//! copies of a dataset, and markers must be the same bytes for the same work. A line is
-//! `<sha256> <dev> <ino> <size> <mtime> <ctime> <path>`, times as `<seconds>.<nanoseconds>`;
-//! the file is written atomically when an entry changes. A file that does not parse is ignored
-//! whole (every input is hashed, and the file is written anew).
+//! **Where.** One small text file a stage and scene (inputs and outputs),
+//! `.mesa/digests/<stage>/<table_type>/<scene_id>.txt`, out of the scene folder and the markers:
+//! file identities differ between copies of a dataset, and markers must be the same bytes for the
+//! same work. A line is `<sha256> <dev> <ino> <size> <mtime> <ctime> <path>`, times as
+//! `<seconds>.<nanoseconds>`; the file is written atomically when an entry changes. A file that
+//! does not parse is ignored whole (every input is hashed, and the file is written anew).
 
 use std::collections::BTreeMap;
 use std::fs;
@@ -157,7 +157,7 @@ pub struct RememberedDigests {
     path: PathBuf,
     entries: Option<BTreeMap<String, (FileIdentity, String)>>,
     changed: bool,
-    /// Whether small files are looked up and remembered too (a rerun: module docs).
+    /// Whether small files are looked up and remembered too (a forced rerun: module docs).
     small_too: bool,
 }
 
@@ -238,8 +238,8 @@ impl RememberedDigests {
 
     /// The digest of an output the runner made, `bytes`: either written anew (`kept` is
     /// `None`) or held already by the file `kept` gives, still open
-    /// ([`write_if_changed_kept`](crate::fsio::write_if_changed_kept)). On a rerun a kept
-    /// output's digest is the remembered one when its identity is unchanged (module docs);
+    /// ([`write_if_changed_kept`](crate::fsio::write_if_changed_kept)). On a forced rerun a
+    /// kept output's digest is the remembered one when its identity is unchanged (module docs);
     /// otherwise `bytes` are hashed. `now` is a time taken before the file was read.
     pub fn output_digest(
         &mut self,
