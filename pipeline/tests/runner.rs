@@ -197,7 +197,7 @@ fn a_large_input_is_hashed_again_only_when_its_identity_changed() {
 }
 
 #[test]
-fn a_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digests() {
+fn a_forced_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digests() {
     use mesa_pipeline::runner::digests::SETTLED_AFTER;
     use sha2::Digest as _;
     let sha = |bytes: &[u8]| format!("{:x}", sha2::Sha256::digest(bytes));

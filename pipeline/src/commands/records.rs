@@ -519,11 +519,7 @@ pub fn run_records(ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Resul
             }
         }
     }
-    let inputs_digest: String = inputs
-        .finalize()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect();
+    let inputs_digest = mesa_stages::hex(&inputs.finalize());
     let config_digest = config_digest(dataset, config, &instruction);
     let marker_path = exec.marker_path(ctx);
     let out_dir = dataset.join(RECORDS_DIR);

@@ -232,7 +232,7 @@ impl RememberedDigests {
         }
         let digest = sha256_reader(&file, HASHED_INPUT_LIMIT)?;
         let after = FileIdentity::of(&file.metadata()?);
-        self.note(rel, before, after, &digest, now);
+        self.note(rel, (before == after).then_some(before), &digest, now);
         Ok(digest)
     }
 
@@ -248,13 +248,20 @@ impl RememberedDigests {
         kept: Option<fs::File>,
         now: SystemTime,
     ) -> String {
-        if let Some(file) = kept.filter(|_| self.small_too && !rel.contains('\n')) {
-            if let Ok(digest) = self.known_or_hashed(rel, bytes, &file, now) {
-                return digest;
+        match kept {
+            Some(file) if self.small_too && !rel.contains('\n') => {
+                if let Ok(digest) = self.known_or_hashed(rel, bytes, &file, now) {
+                    return digest;
+                }
             }
-        } else if let Some(entries) = &mut self.entries {
+            // Kept, not looked up on this run: what is remembered of it still holds.
+            Some(_) => {}
             // Written anew: a new identity, which no entry can match.
-            self.changed |= entries.remove(rel).is_some();
+            None => {
+                if let Some(entries) = &mut self.entries {
+                    self.changed |= entries.remove(rel).is_some();
+                }
+            }
         }
         sha256_hex(bytes)
     }
@@ -277,23 +284,17 @@ impl RememberedDigests {
         }
         let digest = sha256_hex(bytes);
         // One identity, taken after the read: settled, it covers the read (module docs).
-        self.note(rel, after, after, &digest, now);
+        self.note(rel, Some(after), &digest, now);
         Ok(digest)
     }
 
-    /// Remembers `digest` for `rel` when the file kept its identity while it was read and has
-    /// settled as of `now`; otherwise forgets what was remembered for it.
-    fn note(
-        &mut self,
-        rel: &str,
-        before: FileIdentity,
-        after: FileIdentity,
-        digest: &str,
-        now: SystemTime,
-    ) {
+    /// Remembers `digest` for `rel` with the file's `identity` while it was read (`None` when
+    /// it changed during the read) if that identity has settled as of `now`; otherwise forgets
+    /// what was remembered for it.
+    fn note(&mut self, rel: &str, identity: Option<FileIdentity>, digest: &str, now: SystemTime) {
         let entries = self.entries();
-        if before == after && before.settled_at(now) {
-            let entry = (before, digest.to_owned());
+        if let Some(identity) = identity.filter(|i| i.settled_at(now)) {
+            let entry = (identity, digest.to_owned());
             if entries.get(rel) != Some(&entry) {
                 entries.insert(rel.to_owned(), entry);
                 self.changed = true;

@@ -505,22 +505,21 @@ fn process_scene_here(
             }
         }
     }
-    let result = catch_unwind(AssertUnwindSafe(|| stage.run(ctx, scene)));
+    let result = match catch_unwind(AssertUnwindSafe(|| stage.run(ctx, scene))) {
+        Ok(result) => result,
+        Err(payload) => Err(anyhow::anyhow!(
+            "this is a bug in mesa: please report it with this scene's inputs"
+        )
+        .context(format!(
+            "internal error: {}",
+            panic_message(payload.as_ref())
+        ))),
+    };
     let output = match result {
-        Ok(Ok(output)) => output,
-        Ok(Err(e)) => {
+        Ok(output) => output,
+        Err(e) => {
             save_remembered(remembered, &inputs, None);
             return fail(ctx, scene, &marker_file, base, previous.as_ref(), &e);
-        }
-        Err(payload) => {
-            save_remembered(remembered, &inputs, None);
-            let error =
-                anyhow::anyhow!("this is a bug in mesa: please report it with this scene's inputs")
-                    .context(format!(
-                        "internal error: {}",
-                        panic_message(payload.as_ref())
-                    ));
-            return fail(ctx, scene, &marker_file, base, previous.as_ref(), &error);
         }
     };
     let written = write_outputs(ctx, scene, &output, previous.as_ref(), &mut remembered);
