@@ -93,11 +93,12 @@ pub fn write_if_changed(path: &Path, bytes: &[u8]) -> io::Result<bool> {
     Ok(write_if_changed_kept(path, bytes)?.is_none())
 }
 
-/// [`write_if_changed`], giving back the file it left alone: `Some` with the file still open
-/// when it held these bytes already (nothing was written), `None` when the bytes were written.
-/// The runner takes a kept output's digest from its remembered digests when the file's
-/// identity says it has not changed ([`crate::runner::digests`]).
-pub fn write_if_changed_kept(path: &Path, bytes: &[u8]) -> io::Result<Option<fs::File>> {
+/// [`write_if_changed`], giving back what it found of the file it left alone: `Some` with the
+/// file's metadata, taken through the open file after it was read, when it held these bytes
+/// already (nothing was written); `None` when the bytes were written. The runner takes a kept
+/// output's digest from its remembered digests when that identity says the file has not changed
+/// ([`crate::runner::digests`]).
+pub fn write_if_changed_kept(path: &Path, bytes: &[u8]) -> io::Result<Option<fs::Metadata>> {
     if let Some(kept) = holding(path, bytes) {
         return Ok(Some(kept));
     }
@@ -105,30 +106,39 @@ pub fn write_if_changed_kept(path: &Path, bytes: &[u8]) -> io::Result<Option<fs:
     Ok(None)
 }
 
-/// `path` open when it is a regular file (not a link) whose contents are `bytes` (a file of
-/// another size is not read); `None` otherwise.
+/// The metadata of `path`, taken through the open file after it was read, when it is a regular
+/// file (not a link) whose contents are `bytes`; `None` otherwise.
 ///
 /// The file is opened first ([`open_own_file`]: a link is refused by the open, a FIFO does not
-/// block it) and then statted through the open file, so the path is walked once, not twice:
-/// a scene's output sits eight folders down, and the walk was most of a `stat`'s cost.
-fn holding(path: &Path, bytes: &[u8]) -> Option<fs::File> {
+/// block it), so the path is walked once: a scene's output sits eight folders down, and the
+/// walk was most of a `stat`'s cost. A file of up to [`WHOLE_COMPARE_UP_TO`] is then read
+/// before it is statted, never more than one byte past the length of `bytes`
+/// ([`read_sized`]), and the one `fstat` after the read tells its type and length and gives
+/// the identity the runner needs after a read (two `fstat`s a file before: one to see the
+/// length, one for the identity). Of anything but a regular file, at most that many bytes are
+/// read and then refused: a FIFO or a terminal gives nothing (`O_NONBLOCK`), a folder an
+/// error. A larger file is statted first, and read block by block only if it has the length.
+fn holding(path: &Path, bytes: &[u8]) -> Option<fs::Metadata> {
     let file = open_own_file(path).ok()?;
-    let meta = file.metadata().ok()?;
-    if !meta.is_file() || meta.len() != bytes.len() as u64 {
-        return None;
-    }
     let len = bytes.len() as u64;
     if len <= WHOLE_COMPARE_UP_TO {
-        // Markers and most outputs: read whole in one call ([`read_sized`]).
-        let same = matches!(read_sized(&file, len, len), Ok(held) if held == bytes);
-        return same.then_some(file);
+        let held = read_sized(&file, len, len).ok()?;
+        if held != bytes {
+            return None;
+        }
+        let meta = file.metadata().ok()?;
+        return (meta.is_file() && meta.len() == len).then_some(meta);
+    }
+    let meta = file.metadata().ok()?;
+    if !meta.is_file() || meta.len() != len {
+        return None;
     }
     let mut reader = io::BufReader::with_capacity(1 << 16, &file);
     let mut rest = bytes;
     loop {
         let block = reader.fill_buf().ok()?;
         if block.is_empty() {
-            return rest.is_empty().then_some(file);
+            break;
         }
         let n = block.len();
         if n > rest.len() || block != &rest[..n] {
@@ -137,6 +147,11 @@ fn holding(path: &Path, bytes: &[u8]) -> Option<fs::File> {
         rest = &rest[n..];
         reader.consume(n);
     }
+    if !rest.is_empty() {
+        return None;
+    }
+    // Statted again after the read: the identity that covers it.
+    file.metadata().ok().filter(|after| after.len() == len)
 }
 
 /// Opens one of mesa's own files (an output or a marker it wrote) to read it, refusing a link
@@ -232,15 +247,16 @@ pub fn sweep_tmp_for(path: &Path) -> io::Result<()> {
         return Ok(());
     };
     let prefix = format!(".{}{}", name.to_string_lossy(), TMP_MARK);
-    sweep_dead_tmp(dir, |file| file.strip_prefix(prefix.as_str()))
+    sweep_dead_tmp(dir, |file| file.strip_prefix(prefix.as_str())).map(drop)
 }
 
 /// [`sweep_tmp_for`] for every file of `dir` at once: removes the temporary files of dead
 /// writers, whatever file they were writing, in one listing of the folder. For a folder that
 /// takes one file a scene (a stage's markers of a table type: thousands of files), sweeping it
 /// once before the scenes costs one listing, where sweeping beside each file would list the
-/// folder once a scene.
-pub fn sweep_dead_tmp_in(dir: &Path) -> io::Result<()> {
+/// folder once a scene. Gives how many temporary files the listing found, those of running
+/// writers and those it removed alike (0 for a folder that does not exist).
+pub fn sweep_dead_tmp_in(dir: &Path) -> io::Result<usize> {
     sweep_dead_tmp(dir, |file| {
         file.strip_prefix('.')
             .and_then(|n| n.rfind(TMP_MARK).map(|at| &n[at + TMP_MARK.len()..]))
@@ -248,25 +264,28 @@ pub fn sweep_dead_tmp_in(dir: &Path) -> io::Result<()> {
 }
 
 /// Removes the files of `dir` that `owner_part` takes for temporary files (giving what follows
-/// [`TMP_MARK`] in their name, `<pid>-<n>-<host tag>`) and whose writer no longer runs.
-fn sweep_dead_tmp(dir: &Path, owner_part: impl Fn(&str) -> Option<&str>) -> io::Result<()> {
+/// [`TMP_MARK`] in their name, `<pid>-<n>-<host tag>`) and whose writer no longer runs; gives
+/// how many such files it found.
+fn sweep_dead_tmp(dir: &Path, owner_part: impl Fn(&str) -> Option<&str>) -> io::Result<usize> {
     let entries = match fs::read_dir(dir) {
         Ok(entries) => entries,
-        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(0),
         Err(e) => return Err(e),
     };
+    let mut found = 0;
     for entry in entries {
         let entry = entry?;
         let file_name = entry.file_name();
         let Some(rest) = owner_part(&file_name.to_string_lossy()).map(str::to_owned) else {
             continue;
         };
+        found += 1;
         if !writer_is_dead(&rest) {
             continue;
         }
         let _ = fs::remove_file(entry.path());
     }
-    Ok(())
+    Ok(found)
 }
 
 /// Whether the writer of a temporary file, `owner` being what follows [`TMP_MARK`] in its
@@ -448,6 +467,29 @@ pub fn read_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
     read_statted(&fs::File::open(path)?, len, limit)
 }
 
+/// [`read_bounded`] for one of mesa's own files (a marker, a remembered-digests file): opened
+/// with [`open_own_file`] and statted through the open file, so the path is walked once. A
+/// link, a FIFO, a folder or a file over the limit is an error, nothing read.
+pub fn read_own_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
+    let file = open_own_file(path)?;
+    let meta = file.metadata()?;
+    let what = if !meta.is_file() {
+        special_kind(&meta)
+    } else if meta.len() > limit.bytes {
+        "a file over the limit for it"
+    } else {
+        return read_statted(&file, meta.len(), limit);
+    };
+    Err(io::Error::new(
+        io::ErrorKind::InvalidInput,
+        format!(
+            "{what} ({}), where mesa keeps {}: remove it and run again",
+            human_bytes(meta.len()),
+            limit.what
+        ),
+    ))
+}
+
 /// The reading half of [`read_bounded`], for a caller that has statted the file itself (by
 /// path, or through the open `file`) and found a regular file of `len` bytes, at most
 /// `limit.bytes`: an error when it grew over the limit since.
@@ -603,6 +645,14 @@ mod tests {
             fs::read(&target).expect("read"),
             b"(b, is at, center)\n(b, face to, front)\n"
         );
+        // Bytes that the file starts with, but shorter: written (the read goes one byte past).
+        assert!(write_if_changed(&target, b"(b, is at, center)\n").expect("shorter"));
+        assert_eq!(fs::read(&target).expect("read"), b"(b, is at, center)\n");
+        // The metadata given back for a kept file is the file's, as statted after the read.
+        let kept = write_if_changed_kept(&target, b"(b, is at, center)\n")
+            .expect("kept")
+            .expect("the file holds the bytes");
+        assert_eq!((kept.ino(), kept.len()), (inode(&target), 19));
         // A link to a file with the bytes is replaced by a file, as write_atomic does.
         let elsewhere = dir.path().join("elsewhere.txt");
         fs::write(&elsewhere, b"linked").expect("write");
@@ -707,15 +757,20 @@ mod tests {
         for file in &kept {
             fs::write(file, b"keep").expect("write");
         }
-        sweep_dead_tmp_in(dir.path()).expect("sweep");
+        // Found: the four of dead writers, removed, and the two of writers it cannot call dead.
+        assert_eq!(sweep_dead_tmp_in(dir.path()).expect("sweep"), 6);
         for stray in strays.iter().chain([&tagged]) {
             assert!(!stray.exists(), "{} is swept", stray.display());
         }
         for file in &kept {
             assert!(file.exists(), "{} is left alone", file.display());
         }
+        assert_eq!(sweep_dead_tmp_in(dir.path()).expect("again"), 2);
         // A folder that does not exist has nothing to sweep.
-        sweep_dead_tmp_in(&dir.path().join("none")).expect("missing folder");
+        assert_eq!(
+            sweep_dead_tmp_in(&dir.path().join("none")).expect("missing folder"),
+            0
+        );
     }
 
     /// The pid of a process that has exited and been reaped.

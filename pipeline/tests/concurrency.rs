@@ -5,21 +5,11 @@
 
 mod common;
 
-use common::{all_files, gallery_dataset, mesa};
+use common::{all_files, dead_pid, gallery_dataset, mesa};
 
 use std::path::{Path, PathBuf};
 
 use serde_json::json;
-
-/// The pid of a process that has exited and been reaped.
-fn dead_pid() -> u32 {
-    let mut child = std::process::Command::new("true")
-        .spawn()
-        .expect("spawn true");
-    let pid = child.id();
-    child.wait().expect("wait");
-    pid
-}
 
 fn lock_file(dataset: &Path) -> PathBuf {
     dataset.join(".mesa/locks/graph.lock")

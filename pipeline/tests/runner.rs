@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::snapshot;
+use common::{dead_pid, snapshot};
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -247,7 +247,9 @@ fn a_forced_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digest
     );
     assert_eq!(run(dir.path(), &config, &forced).done, 1);
     let saved = std::fs::read_to_string(&remembered).expect("remembered");
-    assert_eq!(saved.lines().count(), 5, "{saved}");
+    // The header, the input, the three outputs and their folder, found clean.
+    assert_eq!(saved.lines().count(), 6, "{saved}");
+    assert!(saved.contains(&format!(" {scene}/echo/\n")), "{saved}");
     assert!(saved.contains(&format!("{truth_in} ")), "{saved}");
     assert!(saved.contains(&format!("{truth_out} ")), "{saved}");
     assert_eq!(
@@ -285,6 +287,43 @@ fn a_forced_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digest
         !now.contains(&forged_in) && !now.contains(&forged_out),
         "{now}"
     );
+
+    // An output folder remembered clean is not listed again while its identity holds: a dead
+    // writer's leftover put there, with the folder's entry forged to its identity since, stays.
+    let folder = dir.path().join(scene).join("echo");
+    let leftover = folder.join(format!(".a.txt.mesa-tmp-{}-0", dead_pid()));
+    std::fs::write(&leftover, b"a killed run's half").expect("leftover");
+    let folder_line = |path: &Path| {
+        use std::os::unix::fs::MetadataExt as _;
+        let m = std::fs::metadata(path).expect("folder");
+        format!(
+            "swept {} {} {} {}.{:09} {}.{:09} {scene}/echo/",
+            m.dev(),
+            m.ino(),
+            m.size(),
+            m.mtime(),
+            m.mtime_nsec(),
+            m.ctime(),
+            m.ctime_nsec()
+        )
+    };
+    let text = std::fs::read_to_string(&remembered).expect("remembered");
+    let old = text
+        .lines()
+        .find(|line| line.starts_with("swept "))
+        .expect("the folder is remembered")
+        .to_owned();
+    std::fs::write(&remembered, text.replace(&old, &folder_line(&folder))).expect("forge");
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    assert!(leftover.exists(), "an unchanged folder is not listed");
+
+    // Control: any entry made or removed in the folder changes its identity, and the next
+    // forced run lists it and sweeps the leftover.
+    let other = folder.join("other");
+    std::fs::write(&other, b"x").expect("other");
+    std::fs::remove_file(&other).expect("rm");
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    assert!(!leftover.exists(), "a changed folder is swept");
 }
 
 #[test]

@@ -16,7 +16,7 @@ use super::core::{
     discover_all, progress, read_marker, select_scenes, thread_pool, write_run_record, RunError,
     RunOptions, Scene, StageContext, MARKER_LIMIT, RUN_DIR,
 };
-use super::digests::RememberedDigests;
+use super::digests::{FolderLook, RememberedDigests};
 use super::scene_files;
 use crate::exit::UsageError;
 use crate::fsio::{
@@ -331,7 +331,17 @@ fn save_remembered(
     outputs: Option<&BTreeMap<String, String>>,
 ) {
     remembered.retain(|rel| {
-        inputs.contains_key(rel) || outputs.is_some_and(|outputs| outputs.contains_key(rel))
+        inputs.contains_key(rel)
+            || outputs.is_some_and(|outputs| {
+                outputs.contains_key(rel)
+                    // An output folder's entry (`look_at_folder`): a folder an output is in.
+                    || rel.ends_with('/')
+                        && outputs.keys().any(|output| {
+                            output
+                                .strip_prefix(rel)
+                                .is_some_and(|name| !name.contains('/'))
+                        })
+            })
     });
     // Only a shortcut (see `digests`): a file not written means hashing again next time.
     let _ = remembered.save();
@@ -566,21 +576,39 @@ fn write_outputs(
     let now = SystemTime::now();
     let mut written = BTreeMap::new();
     // Dead writers' temporary files are swept once per output folder (one listing), not once
-    // per file.
-    let mut swept = std::collections::BTreeSet::new();
+    // per file; on a forced rerun, not at all from a folder that has not changed since it was
+    // last found clean ([`RememberedDigests::look_at_folder`]). Each folder's look, and
+    // whether it is still clean (nothing found by the sweep, nothing written in it since).
+    let mut folders: BTreeMap<PathBuf, (FolderLook, bool)> = BTreeMap::new();
     for (rel, bytes) in &output.files {
         check_output_path(rel)?;
         let path = scene.path(rel);
-        if let Some(dir) = path.parent() {
-            if swept.insert(dir.to_owned()) {
-                sweep_dead_tmp_in(dir).with_context(|| format!("{}: sweeping", dir.display()))?;
-            }
+        let dir = path.parent().unwrap_or(&path).to_owned();
+        let rel = scene.rel(rel);
+        if !folders.contains_key(&dir) {
+            let folder_rel = match rel.rfind('/') {
+                Some(at) => rel[..=at].to_owned(),
+                None => String::new(),
+            };
+            let look = remembered.look_at_folder(&dir, folder_rel);
+            let clean = look.unchanged
+                || sweep_dead_tmp_in(&dir)
+                    .with_context(|| format!("{}: sweeping", dir.display()))?
+                    == 0;
+            folders.insert(dir.clone(), (look, clean));
         }
         let kept = write_if_changed_kept(&path, bytes)
             .with_context(|| format!("{}: cannot write", path.display()))?;
-        let rel = scene.rel(rel);
+        if kept.is_none() {
+            if let Some((_, clean)) = folders.get_mut(&dir) {
+                *clean = false;
+            }
+        }
         let digest = remembered.output_digest(&rel, bytes, kept, now);
         written.insert(rel, digest);
+    }
+    for (look, clean) in folders.into_values() {
+        remembered.note_folder(look, clean, now);
     }
     // Outputs of an earlier run that this run no longer writes would be stale: removed, and
     // each named in a warning (a later stage may have read it).

@@ -16,6 +16,17 @@ use std::time::Duration;
 use assert_cmd::Command;
 use serde_json::{json, Value};
 
+/// The pid of a process that has exited and been reaped (the writer of a leftover that a run
+/// may sweep).
+pub fn dead_pid() -> u32 {
+    let mut child = std::process::Command::new("true")
+        .spawn()
+        .expect("spawn true");
+    let pid = child.id();
+    child.wait().expect("wait");
+    pid
+}
+
 /// The `mesa` binary under test.
 pub fn mesa() -> Command {
     Command::cargo_bin("mesa").expect("the mesa binary")
