@@ -468,7 +468,19 @@ mod tests {
             ("source_instance", "1"),
             ("notes", "[]"),
         ];
-        match rng.below(8) {
+        match rng.below(11) {
+            8 => number_spelled_oddly(rng, text),
+            9 => {
+                // A string value with an escape, a raw control character or a bad escape.
+                let odd = ["\\u00e9t\\u00e9", "\\n", "\u{1}", "\\x", "\\ud800", "\\/"];
+                let odd = odd[rng.below(odd.len())];
+                text.replacen(": \"", &format!(": \"{odd}"), 1).replacen(
+                    ":\"",
+                    &format!(":\"{odd}"),
+                    1,
+                )
+            }
+            10 => text.replacen("null", ["nul", "nulll", "Null"][rng.below(3)], 1),
             0 | 1 => {
                 // Among the keys the text has.
                 let present: Vec<&(&str, &str)> = TWICE
@@ -488,6 +500,54 @@ mod tests {
             6 => format!("{text}\n  "),
             _ => text.replacen("1", "Infinity", 1),
         }
+    }
+
+    /// One number of the text spelled another way: each form JSON allows for a value, the
+    /// limits of f64, and forms JSON refuses.
+    fn number_spelled_oddly(rng: &mut Rng, text: &str) -> String {
+        const SPELLINGS: [&str; 24] = [
+            "1E2",
+            "1e+2",
+            "25e-1",
+            "-0",
+            "-0.0",
+            "0e999999999999999999",
+            "1e-400",
+            "1e400",
+            "01",
+            "1.",
+            ".5",
+            "+1",
+            "-",
+            "1e",
+            "12345678901234567890123",
+            "9007199254740993",
+            "-9223372036854775809",
+            "0.30000000000000004",
+            "2.2250738585072011e-308",
+            "4.9e-324",
+            "1.7976931348623157e308",
+            "1.7976931348623159e308",
+            "7.0000000000000000000000000000000000000000000001",
+            "3",
+        ];
+        let bytes = text.as_bytes();
+        let starts: Vec<usize> = (1..bytes.len())
+            .filter(|&i| {
+                (bytes[i].is_ascii_digit() || bytes[i] == b'-')
+                    && matches!(bytes[i - 1], b' ' | b'[' | b',' | b':' | b'\n')
+            })
+            .collect();
+        let Some(&start) = starts.get(rng.below(starts.len().max(1))) else {
+            return text.to_owned();
+        };
+        let end = start
+            + bytes[start..]
+                .iter()
+                .position(|b| !b"0123456789.eE+-".contains(b))
+                .unwrap_or(bytes.len() - start);
+        let spelling = SPELLINGS[rng.below(SPELLINGS.len())];
+        format!("{}{spelling}{}", &text[..start], &text[end..])
     }
 
     fn canonical(read: &Result<ReadLayout, Vec<crate::Problem>>) -> String {
