@@ -324,6 +324,19 @@ fn a_forced_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digest
     std::fs::remove_file(&other).expect("rm");
     assert_eq!(run(dir.path(), &config, &forced).done, 1);
     assert!(!leftover.exists(), "a changed folder is swept");
+
+    // A folder left unlisted stays remembered while nothing is written in it, and is forgotten
+    // once this run writes in it (an input edited, so the outputs change): the write outdated
+    // the identity remembered.
+    let forged = format!("mesa.digests/1\n{}\n", folder_line(&folder));
+    std::fs::write(&remembered, &forged).expect("forge");
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    let kept = std::fs::read_to_string(&remembered).expect("remembered");
+    assert!(kept.contains(&folder_line(&folder)), "{kept}");
+    std::fs::write(dir.path().join(&input), "edited\n").expect("edit");
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    let now = std::fs::read_to_string(&remembered).unwrap_or_default();
+    assert!(!now.contains("swept "), "{now}");
 }
 
 #[test]

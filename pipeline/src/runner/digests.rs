@@ -360,12 +360,13 @@ impl RememberedDigests {
     }
 
     /// What the runner did with a folder it looked at ([`Self::look_at_folder`]): `clean` when
-    /// its listing found no temporary file (of a dead writer or a running one) and nothing was
-    /// written in it since. A clean folder is remembered with the identity it had before the
-    /// listing, if that had settled as of `now` (a time taken before the `stat`); any other is
-    /// forgotten. A folder left unlisted stays remembered.
+    /// its listing found no temporary file (of a dead writer or a running one), or it was left
+    /// unlisted, and nothing was written in it since. A folder left unlisted and clean stays
+    /// remembered; one listed clean is remembered with the identity it had before the listing,
+    /// if that had settled as of `now` (a time taken before the `stat`); any other is forgotten
+    /// (a write renamed an entry into it: the identity remembered can no longer match).
     pub fn note_folder(&mut self, look: FolderLook, clean: bool, now: SystemTime) {
-        if look.unchanged || look.identity.is_none() && self.entries.is_none() {
+        if look.identity.is_none() && self.entries.is_none() || look.unchanged && clean {
             return;
         }
         self.note(&look.rel, look.identity.filter(|_| clean), SWEPT, now);
