@@ -5,9 +5,34 @@
 //! **Why.** Every stage after `place` reads a layout per scene, and the general reader spent
 //! 41 µs on a 10 KB demo layout: most of it building a `Value` (a map and a string per key,
 //! 30 µs alone) and walking the schema with JSON paths (13 µs alone), then 2.6 µs converting to
-//! the type. Read straight into the type, the same layout takes 16 µs (criterion,
-//! `schemas/benches/layout.rs`: 22 against 58.5 µs on a 12.6 KB layout). The graph stage,
-//! whose own work is 5 µs a scene, spent a quarter of its time here.
+//! the type. Read straight into the type through serde's visitors, the same layout took 16 µs
+//! (criterion, `schemas/benches/layout.rs`: 22 against 58.5 µs on a 12.6 KB layout).
+//!
+//! **Why by hand, not through serde_json.** A 16.7 KB layout of the 1,000-scene demo (13
+//! objects, 250 numbers, pretty-printed) still took 37 µs through serde_json's visitors, a
+//! third of `mesa graph --force`'s time a scene; most of it went to the numbers (serde_json's
+//! exact `float_roundtrip` parser, after its byte-by-byte scan) and to its token machinery, and
+//! serde_json hands out no number's text to parse it another way. This reader is a scanner
+//! of the one shape it takes:
+//! - runs of spaces are passed eight bytes at a time (a pretty layout is a third indentation);
+//! - a string is scanned eight bytes at a time, the first quote, backslash or control byte
+//!   found from the word's bits; one with an escape is decoded by serde_json itself;
+//! - a number's digits are checked and gathered in one pass, eight at a time where they can
+//!   be, and converted exactly (below).
+//!
+//! On that layout it takes 31 µs against serde's 37 µs (the same binary, 20,000 reads, best of
+//! five, the system allocator); `docs/performance.md` has what it did to `mesa graph`.
+//!
+//! **Numbers are the bits serde_json gives.** serde_json (built with `float_roundtrip`, as mesa
+//! builds it) rounds every decimal correctly, and so does every whole number it reads as an
+//! integer and converts. Here a number of at most 19 digits whose value is at most 2^53 and
+//! whose power of ten is at most 22 either way is one exact multiplication or division of two
+//! exact f64s, which IEEE arithmetic rounds correctly (Clinger's fast path, the first step of
+//! every exact parser); any other goes to Rust's own `f64` parser, which rounds every input
+//! correctly. `tests::numbers_read_as_serde_json_reads_them` compares the bits with serde_json's
+//! on 80,000 spellings (random doubles over the whole range, shortest and cut short, plain and
+//! with exponents, the edges of both paths), and fails if the fast path's division is made an
+//! inexact multiplication or its bound raised to 2^54.
 //!
 //! **It only ever accepts what the general reader accepts, with the same result.** It declines
 //! (returns `None`, and the general reader runs and reports every problem with its JSON path)
@@ -23,14 +48,12 @@
 //!   ([`DatasetLayout::problems`]) refuse;
 //! - trailing text after the document.
 //!
-//! What remains is a document that the schema accepts, with no key for `extra`; serde_json
-//! reads its numbers and strings through the same code whether into a `Value` or into the
-//! type, so the values are the same bits. `tests::accepts_only_what_the_general_reader_accepts`
-//! checks it on thousands of generated and mutated layouts.
-
-use std::fmt;
-
-use serde::de::{self, DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
+//! What remains is a document that the schema accepts, with no key for `extra`; its numbers
+//! are serde_json's bits (above) and its strings serde_json's (copied as they are when they hold
+//! no escape, which is what serde_json does with them, decoded by serde_json when they do).
+//! `tests::accepts_only_what_the_general_reader_accepts` checks it against the general reader
+//! on thousands of generated and mutated layouts (numbers spelled every way JSON allows and
+//! some it refuses, strings with escapes and control characters among the mutations).
 
 use crate::json::NONFINITE_PREFIX;
 use crate::layout::{DatasetLayout, LayoutObject, Provenance, LAYOUT_SCHEMA};
@@ -39,10 +62,566 @@ use crate::units::{PositionCm, QuatXyzw, ScaleFactor, SizeCm, ZoneCm};
 /// `text` read as a dataset layout when it has the plain shape (module docs) and is valid;
 /// `None` when the general reader must decide.
 pub fn read_plain_dataset_layout(text: &str) -> Option<DatasetLayout> {
-    let mut deserializer = serde_json::Deserializer::from_str(text);
-    let layout = deserializer.deserialize_map(LayoutVisitor).ok()?;
-    deserializer.end().ok()?;
+    let mut scan = Scan {
+        bytes: text.as_bytes(),
+        text,
+        at: 0,
+    };
+    let layout = scan.layout()?;
+    scan.skip_space();
+    if scan.at != scan.bytes.len() {
+        return None;
+    }
     (within_schema_bounds(&layout) && layout.problems().is_empty()).then_some(layout)
+}
+
+/// A reading position in the text. Every method returns `None` to decline (module docs).
+struct Scan<'a> {
+    bytes: &'a [u8],
+    text: &'a str,
+    at: usize,
+}
+
+impl<'a> Scan<'a> {
+    /// Skips JSON's whitespace (space, tab, line feed, carriage return), as serde_json does.
+    /// A pretty-printed layout is a third indentation: runs of spaces are passed eight bytes
+    /// at a time.
+    #[inline]
+    fn skip_space(&mut self) {
+        let bytes = self.bytes;
+        let mut i = self.at;
+        if !bytes.get(i).is_some_and(|&b| is_space(b)) {
+            return;
+        }
+        loop {
+            if let Some(word) = word_at(bytes, i) {
+                let other = word ^ ONES.wrapping_mul(u64::from(b' '));
+                if other == 0 {
+                    i += 8;
+                    continue;
+                }
+                // The spaces before the first other byte, then that byte if it is whitespace.
+                i += (other.trailing_zeros() / 8) as usize;
+            } else {
+                while bytes.get(i) == Some(&b' ') {
+                    i += 1;
+                }
+            }
+            if !bytes.get(i).is_some_and(|&b| is_space(b)) {
+                break;
+            }
+            i += 1;
+        }
+        self.at = i;
+    }
+
+    /// The next byte after whitespace, not taken.
+    #[inline]
+    fn peek(&mut self) -> Option<u8> {
+        self.skip_space();
+        self.bytes.get(self.at).copied()
+    }
+
+    /// Takes `byte`, after whitespace.
+    #[inline]
+    fn expect(&mut self, byte: u8) -> Option<()> {
+        (self.peek()? == byte).then(|| self.at += 1)
+    }
+
+    /// Takes the literal `null` if it comes next.
+    fn null(&mut self) -> Option<bool> {
+        if self.peek()? != b'n' {
+            return Some(false);
+        }
+        self.bytes[self.at..]
+            .starts_with(b"null")
+            .then(|| self.at += 4)
+            .map(|()| true)
+    }
+
+    /// The members of an object, each key handed to `member`, which reads its value. A key
+    /// with an escape declines, as the serde reader's borrowed keys did.
+    fn object(&mut self, mut member: impl FnMut(&mut Self, &'a str) -> Option<()>) -> Option<()> {
+        self.expect(b'{')?;
+        if self.peek()? == b'}' {
+            self.at += 1;
+            return Some(());
+        }
+        loop {
+            self.skip_space();
+            let key = self.plain_string()?;
+            self.expect(b':')?;
+            member(self, key)?;
+            match self.peek()? {
+                b',' => self.at += 1,
+                b'}' => {
+                    self.at += 1;
+                    return Some(());
+                }
+                _ => return None,
+            }
+        }
+    }
+
+    /// The items of an array, each read by `item`.
+    fn array(&mut self, mut item: impl FnMut(&mut Self) -> Option<()>) -> Option<()> {
+        self.expect(b'[')?;
+        if self.peek()? == b']' {
+            self.at += 1;
+            return Some(());
+        }
+        loop {
+            item(self)?;
+            match self.peek()? {
+                b',' => self.at += 1,
+                b']' => {
+                    self.at += 1;
+                    return Some(());
+                }
+                _ => return None,
+            }
+        }
+    }
+
+    /// Where the string starting at the quote `self.at` ends (its closing quote), passing
+    /// escapes, and whether it has any; `None` for a control character (serde_json refuses
+    /// it) or a string that does not end. Eight bytes at a time: the first byte that is a
+    /// quote, a backslash or below 0x20 is found from the word's bits.
+    #[inline]
+    fn string_end(&self) -> Option<(usize, bool)> {
+        let bytes = self.bytes;
+        let mut i = self.at + 1;
+        let mut escaped = false;
+        loop {
+            let special = match word_at(bytes, i) {
+                Some(word) => {
+                    let found = zero_byte(word ^ ONES.wrapping_mul(u64::from(b'"')))
+                        | zero_byte(word ^ ONES.wrapping_mul(u64::from(b'\\')))
+                        | below_0x20(word);
+                    if found == 0 {
+                        i += 8;
+                        continue;
+                    }
+                    // The lowest flagged byte is a true one (a borrow only runs upwards).
+                    i + (found.trailing_zeros() / 8) as usize
+                }
+                None => {
+                    let rest = bytes.get(i..)?;
+                    i + rest
+                        .iter()
+                        .position(|&b| b == b'"' || b == b'\\' || b < 0x20)?
+                }
+            };
+            match bytes[special] {
+                b'"' => return Some((special, escaped)),
+                b'\\' => {
+                    escaped = true;
+                    i = special + 2;
+                }
+                _ => return None,
+            }
+        }
+    }
+
+    /// A string without escapes, borrowed from the text (after whitespace taken by the
+    /// caller); one with an escape declines.
+    fn plain_string(&mut self) -> Option<&'a str> {
+        if self.bytes.get(self.at) != Some(&b'"') {
+            return None;
+        }
+        let (end, escaped) = self.string_end()?;
+        if escaped {
+            return None;
+        }
+        let start = self.at + 1;
+        self.at = end + 1;
+        // Both ends are ASCII quotes, so the slice falls on character boundaries.
+        Some(&self.text[start..end])
+    }
+
+    /// A string value, owned: one without escapes copied, one with escapes decoded by
+    /// serde_json itself (the same result as the serde reader's, by the same code).
+    fn string(&mut self) -> Option<String> {
+        self.skip_space();
+        if self.bytes.get(self.at) != Some(&b'"') {
+            return None;
+        }
+        let start = self.at;
+        let (end, escaped) = self.string_end()?;
+        self.at = end + 1;
+        if escaped {
+            serde_json::from_str(&self.text[start..=end]).ok()
+        } else {
+            Some(self.text[start + 1..end].to_owned())
+        }
+    }
+
+    /// `null`, or a string.
+    fn optional_string(&mut self) -> Option<Option<String>> {
+        if self.null()? {
+            return Some(None);
+        }
+        self.string().map(Some)
+    }
+
+    /// A number as JSON spells it (`-`, digits without a leading zero, an optional fraction
+    /// and exponent), as an f64 rounded correctly, as serde_json (with `float_roundtrip`)
+    /// rounds it; whole numbers too, which serde_json reads as integers and converts, which
+    /// rounds correctly as well.
+    ///
+    /// The digits are gathered as they are checked. With at most 19 of them, a value of at
+    /// most 2^53 and a power of ten of at most 22 either way, both are exact f64s and one
+    /// multiplication or division rounds correctly (Clinger's fast path, the one every exact
+    /// parser takes first); any other number goes to Rust's own parser, which rounds every
+    /// input correctly. What serde_json refuses or handles apart declines: a number out of
+    /// range, and one so small that it rounds to zero although it has a digit other than
+    /// zero.
+    fn number(&mut self) -> Option<f64> {
+        self.skip_space();
+        let bytes = self.bytes;
+        let start = self.at;
+        let mut i = start;
+        let negative = bytes.get(i) == Some(&b'-');
+        if negative {
+            i += 1;
+        }
+        let mut digits = Digits::default();
+        match bytes.get(i)? {
+            b'0' => {
+                i += 1;
+                digits.count += 1;
+            }
+            b'1'..=b'9' => {
+                digits.take(bytes, &mut i);
+            }
+            _ => return None,
+        }
+        let mut exponent = 0i64;
+        if bytes.get(i) == Some(&b'.') {
+            i += 1;
+            let fraction = digits.take(bytes, &mut i);
+            if fraction == 0 {
+                return None;
+            }
+            exponent -= i64::from(fraction);
+        }
+        if matches!(bytes.get(i), Some(b'e' | b'E')) {
+            i += 1;
+            let sign = match bytes.get(i) {
+                Some(b'-') => {
+                    i += 1;
+                    -1
+                }
+                Some(b'+') => {
+                    i += 1;
+                    1
+                }
+                _ => 1,
+            };
+            let from = i;
+            let mut value = 0i64;
+            while let Some(&b) = bytes.get(i) {
+                let d = b.wrapping_sub(b'0');
+                if d > 9 {
+                    break;
+                }
+                value = (value * 10 + i64::from(d)).min(1 << 40);
+                i += 1;
+            }
+            if i == from {
+                return None;
+            }
+            exponent += sign * value;
+        }
+        self.at = i;
+        let Digits {
+            mantissa,
+            count,
+            nonzero,
+        } = digits;
+        if count <= 19 && mantissa <= 1 << 53 && (-22..=22).contains(&exponent) {
+            let power = POWERS_OF_TEN[exponent.unsigned_abs() as usize];
+            let magnitude = if exponent < 0 {
+                mantissa as f64 / power
+            } else {
+                mantissa as f64 * power
+            };
+            return Some(if negative { -magnitude } else { magnitude });
+        }
+        let x: f64 = self.text[start..i].parse().ok()?;
+        (x.is_finite() && (x != 0.0 || !nonzero)).then_some(x)
+    }
+
+    /// `null`, or a number.
+    fn optional_number(&mut self) -> Option<Option<f64>> {
+        if self.null()? {
+            return Some(None);
+        }
+        self.number().map(Some)
+    }
+
+    /// An array of exactly `N` numbers.
+    fn numbers<const N: usize>(&mut self) -> Option<[f64; N]> {
+        let mut out = [0.0; N];
+        let mut n = 0;
+        self.array(|scan| {
+            let slot = out.get_mut(n)?;
+            *slot = scan.number()?;
+            n += 1;
+            Some(())
+        })?;
+        (n == N).then_some(out)
+    }
+
+    /// A whole number that fits a u32, written with digits only (serde_json refuses `2.0`,
+    /// `2e0` and a minus sign for an integer; a leading zero is no JSON).
+    fn u32(&mut self) -> Option<u32> {
+        self.skip_space();
+        let bytes = self.bytes;
+        let start = self.at;
+        let end = start
+            + bytes[start..]
+                .iter()
+                .position(|b| !b.is_ascii_digit())
+                .unwrap_or(bytes.len() - start);
+        let text = &self.text[start..end];
+        if text.is_empty()
+            || text.len() > 1 && text.starts_with('0')
+            || matches!(bytes.get(end), Some(b'.' | b'e' | b'E'))
+        {
+            return None;
+        }
+        self.at = end;
+        text.parse().ok()
+    }
+
+    fn layout(&mut self) -> Option<DatasetLayout> {
+        let mut schema = None;
+        let mut zone = None;
+        let mut restricted = None;
+        let mut objects = None;
+        self.object(|scan, key| match key {
+            "schema" => {
+                let value = scan.string()?;
+                if value != LAYOUT_SCHEMA {
+                    return None;
+                }
+                once(&mut schema, value)
+            }
+            "item_placement_zone" => once(&mut zone, ZoneCm(scan.numbers()?)),
+            "restricted_zone" => {
+                let value = if scan.null()? {
+                    None
+                } else {
+                    Some(ZoneCm(scan.numbers()?))
+                };
+                once(&mut restricted, value)
+            }
+            "objects" => {
+                let mut list = Vec::with_capacity(16);
+                scan.array(|scan| {
+                    list.push(scan.object_entry()?);
+                    Some(())
+                })?;
+                once(&mut objects, list)
+            }
+            _ => None,
+        })?;
+        Some(DatasetLayout {
+            schema: schema.unwrap_or_else(|| LAYOUT_SCHEMA.to_owned()),
+            zone_cm: zone?,
+            restricted_zone_cm: restricted.flatten(),
+            objects: objects?,
+            extra: Default::default(),
+        })
+    }
+
+    fn object_entry(&mut self) -> Option<LayoutObject> {
+        let mut instance = None;
+        let mut retrieved_uid = None;
+        let mut position = None;
+        let mut rotation = None;
+        let mut size = None;
+        let mut scale_factor = None;
+        let mut category = None;
+        let mut description = None;
+        let mut z_rotation = None;
+        let mut provenance = None;
+        self.object(|scan, key| match key {
+            "instance" => once(&mut instance, scan.string()?),
+            "retrieved_uid" => once(&mut retrieved_uid, scan.string()?),
+            "position" => once(&mut position, PositionCm(scan.numbers()?)),
+            "rotation" => once(&mut rotation, QuatXyzw(scan.numbers()?)),
+            "size" => once(&mut size, SizeCm(scan.numbers()?)),
+            "scale_factor" => once(&mut scale_factor, ScaleFactor(scan.numbers()?)),
+            "category" => once(&mut category, scan.optional_string()?),
+            "description" => once(&mut description, scan.optional_string()?),
+            "z_rotation" => once(&mut z_rotation, scan.optional_number()?),
+            "provenance" => {
+                let value = if scan.null()? {
+                    None
+                } else {
+                    Some(scan.provenance()?)
+                };
+                once(&mut provenance, value)
+            }
+            _ => None,
+        })?;
+        Some(LayoutObject {
+            instance: instance?,
+            retrieved_uid: retrieved_uid?,
+            position_cm: position?,
+            rotation: rotation?,
+            size_cm: size?,
+            scale_factor: scale_factor?,
+            category: category.flatten(),
+            description: description.flatten(),
+            z_rotation_deg: z_rotation.flatten(),
+            provenance: provenance.flatten(),
+            extra: Default::default(),
+        })
+    }
+
+    /// A provenance object (not `null`: the caller took that).
+    fn provenance(&mut self) -> Option<Provenance> {
+        let mut stage = None;
+        let mut source_instance = None;
+        let mut notes = None;
+        self.object(|scan, key| match key {
+            "stage" => once(&mut stage, scan.string()?),
+            "source_instance" => {
+                let value = if scan.null()? {
+                    None
+                } else {
+                    Some(scan.u32()?)
+                };
+                once(&mut source_instance, value)
+            }
+            "notes" => {
+                let mut list = Vec::new();
+                scan.array(|scan| {
+                    list.push(scan.string()?);
+                    Some(())
+                })?;
+                once(&mut notes, list)
+            }
+            _ => None,
+        })?;
+        Some(Provenance {
+            stage: stage?,
+            source_instance: source_instance.flatten(),
+            notes: notes.unwrap_or_default(),
+        })
+    }
+}
+
+/// The digits of a number's mantissa, gathered as they are read: the first 19 as a whole
+/// number (more would overflow it), how many there are, and whether any is not zero.
+#[derive(Default)]
+struct Digits {
+    mantissa: u64,
+    count: u32,
+    nonzero: bool,
+}
+
+impl Digits {
+    /// Takes the digits at `i` in `bytes`, moving `i` past them; gives how many there were.
+    #[inline]
+    fn take(&mut self, bytes: &[u8], i: &mut usize) -> u32 {
+        let from = *i;
+        // Eight digits at a time while they fit the 19 gathered.
+        while self.count + 8 <= 19 {
+            let Some(word) = word_at(bytes, *i).filter(|&w| eight_digits(w)) else {
+                break;
+            };
+            let value = eight_digits_value(word);
+            self.mantissa = self.mantissa * 100_000_000 + value;
+            self.count += 8;
+            self.nonzero |= value != 0;
+            *i += 8;
+        }
+        while let Some(&b) = bytes.get(*i) {
+            let d = b.wrapping_sub(b'0');
+            if d > 9 {
+                break;
+            }
+            if self.count < 19 {
+                self.mantissa = self.mantissa * 10 + u64::from(d);
+            }
+            self.count += 1;
+            self.nonzero |= d != 0;
+            *i += 1;
+        }
+        (*i - from) as u32
+    }
+}
+
+/// A byte with every bit set in each of eight lanes.
+const ONES: u64 = u64::from_le_bytes([1; 8]);
+
+/// The exact powers of ten an f64 holds, 10^0 to 10^22 (Clinger's fast path).
+const POWERS_OF_TEN: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+/// JSON's whitespace.
+#[inline]
+fn is_space(b: u8) -> bool {
+    matches!(b, b' ' | b'\n' | b'\r' | b'\t')
+}
+
+/// The eight bytes at `i` as a little-endian word, when there are eight.
+#[inline]
+fn word_at(bytes: &[u8], i: usize) -> Option<u64> {
+    let chunk: [u8; 8] = bytes.get(i..i + 8)?.try_into().ok()?;
+    Some(u64::from_le_bytes(chunk))
+}
+
+/// Whether the eight bytes of `word` are all ASCII digits.
+#[inline]
+fn eight_digits(word: u64) -> bool {
+    let high = ONES.wrapping_mul(0xF0);
+    let digits = ONES.wrapping_mul(0x30);
+    word & high == digits && word.wrapping_add(ONES.wrapping_mul(0x06)) & high == digits
+}
+
+/// The value of eight ASCII digits (the first byte the most significant), in three
+/// multiplications: pairs, then fours, then the eight (as `fast_float` does).
+#[inline]
+fn eight_digits_value(word: u64) -> u64 {
+    let mut v = word.wrapping_sub(ONES.wrapping_mul(0x30));
+    v = v.wrapping_mul(10).wrapping_add(v >> 8);
+    let mask = 0x0000_00FF_0000_00FF;
+    let by_hundred = 100 + (1_000_000 << 32);
+    let by_one = 1 + (10_000 << 32);
+    ((v & mask)
+        .wrapping_mul(by_hundred)
+        .wrapping_add(((v >> 16) & mask).wrapping_mul(by_one))
+        >> 32)
+        & 0xFFFF_FFFF
+}
+
+/// The high bit of each byte of `word` that is zero (and maybe of bytes above the first such
+/// one: the lowest flagged byte is always a true one).
+#[inline]
+fn zero_byte(word: u64) -> u64 {
+    word.wrapping_sub(ONES) & !word & ONES.wrapping_mul(0x80)
+}
+
+/// The high bit of each byte of `word` below 0x20 (the lowest flagged byte is a true one).
+#[inline]
+fn below_0x20(word: u64) -> u64 {
+    word.wrapping_sub(ONES.wrapping_mul(0x20)) & !word & ONES.wrapping_mul(0x80)
+}
+
+/// Sets a field read once; a second time declines (a key written twice).
+fn once<T>(slot: &mut Option<T>, value: T) -> Option<()> {
+    if slot.is_some() {
+        return None;
+    }
+    *slot = Some(value);
+    Some(())
 }
 
 /// The bounds of the JSON Schema that the type does not carry: sizes and scale factors above 0,
@@ -63,206 +642,6 @@ fn within_schema_bounds(layout: &DatasetLayout) -> bool {
             && !o.description.as_deref().is_some_and(marked)
             && !provenance_marked
     })
-}
-
-/// Declines the plain reading (the message is never shown).
-fn decline<E: de::Error>() -> E {
-    E::custom("not a plain layout")
-}
-
-/// Sets a field read once; a second time declines (a key written twice).
-fn once<T, E: de::Error>(slot: &mut Option<T>, value: T) -> Result<(), E> {
-    if slot.is_some() {
-        return Err(decline());
-    }
-    *slot = Some(value);
-    Ok(())
-}
-
-struct LayoutVisitor;
-
-impl<'de> Visitor<'de> for LayoutVisitor {
-    type Value = DatasetLayout;
-
-    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-        f.write_str("a dataset layout")
-    }
-
-    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<DatasetLayout, A::Error> {
-        let mut schema = None;
-        let mut zone = None;
-        let mut restricted = None;
-        let mut objects = None;
-        // A key with an escape cannot be borrowed, and fails here: declined.
-        while let Some(key) = map.next_key::<&str>()? {
-            match key {
-                "schema" => {
-                    let value: String = map.next_value()?;
-                    if value != LAYOUT_SCHEMA {
-                        return Err(decline());
-                    }
-                    once(&mut schema, value)?;
-                }
-                "item_placement_zone" => once(&mut zone, map.next_value::<ZoneCm>()?)?,
-                "restricted_zone" => {
-                    once(&mut restricted, map.next_value::<Option<ZoneCm>>()?)?;
-                }
-                "objects" => once(&mut objects, map.next_value_seed(ObjectsSeed)?)?,
-                _ => return Err(decline()),
-            }
-        }
-        Ok(DatasetLayout {
-            schema: schema.unwrap_or_else(|| LAYOUT_SCHEMA.to_owned()),
-            zone_cm: zone.ok_or_else(decline)?,
-            restricted_zone_cm: restricted.flatten(),
-            objects: objects.ok_or_else(decline)?,
-            extra: Default::default(),
-        })
-    }
-}
-
-struct ObjectsSeed;
-
-impl<'de> DeserializeSeed<'de> for ObjectsSeed {
-    type Value = Vec<LayoutObject>;
-
-    fn deserialize<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
-        deserializer.deserialize_seq(self)
-    }
-}
-
-impl<'de> Visitor<'de> for ObjectsSeed {
-    type Value = Vec<LayoutObject>;
-
-    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-        f.write_str("a list of layout objects")
-    }
-
-    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
-        let mut objects = Vec::with_capacity(seq.size_hint().unwrap_or(16).min(256));
-        while let Some(object) = seq.next_element_seed(ObjectSeed)? {
-            objects.push(object);
-        }
-        Ok(objects)
-    }
-}
-
-struct ObjectSeed;
-
-impl<'de> DeserializeSeed<'de> for ObjectSeed {
-    type Value = LayoutObject;
-
-    fn deserialize<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
-        deserializer.deserialize_map(self)
-    }
-}
-
-impl<'de> Visitor<'de> for ObjectSeed {
-    type Value = LayoutObject;
-
-    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-        f.write_str("a layout object")
-    }
-
-    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<LayoutObject, A::Error> {
-        let mut instance = None;
-        let mut retrieved_uid = None;
-        let mut position = None;
-        let mut rotation = None;
-        let mut size = None;
-        let mut scale_factor = None;
-        let mut category = None;
-        let mut description = None;
-        let mut z_rotation = None;
-        let mut provenance = None;
-        while let Some(key) = map.next_key::<&str>()? {
-            match key {
-                "instance" => once(&mut instance, map.next_value::<String>()?)?,
-                "retrieved_uid" => once(&mut retrieved_uid, map.next_value::<String>()?)?,
-                "position" => once(&mut position, map.next_value::<PositionCm>()?)?,
-                "rotation" => once(&mut rotation, map.next_value::<QuatXyzw>()?)?,
-                "size" => once(&mut size, map.next_value::<SizeCm>()?)?,
-                "scale_factor" => once(&mut scale_factor, map.next_value::<ScaleFactor>()?)?,
-                "category" => once(&mut category, map.next_value::<Option<String>>()?)?,
-                "description" => once(&mut description, map.next_value::<Option<String>>()?)?,
-                "z_rotation" => once(&mut z_rotation, map.next_value::<Option<f64>>()?)?,
-                "provenance" => once(&mut provenance, map.next_value_seed(ProvenanceSeed)?)?,
-                _ => return Err(decline()),
-            }
-        }
-        Ok(LayoutObject {
-            instance: instance.ok_or_else(decline)?,
-            retrieved_uid: retrieved_uid.ok_or_else(decline)?,
-            position_cm: position.ok_or_else(decline)?,
-            rotation: rotation.ok_or_else(decline)?,
-            size_cm: size.ok_or_else(decline)?,
-            scale_factor: scale_factor.ok_or_else(decline)?,
-            category: category.flatten(),
-            description: description.flatten(),
-            z_rotation_deg: z_rotation.flatten(),
-            provenance: provenance.flatten(),
-            extra: Default::default(),
-        })
-    }
-}
-
-/// A provenance object, or `null`. Read as a map only: serde's derived reader would also take
-/// an array for a struct, which the schema refuses.
-struct ProvenanceSeed;
-
-impl<'de> DeserializeSeed<'de> for ProvenanceSeed {
-    type Value = Option<Provenance>;
-
-    fn deserialize<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
-        deserializer.deserialize_option(self)
-    }
-}
-
-impl<'de> Visitor<'de> for ProvenanceSeed {
-    type Value = Option<Provenance>;
-
-    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-        f.write_str("a provenance object or null")
-    }
-
-    fn visit_none<E: de::Error>(self) -> Result<Self::Value, E> {
-        Ok(None)
-    }
-
-    fn visit_some<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
-        deserializer.deserialize_map(ProvenanceVisitor).map(Some)
-    }
-}
-
-struct ProvenanceVisitor;
-
-impl<'de> Visitor<'de> for ProvenanceVisitor {
-    type Value = Provenance;
-
-    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-        f.write_str("a provenance object")
-    }
-
-    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Provenance, A::Error> {
-        let mut stage = None;
-        let mut source_instance = None;
-        let mut notes = None;
-        while let Some(key) = map.next_key::<&str>()? {
-            match key {
-                "stage" => once(&mut stage, map.next_value::<String>()?)?,
-                "source_instance" => {
-                    once(&mut source_instance, map.next_value::<Option<u32>>()?)?;
-                }
-                "notes" => once(&mut notes, map.next_value::<Vec<String>>()?)?,
-                _ => return Err(decline()),
-            }
-        }
-        Ok(Provenance {
-            stage: stage.ok_or_else(decline)?,
-            source_instance: source_instance.flatten(),
-            notes: notes.unwrap_or_default(),
-        })
-    }
 }
 
 #[cfg(test)]
@@ -594,6 +973,107 @@ mod tests {
             }
             prop_assert_eq!(canonical(&read_layout_text(&text)), canonical(&general));
         }
+    }
+
+    /// One number read by the scanner alone: its value, and where it stopped.
+    fn scanned(text: &str) -> Option<(f64, usize)> {
+        let mut scan = Scan {
+            bytes: text.as_bytes(),
+            text,
+            at: 0,
+        };
+        scan.number().map(|x| (x, scan.at))
+    }
+
+    /// Every number the scanner reads has the bits serde_json (with `float_roundtrip`, as mesa
+    /// builds it) gives the same text, on both of its paths: the fast one (at most 19 digits,
+    /// a value up to 2^53, a power of ten up to 22) and Rust's parser. The spellings: random
+    /// doubles over the whole range, shortest and cut to 1 to 17 digits, in plain and
+    /// exponent form, whole numbers around 2^53 and 2^64, and the edges of each path. The
+    /// control: serde_json's reading differs from a naive one (digits times a power of ten)
+    /// on some of them, so the comparison can tell a wrong rounding.
+    #[test]
+    fn numbers_read_as_serde_json_reads_them() {
+        let mut rng = Rng(0x5eed_f00d);
+        let mut spellings: Vec<String> = [
+            "0",
+            "-0",
+            "0.0",
+            "-0.0",
+            "1",
+            "9007199254740992",
+            "9007199254740993",
+            "18446744073709551615",
+            "18446744073709551616",
+            "123456789012345678901234",
+            "1e22",
+            "1e23",
+            "1E-22",
+            "1e-23",
+            "4.35e-5",
+            "0.1",
+            "0.30000000000000004",
+            "5e-324",
+            "2.2250738585072011e-308",
+            "1.7976931348623157e308",
+            "9.999999999999999e22",
+            "0.000000000000000000000000000001",
+            "1234567890123456789",
+            "12345678901234567890",
+            "7.0000000000000000000000000000000000000000000001",
+            "0e999999",
+            "25e-1",
+            "1e+2",
+        ]
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect();
+        for _ in 0..20_000 {
+            let x = match rng.below(3) {
+                0 => f64::from_bits(rng.next()),
+                1 => rng.number(-1000.0, 1000.0),
+                _ => (rng.next() >> rng.below(64)) as f64,
+            };
+            if !x.is_finite() {
+                continue;
+            }
+            spellings.push(format!("{x}"));
+            spellings.push(format!("{x:e}"));
+            spellings.push(format!("{x:.*e}", rng.below(17)));
+            spellings.push(format!("{:.*}", rng.below(20), x));
+        }
+        let mut naive_differs = 0;
+        for text in &spellings {
+            let reference = serde_json::from_str::<f64>(text).ok();
+            match scanned(text) {
+                Some((x, end)) => {
+                    assert_eq!(end, text.len(), "{text}");
+                    let reference = reference.unwrap_or_else(|| panic!("{text}: serde refuses"));
+                    assert_eq!(x.to_bits(), reference.to_bits(), "{text}");
+                }
+                // Declined: serde refuses it too, or reads a non-finite value or zero from
+                // digits that are not all zero (out of range for this reader).
+                None => assert!(
+                    reference.is_none_or(|r| !r.is_finite() || r == 0.0),
+                    "{text} declined, serde reads {reference:?}"
+                ),
+            }
+            if let (Some(reference), Some((mantissa, exponent))) = (reference, naive(text)) {
+                naive_differs += usize::from(mantissa * 10f64.powi(exponent) != reference);
+            }
+        }
+        assert!(naive_differs > 100, "{naive_differs}");
+    }
+
+    /// A number's digits as an f64 and its power of ten, the way a careless reader takes them.
+    fn naive(text: &str) -> Option<(f64, i32)> {
+        let (mantissa, exponent) = match text.split_once(['e', 'E']) {
+            Some((m, e)) => (m, e.parse::<i32>().ok()?),
+            None => (text, 0),
+        };
+        let (whole, fraction) = mantissa.split_once('.').unwrap_or((mantissa, ""));
+        let digits: f64 = format!("{whole}{fraction}").parse::<i128>().ok()? as f64;
+        Some((digits, exponent - fraction.len() as i32))
     }
 
     use crate::layout_file::LayoutForm;
