@@ -975,6 +975,45 @@ mod tests {
         }
     }
 
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(3000))]
+
+        /// Damaged text (cut anywhere, a byte changed to any value where that leaves UTF-8,
+        /// or a run of bytes repeated) never makes the scanner panic or loop: it declines or
+        /// reads, and what it reads the general reader reads the same. The control: the text
+        /// undamaged is read.
+        #[test]
+        fn damaged_text_is_declined_or_read_as_the_general_reader_reads_it(
+            seed in any::<u64>(),
+            cut in 0.0..1.0f64,
+            byte in any::<u8>(),
+            damage in 0..3usize,
+        ) {
+            let mut rng = Rng(seed);
+            let document = layout(&mut rng);
+            let text = serde_json::to_string_pretty(&document).expect("json");
+            prop_assert!(read_plain_dataset_layout(&text).is_some());
+            let at = ((text.len() as f64 * cut) as usize).min(text.len());
+            let mut bytes = text.clone().into_bytes();
+            match damage {
+                0 => bytes.truncate(at),
+                1 if at < bytes.len() => bytes[at] = byte,
+                _ => {
+                    let end = (at + 1 + usize::from(byte % 16)).min(bytes.len());
+                    let run = bytes[at..end].to_vec();
+                    bytes.splice(at..at, run);
+                }
+            }
+            let Ok(damaged) = String::from_utf8(bytes) else {
+                return Ok(());
+            };
+            if let Some(quick) = read_plain_dataset_layout(&damaged) {
+                let quick = Ok(ReadLayout { form: LayoutForm::Dataset, layout: AnyLayout::Dataset(quick) });
+                prop_assert_eq!(canonical(&quick), canonical(&read_layout_text_general(&damaged)));
+            }
+        }
+    }
+
     /// One number read by the scanner alone: its value, and where it stopped.
     fn scanned(text: &str) -> Option<(f64, usize)> {
         let mut scan = Scan {
