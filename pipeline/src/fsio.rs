@@ -468,17 +468,59 @@ pub fn read_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
 }
 
 /// [`read_bounded`] for one of mesa's own files (a marker, a remembered-digests file): opened
-/// with [`open_own_file`] and statted through the open file, so the path is walked once. A
-/// link, a FIFO, a folder or a file over the limit is an error, nothing read.
+/// with [`open_own_file`] (a link is an error) and read by [`read_own_small`].
 pub fn read_own_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
-    let file = open_own_file(path)?;
+    read_own_small(&open_own_file(path)?, limit)
+}
+
+/// What [`read_own_small`] asks for in its first read: a done marker or a digests file is
+/// under a kilobyte.
+const SMALL_FIRST_READ: usize = 4096;
+
+/// Reads one of mesa's own small files, opened with [`open_own_file`], in one call when it is
+/// small: the first read asks for [`SMALL_FIRST_READ`] bytes, and a regular file's read stops
+/// only at its end (page-cache reads on Linux, as [`read_sized`] relies on), so a shorter
+/// answer is the whole file, without the `fstat` that would tell its size first (one system
+/// call a scene and file in a forced rerun). A file that fills that read is statted: anything
+/// but a regular file of at most `limit` is an error, and the rest is read to its end.
+///
+/// What the callers make of a short answer from something else: a FIFO or a terminal gives
+/// nothing (`O_NONBLOCK`), a folder an error, and both callers parse what they read (a marker,
+/// a digests file), so an empty or cut answer is no marker and no digests, as a missing file
+/// is.
+pub fn read_own_small(file: &fs::File, limit: SizeLimit) -> io::Result<Vec<u8>> {
+    let first = SMALL_FIRST_READ.min(usize::try_from(limit.bytes).unwrap_or(usize::MAX));
+    let mut bytes = vec![0u8; first];
+    let n = loop {
+        match (&*file).read(&mut bytes) {
+            Ok(n) => break n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    };
+    if n < first {
+        bytes.truncate(n);
+        return Ok(bytes);
+    }
     let meta = file.metadata()?;
     let what = if !meta.is_file() {
         special_kind(&meta)
     } else if meta.len() > limit.bytes {
         "a file over the limit for it"
     } else {
-        return read_statted(&file, meta.len(), limit);
+        let size = meta.len().saturating_sub(n as u64);
+        let rest = read_sized(file, size, limit.bytes - n as u64)?;
+        bytes.extend_from_slice(&rest);
+        if bytes.len() as u64 > limit.bytes {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "grew over the limit of {} while being read",
+                    human_bytes(limit.bytes)
+                ),
+            ));
+        }
+        return Ok(bytes);
     };
     Err(io::Error::new(
         io::ErrorKind::InvalidInput,
@@ -903,6 +945,54 @@ mod tests {
         }
         let bytes = read_sized(file_like(&[]), 0, 100).expect("read");
         assert!(bytes.is_empty());
+    }
+
+    /// mesa's own small files are read whole at any size up to the limit (below the first
+    /// read's size, at it, and past it); a file over the limit and a folder are errors, and a
+    /// FIFO gives nothing without waiting for a writer.
+    #[test]
+    fn own_small_files_are_read_whole_and_anything_else_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let limit = SizeLimit {
+            bytes: 10_000,
+            what: "a test file",
+            name: "TEST_LIMIT",
+        };
+        for len in [
+            0,
+            1,
+            800,
+            SMALL_FIRST_READ - 1,
+            SMALL_FIRST_READ,
+            SMALL_FIRST_READ + 1,
+            10_000,
+        ] {
+            let path = dir.path().join(format!("f{len}"));
+            let data: Vec<u8> = (0..len).map(|i| (i * 31 % 251) as u8).collect();
+            fs::write(&path, &data).expect("write");
+            assert!(
+                read_own_bounded(&path, limit).expect("read") == data,
+                "{len} bytes"
+            );
+        }
+        let over = dir.path().join("over");
+        fs::write(&over, vec![7u8; 10_001]).expect("write");
+        let e = read_own_bounded(&over, limit).expect_err("over the limit");
+        assert!(e.to_string().contains("over the limit"), "{e}");
+        let e = read_own_bounded(dir.path(), limit).expect_err("a folder");
+        assert_eq!(e.raw_os_error(), Some(libc::EISDIR), "{e}");
+        let fifo = dir.path().join("fifo");
+        let status = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .expect("mkfifo");
+        assert!(status.success());
+        assert!(read_own_bounded(&fifo, limit).expect("a FIFO").is_empty());
+        // A link is refused by the open.
+        let link = dir.path().join("link");
+        std::os::unix::fs::symlink(dir.path().join("f800"), &link).expect("symlink");
+        let e = read_own_bounded(&link, limit).expect_err("a link");
+        assert_eq!(e.raw_os_error(), Some(libc::ELOOP), "{e}");
     }
 
     #[test]

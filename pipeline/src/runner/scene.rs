@@ -20,7 +20,7 @@ use super::digests::{FolderLook, RememberedDigests};
 use super::scene_files;
 use crate::exit::UsageError;
 use crate::fsio::{
-    open_own_file, read_statted, sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic,
+    open_own_file, read_own_small, sha256_hex, sweep_dead_tmp_in, sweep_tmp_for, write_atomic,
     write_if_changed, write_if_changed_kept, DigestCache,
 };
 use crate::progress::Tick;
@@ -715,13 +715,9 @@ fn read_scene_marker(path: &Path) -> Option<RunMarker> {
         Err(e) if e.raw_os_error() == Some(libc::ELOOP) => return read_marker(path),
         Err(_) => return None,
     };
-    let meta = file.metadata().ok()?;
-    if !meta.is_file() || meta.len() > MARKER_LIMIT.bytes {
-        // A FIFO, a folder or an outsized file is no marker of mesa's: the scene is redone
-        // and its marker written over it.
-        return None;
-    }
-    let bytes = read_statted(&file, meta.len(), MARKER_LIMIT).ok()?;
+    // A FIFO, a folder or an outsized file is no marker of mesa's (nothing, or an error, or
+    // what does not parse): the scene is redone and its marker written over it.
+    let bytes = read_own_small(&file, MARKER_LIMIT).ok()?;
     let marker = serde_json::from_slice(&bytes).ok()?;
     scene_files::keep(path, bytes);
     Some(marker)
