@@ -512,13 +512,7 @@ pub fn read_own_small(file: &fs::File, limit: SizeLimit) -> io::Result<Vec<u8>> 
         let rest = read_sized(file, size, limit.bytes - n as u64)?;
         bytes.extend_from_slice(&rest);
         if bytes.len() as u64 > limit.bytes {
-            return Err(io::Error::new(
-                io::ErrorKind::InvalidInput,
-                format!(
-                    "grew over the limit of {} while being read",
-                    human_bytes(limit.bytes)
-                ),
-            ));
+            return Err(grew_over(limit));
         }
         return Ok(bytes);
     };
@@ -538,15 +532,20 @@ pub fn read_own_small(file: &fs::File, limit: SizeLimit) -> io::Result<Vec<u8>> 
 pub fn read_statted(file: &fs::File, len: u64, limit: SizeLimit) -> io::Result<Vec<u8>> {
     let bytes = read_sized(file, len, limit.bytes)?;
     if bytes.len() as u64 > limit.bytes {
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!(
-                "grew over the limit of {} while being read",
-                human_bytes(limit.bytes)
-            ),
-        ));
+        return Err(grew_over(limit));
     }
     Ok(bytes)
+}
+
+/// The error for a file that grew over `limit` while it was read.
+fn grew_over(limit: SizeLimit) -> io::Error {
+    io::Error::new(
+        io::ErrorKind::InvalidInput,
+        format!(
+            "grew over the limit of {} while being read",
+            human_bytes(limit.bytes)
+        ),
+    )
 }
 
 /// Reads `file` (a regular file, `size` bytes long when it was statted) whole, but never more
