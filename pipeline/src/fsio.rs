@@ -478,7 +478,7 @@ pub fn read_own_bounded(path: &Path, limit: SizeLimit) -> io::Result<Vec<u8>> {
 const SMALL_FIRST_READ: usize = 4096;
 
 /// Reads one of mesa's own small files, opened with [`open_own_file`], in one call when it is
-/// small: the first read asks for [`SMALL_FIRST_READ`] bytes, and a regular file's read stops
+/// small: the first read asks for 4 KB (`SMALL_FIRST_READ`), and a regular file's read stops
 /// only at its end (page-cache reads on Linux, as [`read_sized`] relies on), so a shorter
 /// answer is the whole file, without the `fstat` that would tell its size first (one system
 /// call a scene and file in a forced rerun). A file that fills that read is statted: anything
