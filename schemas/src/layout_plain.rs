@@ -256,14 +256,6 @@ impl<'a> Scan<'a> {
         }
     }
 
-    /// `null`, or a string.
-    fn optional_string(&mut self) -> Option<Option<String>> {
-        if self.null()? {
-            return Some(None);
-        }
-        self.string().map(Some)
-    }
-
     /// A number as JSON spells it (`-`, digits without a leading zero, an optional fraction
     /// and exponent), as an f64 rounded correctly, as serde_json (with `float_roundtrip`)
     /// rounds it; whole numbers too, which serde_json reads as integers and converts, which
@@ -352,12 +344,22 @@ impl<'a> Scan<'a> {
         (x.is_finite() && (x != 0.0 || !nonzero)).then_some(x)
     }
 
-    /// `null`, or a number.
-    fn optional_number(&mut self) -> Option<Option<f64>> {
+    /// `null`, or what `read` reads.
+    fn optional<T>(&mut self, read: impl FnOnce(&mut Self) -> Option<T>) -> Option<Option<T>> {
         if self.null()? {
             return Some(None);
         }
-        self.number().map(Some)
+        read(self).map(Some)
+    }
+
+    /// An array of any length, each item read by `item`.
+    fn list<T>(&mut self, mut item: impl FnMut(&mut Self) -> Option<T>) -> Option<Vec<T>> {
+        let mut list = Vec::new();
+        self.array(|scan| {
+            list.push(item(scan)?);
+            Some(())
+        })?;
+        Some(list)
     }
 
     /// An array of exactly `N` numbers.
@@ -409,22 +411,11 @@ impl<'a> Scan<'a> {
                 once(&mut schema, value)
             }
             "item_placement_zone" => once(&mut zone, ZoneCm(scan.numbers()?)),
-            "restricted_zone" => {
-                let value = if scan.null()? {
-                    None
-                } else {
-                    Some(ZoneCm(scan.numbers()?))
-                };
-                once(&mut restricted, value)
-            }
-            "objects" => {
-                let mut list = Vec::with_capacity(16);
-                scan.array(|scan| {
-                    list.push(scan.object_entry()?);
-                    Some(())
-                })?;
-                once(&mut objects, list)
-            }
+            "restricted_zone" => once(
+                &mut restricted,
+                scan.optional(|scan| scan.numbers().map(ZoneCm))?,
+            ),
+            "objects" => once(&mut objects, scan.list(Self::object_entry)?),
             _ => None,
         })?;
         Some(DatasetLayout {
@@ -454,17 +445,10 @@ impl<'a> Scan<'a> {
             "rotation" => once(&mut rotation, QuatXyzw(scan.numbers()?)),
             "size" => once(&mut size, SizeCm(scan.numbers()?)),
             "scale_factor" => once(&mut scale_factor, ScaleFactor(scan.numbers()?)),
-            "category" => once(&mut category, scan.optional_string()?),
-            "description" => once(&mut description, scan.optional_string()?),
-            "z_rotation" => once(&mut z_rotation, scan.optional_number()?),
-            "provenance" => {
-                let value = if scan.null()? {
-                    None
-                } else {
-                    Some(scan.provenance()?)
-                };
-                once(&mut provenance, value)
-            }
+            "category" => once(&mut category, scan.optional(Self::string)?),
+            "description" => once(&mut description, scan.optional(Self::string)?),
+            "z_rotation" => once(&mut z_rotation, scan.optional(Self::number)?),
+            "provenance" => once(&mut provenance, scan.optional(Self::provenance)?),
             _ => None,
         })?;
         Some(LayoutObject {
@@ -489,22 +473,8 @@ impl<'a> Scan<'a> {
         let mut notes = None;
         self.object(|scan, key| match key {
             "stage" => once(&mut stage, scan.string()?),
-            "source_instance" => {
-                let value = if scan.null()? {
-                    None
-                } else {
-                    Some(scan.u32()?)
-                };
-                once(&mut source_instance, value)
-            }
-            "notes" => {
-                let mut list = Vec::new();
-                scan.array(|scan| {
-                    list.push(scan.string()?);
-                    Some(())
-                })?;
-                once(&mut notes, list)
-            }
+            "source_instance" => once(&mut source_instance, scan.optional(Self::u32)?),
+            "notes" => once(&mut notes, scan.list(Self::string)?),
             _ => None,
         })?;
         Some(Provenance {

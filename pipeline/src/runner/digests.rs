@@ -71,7 +71,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use super::scene_files;
 use crate::fsio::{
-    check_regular_file, read_own_bounded, read_sized, sha256_hex, sha256_reader, write_if_changed,
+    check_regular_file, read_own_bounded, read_sized, sha256_hex, sha256_reader, write_atomic,
     SizeLimit, HASHED_INPUT_LIMIT,
 };
 
@@ -399,7 +399,9 @@ impl RememberedDigests {
         for (rel, (identity, digest)) in entries {
             text.push_str(&identity.line(digest, rel));
         }
-        write_if_changed(&self.path, text.as_bytes()).map(drop)
+        // An entry changed since the file was read, so its bytes differ: written without
+        // reading the file again to compare.
+        write_atomic(&self.path, text.as_bytes())
     }
 }
 
