@@ -250,8 +250,9 @@ fn a_forced_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digest
     // The header, the input, the three outputs and their folder, found clean.
     assert_eq!(saved.lines().count(), 6, "{saved}");
     assert!(saved.contains(&format!(" {scene}/echo/\n")), "{saved}");
-    assert!(saved.contains(&format!("{truth_in} ")), "{saved}");
-    assert!(saved.contains(&format!("{truth_out} ")), "{saved}");
+    // Each digest with the fingerprint of the bytes read (module docs of runner::digests).
+    assert!(saved.contains(&format!("{truth_in}:")), "{saved}");
+    assert!(saved.contains(&format!("{truth_out}:")), "{saved}");
     assert_eq!(
         (digest("inputs", &input), digest("outputs", &output)),
         (truth_in.clone(), truth_out.clone())
@@ -337,6 +338,91 @@ fn a_forced_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digest
     assert_eq!(run(dir.path(), &config, &forced).done, 1);
     let now = std::fs::read_to_string(&remembered).unwrap_or_default();
     assert!(!now.contains("swept "), "{now}");
+}
+
+#[test]
+fn a_forced_rerun_leaves_an_output_unread_while_its_identity_and_fingerprint_hold() {
+    use mesa_pipeline::runner::digests::SETTLED_AFTER;
+    use std::os::unix::fs::MetadataExt as _;
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_dataset(dir.path(), 1);
+    let scene = "scenes/office_table/office_table_0000";
+    let output = format!("{scene}/echo/a.txt");
+    let path = dir.path().join(&output);
+    let config = Config::default();
+    let forced = RunOptions {
+        force: true,
+        ..options(1)
+    };
+    let remembered = dir
+        .path()
+        .join(".mesa/digests/echo/office_table/office_table_0000.txt");
+    let line_of = |text: &str| -> String {
+        text.lines()
+            .find(|line| line.ends_with(&format!(" {output}")))
+            .expect("the output is remembered")
+            .to_owned()
+    };
+    // The output's line with its identity fields replaced by those the file has now.
+    let identity_now = |line: &str| -> String {
+        let m = std::fs::metadata(&path).expect("output");
+        let first = line.split(' ').next().expect("digest");
+        format!(
+            "{first} {} {} {} {}.{:09} {}.{:09} {output}",
+            m.dev(),
+            m.ino(),
+            m.size(),
+            m.mtime(),
+            m.mtime_nsec(),
+            m.ctime(),
+            m.ctime_nsec()
+        )
+    };
+
+    assert_eq!(run(dir.path(), &config, &options(1)).done, 1);
+    std::thread::sleep(SETTLED_AFTER + Duration::from_millis(300));
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    let text = std::fs::read_to_string(&remembered).expect("remembered");
+    let line = line_of(&text);
+    let truth = std::fs::read(&path).expect("output");
+    // Remembered with its fingerprint: the digest, a colon and 32 hex digits.
+    let first = line.split(' ').next().expect("digest").to_owned();
+    assert!(
+        first.len() == 64 + 1 + 32 && first.as_bytes()[64] == b':',
+        "{line}"
+    );
+
+    // The file changed behind the runner's back (same length), and its entry forged to the
+    // new identity with the old fingerprint: a forced rerun trusts the entry and leaves the
+    // file unread, so the change stays (what shows that it was not read).
+    let altered: Vec<u8> = truth.iter().map(|b| b.to_ascii_lowercase()).collect();
+    assert_ne!(altered, truth);
+    std::fs::write(&path, &altered).expect("alter");
+    std::fs::write(&remembered, text.replace(&line, &identity_now(&line))).expect("forge");
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    assert_eq!(
+        std::fs::read(&path).expect("output"),
+        altered,
+        "left unread"
+    );
+
+    // Control: the same forged identity with another fingerprint makes the runner read the
+    // file, see that it differs from the new bytes, and write them.
+    let text = std::fs::read_to_string(&remembered).expect("remembered");
+    let line = line_of(&text);
+    let (digest, _) = first.split_once(':').expect("colon");
+    let other = identity_now(&line).replacen(&first, &format!("{digest}:{}", "0".repeat(32)), 1);
+    std::fs::write(&remembered, text.replace(&line, &other)).expect("forge");
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    assert_eq!(std::fs::read(&path).expect("output"), truth, "rewritten");
+
+    // Control: without any forging, an output changed in place (a new identity) is read,
+    // compared and rewritten.
+    std::thread::sleep(SETTLED_AFTER + Duration::from_millis(300));
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    std::fs::write(&path, &altered).expect("alter");
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    assert_eq!(std::fs::read(&path).expect("output"), truth, "rewritten");
 }
 
 #[test]

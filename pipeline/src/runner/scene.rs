@@ -597,6 +597,12 @@ fn write_outputs(
                     == 0;
             folders.insert(dir.clone(), (look, clean));
         }
+        // On a forced rerun, an output whose identity and fingerprint say it holds these bytes
+        // already is left unread ([`RememberedDigests::output_unchanged`]).
+        if let Some(digest) = remembered.output_unchanged(&path, &rel, bytes) {
+            written.insert(rel, digest);
+            continue;
+        }
         let kept = write_if_changed_kept(&path, bytes)
             .with_context(|| format!("{}: cannot write", path.display()))?;
         if kept.is_none() {
