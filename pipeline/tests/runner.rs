@@ -196,6 +196,23 @@ fn a_large_input_is_hashed_again_only_when_its_identity_changed() {
     assert_eq!(std::fs::read_to_string(line).expect("redone"), "abd");
 }
 
+/// A line of a remembered-digests file: `first` (a digest, `digest:fingerprint` or `swept`),
+/// then the identity `path` has now, then `rel`.
+fn memo_line(first: &str, path: &Path, rel: &str) -> String {
+    use std::os::unix::fs::MetadataExt as _;
+    let m = std::fs::metadata(path).expect("stat");
+    format!(
+        "{first} {} {} {} {}.{:09} {}.{:09} {rel}",
+        m.dev(),
+        m.ino(),
+        m.size(),
+        m.mtime(),
+        m.mtime_nsec(),
+        m.ctime(),
+        m.ctime_nsec()
+    )
+}
+
 #[test]
 fn a_forced_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digests() {
     use mesa_pipeline::runner::digests::SETTLED_AFTER;
@@ -294,20 +311,7 @@ fn a_forced_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digest
     let folder = dir.path().join(scene).join("echo");
     let leftover = folder.join(format!(".a.txt.mesa-tmp-{}-0", dead_pid()));
     std::fs::write(&leftover, b"a killed run's half").expect("leftover");
-    let folder_line = |path: &Path| {
-        use std::os::unix::fs::MetadataExt as _;
-        let m = std::fs::metadata(path).expect("folder");
-        format!(
-            "swept {} {} {} {}.{:09} {}.{:09} {scene}/echo/",
-            m.dev(),
-            m.ino(),
-            m.size(),
-            m.mtime(),
-            m.mtime_nsec(),
-            m.ctime(),
-            m.ctime_nsec()
-        )
-    };
+    let folder_line = |path: &Path| memo_line("swept", path, &format!("{scene}/echo/"));
     let text = std::fs::read_to_string(&remembered).expect("remembered");
     let old = text
         .lines()
@@ -343,7 +347,6 @@ fn a_forced_rerun_takes_small_inputs_and_kept_outputs_from_the_remembered_digest
 #[test]
 fn a_forced_rerun_leaves_an_output_unread_while_its_identity_and_fingerprint_hold() {
     use mesa_pipeline::runner::digests::SETTLED_AFTER;
-    use std::os::unix::fs::MetadataExt as _;
     let dir = tempfile::tempdir().expect("tempdir");
     make_dataset(dir.path(), 1);
     let scene = "scenes/office_table/office_table_0000";
@@ -365,18 +368,7 @@ fn a_forced_rerun_leaves_an_output_unread_while_its_identity_and_fingerprint_hol
     };
     // The output's line with its identity fields replaced by those the file has now.
     let identity_now = |line: &str| -> String {
-        let m = std::fs::metadata(&path).expect("output");
-        let first = line.split(' ').next().expect("digest");
-        format!(
-            "{first} {} {} {} {}.{:09} {}.{:09} {output}",
-            m.dev(),
-            m.ino(),
-            m.size(),
-            m.mtime(),
-            m.mtime_nsec(),
-            m.ctime(),
-            m.ctime_nsec()
-        )
+        memo_line(line.split(' ').next().expect("digest"), &path, &output)
     };
 
     assert_eq!(run(dir.path(), &config, &options(1)).done, 1);
