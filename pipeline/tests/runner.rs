@@ -415,6 +415,27 @@ fn a_forced_rerun_leaves_an_output_unread_while_its_identity_and_fingerprint_hol
     std::fs::write(&path, &altered).expect("alter");
     assert_eq!(run(dir.path(), &config, &forced).done, 1);
     assert_eq!(std::fs::read(&path).expect("output"), truth, "rewritten");
+
+    // Entries without fingerprints (as an earlier version wrote them) get them back when their
+    // files are read with the identities remembered.
+    std::thread::sleep(SETTLED_AFTER + Duration::from_millis(300));
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    let text = std::fs::read_to_string(&remembered).expect("remembered");
+    let stripped: String = text
+        .lines()
+        .map(|line| match line.split_once(' ') {
+            Some((first, rest)) => {
+                let digest = first.split(':').next().expect("digest");
+                format!("{digest} {rest}\n")
+            }
+            None => format!("{line}\n"),
+        })
+        .collect();
+    assert!(!stripped.contains(':'), "{stripped}");
+    std::fs::write(&remembered, &stripped).expect("strip");
+    assert_eq!(run(dir.path(), &config, &forced).done, 1);
+    let again = std::fs::read_to_string(&remembered).expect("remembered");
+    assert_eq!(line_of(&again), line_of(&text), "{again}");
 }
 
 #[test]
