@@ -28,11 +28,13 @@
 //! integer and converts. Here a number of at most 19 digits whose value is at most 2^53 and
 //! whose power of ten is at most 22 either way is one exact multiplication or division of two
 //! exact f64s, which IEEE arithmetic rounds correctly (Clinger's fast path, the first step of
-//! every exact parser); any other goes to Rust's own `f64` parser, which rounds every input
-//! correctly. `tests::numbers_read_as_serde_json_reads_them` compares the bits with serde_json's
-//! on 80,000 spellings (random doubles over the whole range, shortest and cut short, plain and
-//! with exponents, the edges of both paths), and fails if the fast path's division is made an
-//! inexact multiplication or its bound raised to 2^54.
+//! every exact parser); another of at most 19 digits whose power of ten is within ±27 goes to
+//! Eisel–Lemire on the digits gathered ([`crate::decimal`]; a quarter of a layout's numbers,
+//! whose 16 or 17 digits exceed 2^53); any other goes to Rust's own `f64` parser, which rounds
+//! every input correctly. `tests::numbers_read_as_serde_json_reads_them` compares the bits
+//! with serde_json's on 80,000 spellings (random doubles over the whole range, shortest and cut
+//! short, plain and with exponents, the edges of each path), and fails if the fast path's
+//! division is made an inexact multiplication or its bound raised to 2^54.
 //!
 //! **It only ever accepts what the general reader accepts, with the same result.** It declines
 //! (returns `None`, and the general reader runs and reports every problem with its JSON path)
@@ -264,8 +266,9 @@ impl<'a> Scan<'a> {
     /// The digits are gathered as they are checked. With at most 19 of them, a value of at
     /// most 2^53 and a power of ten of at most 22 either way, both are exact f64s and one
     /// multiplication or division rounds correctly (Clinger's fast path, the one every exact
-    /// parser takes first); any other number goes to Rust's own parser, which rounds every
-    /// input correctly. What serde_json refuses or handles apart declines: a number out of
+    /// parser takes first); other numbers of at most 19 digits at powers within ±27 are
+    /// rounded by Eisel–Lemire on the same digits ([`crate::decimal`]); any other number goes
+    /// to Rust's own parser, which rounds every input correctly. What serde_json refuses or handles apart declines: a number out of
     /// range, and one so small that it rounds to zero although it has a digit other than
     /// zero.
     fn number(&mut self) -> Option<f64> {
@@ -339,6 +342,12 @@ impl<'a> Scan<'a> {
                 mantissa as f64 * power
             };
             return Some(if negative { -magnitude } else { magnitude });
+        }
+        // At most 19 digits at the powers of a layout: Eisel–Lemire on the digits gathered.
+        if count <= 19 {
+            if let Some(magnitude) = crate::decimal::to_f64(mantissa, exponent) {
+                return Some(if negative { -magnitude } else { magnitude });
+            }
         }
         let x: f64 = self.text[start..i].parse().ok()?;
         (x.is_finite() && (x != 0.0 || !nonzero)).then_some(x)

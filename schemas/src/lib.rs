@@ -20,6 +20,7 @@ pub mod annotate;
 pub mod annotation;
 pub mod artifacts;
 pub mod convert;
+mod decimal;
 pub mod eval;
 pub mod graph_json;
 pub mod json;
