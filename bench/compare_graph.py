@@ -263,6 +263,11 @@ def main():
               f"shapely {graph_rules.shapely.__version__}; {objects / n:.1f} objects per scene")
         report("a. in process", python_runs, mesa_runs,
                "layouts parsed, containers decided; extract the graph and its text, no file I/O")
+        if "read_layout_min_s_per_scene" in timing:
+            print(f"  mesa's other work of the stage, in process (min of {args.repeat}): reading a layout's "
+                  f"text {1e6 * timing['read_layout_min_s_per_scene']:.2f} us, writing graph.json "
+                  f"{1e6 * timing['to_json_min_s_per_scene']:.2f} us, the graph alone "
+                  f"{1e6 * timing['extract_only_min_s_per_scene']:.2f} us a scene")
         report("b. dataset stage, wall time", [t / n for t in python_wall], [t / n for t in mesa_wall],
                f"whole process over {n} scenes: `mesa graph --force --jobs 1` vs `graph_rules.py dataset "
                f"--out <separate folder>`, reads and writes included")

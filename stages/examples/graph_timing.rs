@@ -4,7 +4,9 @@
 //! does (asset annotations, else the keyword rule); then `extract_graph` and `to_text` over all
 //! scenes are timed, one warm-up pass and `--repeat` timed passes, on one thread. Prints JSON:
 //! the seconds per scene of each pass, their min and median, and the min and median of as many
-//! passes of `extract_graph` alone (no text).
+//! passes of `extract_graph` alone (no text), of reading the layouts' text
+//! (`read_layout_text`), and of writing `graph.json` (`to_json`): the other parts of the
+//! `graph` stage's work, for where its time goes.
 //!
 //! It allocates through mimalloc, as the `mesa` executable does (pipeline/src/main.rs).
 //!
@@ -48,8 +50,8 @@ fn sorted_dirs(path: &Path) -> Result<Vec<PathBuf>, Box<dyn Error>> {
 /// A scene's graph input: the scene and its container flags.
 type SceneInput = (GraphScene, Vec<bool>);
 
-/// Every scene's graph input.
-fn read_scenes(dataset: &Path) -> Result<Vec<SceneInput>, Box<dyn Error>> {
+/// Every scene's graph input, and the text of its layout.
+fn read_scenes(dataset: &Path) -> Result<(Vec<SceneInput>, Vec<String>), Box<dyn Error>> {
     let annotations_path = dataset.join(ANNOTATIONS);
     let annotations = if annotations_path.exists() {
         Some(Annotations::read(&annotations_path)?)
@@ -58,6 +60,7 @@ fn read_scenes(dataset: &Path) -> Result<Vec<SceneInput>, Box<dyn Error>> {
     };
     let options = GraphOptions::default();
     let mut scenes = Vec::new();
+    let mut texts = Vec::new();
     for table in sorted_dirs(&dataset.join(SCENES))? {
         for scene in sorted_dirs(&table)? {
             let Some(path) = LAYOUT_CANDIDATES
@@ -77,12 +80,25 @@ fn read_scenes(dataset: &Path) -> Result<Vec<SceneInput>, Box<dyn Error>> {
                 &options,
             );
             scenes.push((loaded.scene, containers.flags));
+            texts.push(text);
         }
     }
     if scenes.is_empty() {
         return Err(format!("{}: no scene with a layout", dataset.display()).into());
     }
-    Ok(scenes)
+    Ok((scenes, texts))
+}
+
+/// The min and median seconds per item of `repeat` timed passes of `f` over `n` items.
+fn timed(repeat: usize, n: usize, mut f: impl FnMut()) -> (f64, f64) {
+    let runs: Vec<f64> = (0..repeat)
+        .map(|_| {
+            let started = Instant::now();
+            f();
+            started.elapsed().as_secs_f64() / n as f64
+        })
+        .collect();
+    min_median(&runs)
 }
 
 /// One pass over every scene, the graph's text made too when `text`: the seconds per scene.
@@ -130,7 +146,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let dataset = dataset.ok_or(USAGE)?;
     let repeat = repeat.max(1);
 
-    let scenes = read_scenes(&dataset)?;
+    let (scenes, texts) = read_scenes(&dataset)?;
     let options = GraphOptions::default();
     pass(&scenes, &options, true)?; // warm-up
     let runs = (0..repeat)
@@ -142,6 +158,21 @@ fn main() -> Result<(), Box<dyn Error>> {
         .map(|_| pass(&scenes, &options, false))
         .collect::<Result<Vec<f64>, _>>()?;
     let (bare_min, bare_median) = min_median(&bare);
+    // The other parts of the stage's work: reading the layouts, writing graph.json.
+    let (parse_min, parse_median) = timed(repeat, texts.len(), || {
+        for text in &texts {
+            black_box(read_layout_text(black_box(text)).expect("read once already"));
+        }
+    });
+    let graphs = scenes
+        .iter()
+        .map(|(scene, flags)| extract_graph(scene, flags, &options))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (json_min, json_median) = timed(repeat, graphs.len(), || {
+        for graph in &graphs {
+            black_box(graph.to_json("table/scene_0001", "refined/layout.json"));
+        }
+    });
     let report = serde_json::json!({
         "scenes": scenes.len(),
         "repeat": repeat,
@@ -150,6 +181,10 @@ fn main() -> Result<(), Box<dyn Error>> {
         "runs_s_per_scene": runs,
         "extract_only_min_s_per_scene": bare_min,
         "extract_only_median_s_per_scene": bare_median,
+        "read_layout_min_s_per_scene": parse_min,
+        "read_layout_median_s_per_scene": parse_median,
+        "to_json_min_s_per_scene": json_min,
+        "to_json_median_s_per_scene": json_median,
     });
     println!("{report}");
     Ok(())
