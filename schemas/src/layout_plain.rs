@@ -268,9 +268,9 @@ impl<'a> Scan<'a> {
     /// multiplication or division rounds correctly (Clinger's fast path, the one every exact
     /// parser takes first); other numbers of at most 19 digits at powers within ±27 are
     /// rounded by Eisel–Lemire on the same digits ([`crate::decimal`]); any other number goes
-    /// to Rust's own parser, which rounds every input correctly. What serde_json refuses or handles apart declines: a number out of
-    /// range, and one so small that it rounds to zero although it has a digit other than
-    /// zero.
+    /// to Rust's own parser, which rounds every input correctly. What serde_json refuses or
+    /// handles apart declines: a number out of range, and one so small that it rounds to zero
+    /// although it has a digit other than zero.
     fn number(&mut self) -> Option<f64> {
         self.skip_space();
         let bytes = self.bytes;
