@@ -31,6 +31,7 @@ mod layout_plain;
 pub mod llm;
 pub mod order;
 pub mod output;
+mod pretty;
 pub mod render;
 pub mod rotation;
 mod sorted_writer;

@@ -706,7 +706,7 @@ pub fn run_records(ctx: &StageContext<'_>, exec: &Executor<'_>) -> anyhow::Resul
         warnings: Vec::new(),
         error: Vec::new(),
     };
-    write_atomic(&marker_path, &to_sorted_pretty(&marker)?)
+    write_atomic(&marker_path, &marker.to_pretty_json())
         .with_context(|| format!("{}: cannot write", marker_path.display()))?;
     Ok(summary)
 }

@@ -736,7 +736,7 @@ fn read_scene_marker(path: &Path) -> Option<RunMarker> {
 /// scene, quadratic in the scenes of a table type (10,000 scenes: 2.6 ms a scene of runner
 /// cost, most of it listing).
 fn write_marker(path: &Path, marker: &RunMarker) -> std::io::Result<()> {
-    let bytes = to_sorted_pretty(marker).map_err(std::io::Error::other)?;
+    let bytes = marker.to_pretty_json();
     match scene_files::take(path) {
         Some(previous) if previous == bytes => Ok(()),
         Some(_) => write_atomic(path, &bytes),
