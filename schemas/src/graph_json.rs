@@ -169,30 +169,7 @@ mod tests {
     use super::*;
     use crate::artifacts::{GraphEdge, GraphNode, GraphSpacing};
     use crate::json::to_sorted_pretty;
-
-    /// Names with what JSON escapes (quotes, backslashes, control characters) and what it
-    /// does not (non-ASCII, `/`, DEL).
-    fn name() -> impl Strategy<Value = String> {
-        prop_oneof![
-            "[a-z_]{1,12}",
-            proptest::collection::vec(
-                prop_oneof![
-                    Just('"'),
-                    Just('\\'),
-                    Just('\n'),
-                    Just('\u{1}'),
-                    Just('\u{1f}'),
-                    Just('\u{7f}'),
-                    Just('/'),
-                    Just('é'),
-                    Just('😀'),
-                    Just('a'),
-                ],
-                0..6
-            )
-            .prop_map(|chars| chars.into_iter().collect()),
-        ]
-    }
+    use crate::pretty::tests::text as name;
 
     fn number() -> impl Strategy<Value = f64> {
         prop_oneof![

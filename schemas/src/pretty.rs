@@ -189,7 +189,7 @@ pub(crate) fn needs_escape(bytes: &[u8]) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use proptest::prelude::*;
 
     use super::*;
@@ -214,8 +214,8 @@ mod tests {
     }
 
     /// Strings with what JSON escapes (quotes, backslashes, control characters) and what it
-    /// does not (non-ASCII, `/`, DEL), as in the graph writer's test.
-    fn text() -> impl Strategy<Value = String> {
+    /// does not (non-ASCII, `/`, DEL): the names and values of both writers' tests.
+    pub(crate) fn text() -> impl Strategy<Value = String> {
         prop_oneof![
             "[a-z_/.0-9]{0,24}",
             proptest::collection::vec(
@@ -224,6 +224,7 @@ mod tests {
                     Just('\\'),
                     Just('\n'),
                     Just('\u{1}'),
+                    Just('\u{1f}'),
                     Just('\u{7f}'),
                     Just('/'),
                     Just('é'),

@@ -30,11 +30,11 @@
 //! **Outputs left unread, on a forced rerun.** A small file read whole is remembered with a
 //! fingerprint of its bytes too, their XXH3-128 (0.4 µs for a 15 KB `graph.json`, against 8 µs
 //! for a SHA-256 on the machine measured); an entry written without one (by an earlier version)
-//! gets it the next time the file is read with the identity remembered. Before an output is read back to be compared with the
-//! new bytes, it is statted without following a link: a regular file whose identity is the one
-//! remembered holds the bytes it held then (the argument above), so when the fingerprint
-//! remembered with it is that of the new bytes, it holds them, and is left alone unread with
-//! the remembered SHA-256 ([`RememberedDigests::output_unchanged`]). Otherwise (no fingerprint,
+//! gets it the next time the file is read with the identity remembered. Before an output is
+//! read back to be compared with the new bytes, it is statted without following a link: a
+//! regular file whose identity is the one remembered holds the bytes it held then (the
+//! argument above), so when the fingerprint remembered with it is that of the new bytes, it
+//! holds them, and is left alone unread with the remembered SHA-256 ([`RememberedDigests::output_unchanged`]). Otherwise (no fingerprint,
 //! another length, another identity or fingerprint) it is read and compared as before. A `stat`
 //! instead of an open, a read, an `fstat` and a close a file: the reads of `graph.json` and
 //! `graph.txt` were 10 µs of the 50 µs a scene of the stage's bare loop. XXH3 is not a
