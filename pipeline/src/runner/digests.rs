@@ -34,8 +34,9 @@
 //! read back to be compared with the new bytes, it is statted without following a link: a
 //! regular file whose identity is the one remembered holds the bytes it held then (the
 //! argument above), so when the fingerprint remembered with it is that of the new bytes, it
-//! holds them, and is left alone unread with the remembered SHA-256 ([`RememberedDigests::output_unchanged`]). Otherwise (no fingerprint,
-//! another length, another identity or fingerprint) it is read and compared as before. A `stat`
+//! holds them, and is left alone unread with the remembered SHA-256
+//! ([`RememberedDigests::output_unchanged`]). Otherwise (no fingerprint, another length,
+//! another identity or fingerprint) it is read and compared as before. A `stat`
 //! instead of an open, a read, an `fstat` and a close a file: the reads of `graph.json` and
 //! `graph.txt` were 10 µs of the 50 µs a scene of the stage's bare loop. XXH3 is not a
 //! cryptographic hash: someone who can choose both a scene's earlier output and its new one
