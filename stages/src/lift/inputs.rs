@@ -970,6 +970,9 @@ pub fn read_photo(input: &Path, width: usize, height: usize) -> Result<Option<Ph
     if !path.exists() {
         return Ok(None);
     }
+    if let Some(bytes) = rgb8_png(&path, width, height) {
+        return Ok(Some(Photo(bytes)));
+    }
     let image = read_png(&path, PngLimit::Size(width, height))?;
     check_size(
         &path,
@@ -980,6 +983,51 @@ pub fn read_photo(input: &Path, width: usize, height: usize) -> Result<Option<Ph
     )?;
     // An RGB8 image is moved, not copied, into its raw bytes.
     Ok(Some(Photo(image.into_rgb8().into_raw())))
+}
+
+/// The bytes of a photo that is an 8-bit RGB PNG (or a palette PNG without transparency, which
+/// expands to one) of `width` × `height` pixels, not interlaced, decoded by `png` row by row
+/// into one buffer: what [`read_png`] and `into_rgb8` give for it, to the byte, since `image`
+/// decodes a PNG with the same crate, settings and calls, without the zeroed 3-byte-a-pixel
+/// buffer it decodes into and opening the file once instead of twice (its header is read
+/// first, for the size). `None` for anything else (another kind of PNG, another size, not a
+/// PNG, a damaged file): the general reader then decodes it, or says what is wrong with it.
+fn rgb8_png(path: &Path, width: usize, height: usize) -> Option<Vec<u8>> {
+    let file = std::io::BufReader::new(std::fs::File::open(path).ok()?);
+    let bytes = width.checked_mul(height)?.checked_mul(3)?;
+    // The decoder's own buffers (a row, the inflate window) besides the image.
+    let limits = png::Limits {
+        bytes: bytes.saturating_add(1 << 20),
+    };
+    let mut decoder = png::Decoder::new_with_limits(file, limits);
+    // `image`'s settings: text chunks read, bit depths under 8 and palettes expanded.
+    decoder.set_ignore_text_chunk(false);
+    decoder.set_transformations(png::Transformations::EXPAND);
+    let mut reader = decoder.read_info().ok()?;
+    let info = reader.info();
+    let size = (info.width as usize, info.height as usize);
+    let kind = reader.output_color_type();
+    if size != (width, height)
+        || info.interlaced
+        || kind != (png::ColorType::Rgb, png::BitDepth::Eight)
+    {
+        return None;
+    }
+    let row = reader.output_line_size(info.width)?;
+    if row.checked_mul(height) != Some(bytes) {
+        return None;
+    }
+    let mut rgb = Vec::with_capacity(bytes);
+    for _ in 0..height {
+        let at = rgb.len();
+        rgb.resize(at + row, 0);
+        reader.read_row(&mut rgb[at..]).ok()??;
+    }
+    // Past the last row, the rest of the image data is read and checked, as `image` does.
+    match reader.next_row() {
+        Ok(None) => Some(rgb),
+        _ => None,
+    }
 }
 
 /// The photo's RGB8 bytes, row-major.
@@ -1557,5 +1605,242 @@ mod depth_png_tests {
         assert!(through_rows(&path).expect("reads").is_none());
         std::fs::write(&path, b"\x89PN").expect("write");
         assert!(through_rows(&path).expect("reads").is_none());
+    }
+}
+
+#[cfg(test)]
+mod photo_tests {
+    use super::*;
+    use png::{BitDepth, ColorType, Filter};
+    use rand::{Rng, SeedableRng};
+
+    /// A PNG of `data` (rows of the colour type's samples), every row filtered with `filter`.
+    fn encode(
+        (width, height): (u32, u32),
+        color: ColorType,
+        depth: BitDepth,
+        data: &[u8],
+        filter: Filter,
+        setup: impl FnOnce(&mut png::Encoder<&mut Vec<u8>>),
+    ) -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut encoder = png::Encoder::new(&mut out, width, height);
+        encoder.set_color(color);
+        encoder.set_depth(depth);
+        encoder.set_filter(filter);
+        setup(&mut encoder);
+        let mut writer = encoder.write_header().expect("header");
+        writer.write_image_data(data).expect("data");
+        writer.finish().expect("end");
+        out
+    }
+
+    /// The general reader's bytes: `image`'s decoding, then `into_rgb8`.
+    fn through_image(path: &Path, size: (usize, usize)) -> Result<Vec<u8>, String> {
+        read_png(path, PngLimit::Size(size.0, size.1))
+            .map(|image| image.into_rgb8().into_raw())
+            .map_err(|e| e.to_string())
+    }
+
+    fn photo_bytes(path: &Path, size: (usize, usize)) -> Result<Vec<u8>, String> {
+        match read_photo(path.parent().expect("folder"), size.0, size.1) {
+            Ok(photo) => Ok(photo.expect("a photo").0),
+            Err(e) => Err(e.to_string()),
+        }
+    }
+
+    #[test]
+    fn rgb_photos_are_read_as_image_reads_them() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("image.png");
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let filters = [
+            Filter::NoFilter,
+            Filter::Sub,
+            Filter::Up,
+            Filter::Avg,
+            Filter::Paeth,
+            Filter::Adaptive,
+        ];
+        let mut fast = 0;
+        for (width, height) in [(1, 1), (5, 3), (64, 17), (257, 9)] {
+            let size = (width as usize, height as usize);
+            let pixels = size.0 * size.1;
+            // Noise, and smooth gradients (where Paeth's neighbours differ).
+            let noise: Vec<u8> = (0..3 * pixels).map(|_| rng.random()).collect();
+            let smooth: Vec<u8> = (0..3 * pixels)
+                .map(|i| ((i / 3 % size.0) * 3 + (i / 3 / size.0) * 5 + i % 3) as u8)
+                .collect();
+            let palette: Vec<u8> = (0..pixels).map(|_| rng.random_range(0..4)).collect();
+            let rgba: Vec<u8> = (0..4 * pixels).map(|_| rng.random()).collect();
+            let grey16: Vec<u8> = (0..2 * pixels).map(|_| rng.random()).collect();
+            for filter in filters {
+                let kinds: [(Vec<u8>, bool); 7] = [
+                    (
+                        encode(
+                            (width, height),
+                            ColorType::Rgb,
+                            BitDepth::Eight,
+                            &noise,
+                            filter,
+                            |_| {},
+                        ),
+                        true,
+                    ),
+                    (
+                        encode(
+                            (width, height),
+                            ColorType::Rgb,
+                            BitDepth::Eight,
+                            &smooth,
+                            filter,
+                            |_| {},
+                        ),
+                        true,
+                    ),
+                    // A palette without transparency expands to RGB; with it, to RGBA.
+                    (
+                        encode(
+                            (width, height),
+                            ColorType::Indexed,
+                            BitDepth::Eight,
+                            &palette,
+                            filter,
+                            |e| {
+                                e.set_palette(vec![0, 0, 0, 255, 0, 0, 0, 255, 0, 9, 8, 7]);
+                            },
+                        ),
+                        true,
+                    ),
+                    (
+                        encode(
+                            (width, height),
+                            ColorType::Indexed,
+                            BitDepth::Eight,
+                            &palette,
+                            filter,
+                            |e| {
+                                e.set_palette(vec![0, 0, 0, 255, 0, 0, 0, 255, 0, 9, 8, 7]);
+                                e.set_trns(vec![0, 128]);
+                            },
+                        ),
+                        false,
+                    ),
+                    (
+                        encode(
+                            (width, height),
+                            ColorType::Rgba,
+                            BitDepth::Eight,
+                            &rgba,
+                            filter,
+                            |_| {},
+                        ),
+                        false,
+                    ),
+                    (
+                        encode(
+                            (width, height),
+                            ColorType::Grayscale,
+                            BitDepth::Sixteen,
+                            &grey16,
+                            filter,
+                            |_| {},
+                        ),
+                        false,
+                    ),
+                    (
+                        encode(
+                            (width, height),
+                            ColorType::Rgb,
+                            BitDepth::Eight,
+                            &noise,
+                            filter,
+                            |e| {
+                                e.set_trns(vec![0, 1, 0, 2, 0, 3]);
+                            },
+                        ),
+                        false,
+                    ),
+                ];
+                for (k, (file, rgb8)) in kinds.iter().enumerate() {
+                    std::fs::write(&path, file).expect("write");
+                    let expected = through_image(&path, size).expect("image reads it");
+                    assert_eq!(
+                        rgb8_png(&path, size.0, size.1).is_some(),
+                        *rgb8,
+                        "kind {k}, {filter:?}, {size:?}: which reader"
+                    );
+                    fast += usize::from(*rgb8);
+                    assert_eq!(
+                        photo_bytes(&path, size),
+                        Ok(expected),
+                        "kind {k}, {filter:?}"
+                    );
+                }
+            }
+        }
+        // The control: the fast path was taken (else the comparison says nothing of it).
+        assert_eq!(fast, 4 * 6 * 3);
+    }
+
+    #[test]
+    fn damaged_or_other_photos_go_to_the_general_reader() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("image.png");
+        let size = (40usize, 30usize);
+        let data: Vec<u8> = (0..3 * size.0 * size.1)
+            .map(|i| (i * 7 % 251) as u8)
+            .collect();
+        let file = encode(
+            (40, 30),
+            ColorType::Rgb,
+            BitDepth::Eight,
+            &data,
+            Filter::Paeth,
+            |_| {},
+        );
+        std::fs::write(&path, &file).expect("write");
+        assert!(
+            rgb8_png(&path, size.0, size.1).is_some(),
+            "the control reads"
+        );
+        // Another size than the depth map's: the general reader names it.
+        assert!(rgb8_png(&path, 41, 30).is_none());
+        let wrong = photo_bytes(&path, (41, 30));
+        assert!(wrong.is_err(), "{wrong:?}");
+        assert_eq!(wrong, through_image(&path, (41, 30)));
+        // Cut short: within the image data both refuse it; within the end chunk, after the
+        // image data, `image` reads it, and so does the photo reader (it reads as far as
+        // `image` does).
+        for (cut, readable) in [(file.len() - 1, true), (file.len() / 2, false), (40, false)] {
+            std::fs::write(&path, &file[..cut]).expect("write");
+            assert_eq!(
+                rgb8_png(&path, size.0, size.1).is_some(),
+                readable,
+                "cut at {cut}"
+            );
+            let general = through_image(&path, size);
+            assert_eq!(general.is_ok(), readable, "cut at {cut}");
+            assert_eq!(photo_bytes(&path, size), general, "cut at {cut}");
+        }
+        // A byte of the image data changed (its chunk's CRC no longer matches).
+        let mut damaged = file.clone();
+        let at = damaged.len() / 2;
+        damaged[at] ^= 0x40;
+        std::fs::write(&path, &damaged).expect("write");
+        assert!(rgb8_png(&path, size.0, size.1).is_none());
+        assert_eq!(photo_bytes(&path, size), through_image(&path, size));
+        // Not a PNG: a JPEG under the name is the general reader's too.
+        let mut jpeg = Vec::new();
+        image::RgbImage::from_raw(40, 30, data.clone())
+            .expect("image")
+            .write_to(
+                &mut std::io::Cursor::new(&mut jpeg),
+                image::ImageFormat::Jpeg,
+            )
+            .expect("jpeg");
+        std::fs::write(&path, &jpeg).expect("write");
+        assert!(rgb8_png(&path, size.0, size.1).is_none());
+        assert_eq!(photo_bytes(&path, size), through_image(&path, size));
     }
 }

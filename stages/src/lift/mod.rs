@@ -365,39 +365,56 @@ pub fn lift_scene(
             });
             continue;
         }
-        let mut table_points = Vec::with_capacity(points.len());
-        let mut ply_points = Vec::with_capacity(points.len());
+        // One pass over the points: each in the table frame, its bytes in the point file, and
+        // the sides of the box at the extremes of the axes (the top at a quantile), each with
+        // the camera-frame point there. `Iterator::min_by` keeps the first of equal minima and
+        // `max_by` the last of equal maxima, and so does this pass (a minimum is replaced by a
+        // smaller value only, a maximum by one not smaller). The trimmed top is selected among
+        // the heights alone: the value at a rank of a total order is the same whatever else
+        // the items hold.
+        let points_file = format!("coarse/points/{instance}.ply");
+        let mut ply = ply::PlyWriter::new(
+            points.len(),
+            &format!("mesa lift: {scene_id} {instance}, table frame, metres"),
+        );
+        let mut heights = Vec::with_capacity(points.len());
+        let first = frame.to_table(points[0].1);
+        let (mut lo_x, mut hi_x, mut hi_y, mut lo_y) = (
+            (first, points[0].1),
+            (first, points[0].1),
+            (first, points[0].1),
+            first,
+        );
+        let mut lo_z = first.z;
         for &(pixel, point) in &points {
             let t = frame.to_table(point);
-            table_points.push((t, point));
-            let rgb = photo.as_ref().map_or([128, 128, 128], |p| p.rgb(pixel));
-            ply_points.push(([t[0] as f32, t[1] as f32, t[2] as f32], rgb));
-        }
-        // Each side of the box at the extreme of its axis (the top at a quantile), with the
-        // camera-frame point there.
-        let top_trim = ((table_points.len() as f64 * config.top_trim).floor() as usize)
-            .min((table_points.len() - 1) / 2);
-        // Linear scans for the extremes and one selection for the trimmed top, not a sort
-        // per axis (the sorts were a sixth of the stage).
-        let by_axis = |axis: usize| {
-            move |a: &&(Vector3<f64>, Vector3<f64>), b: &&(Vector3<f64>, Vector3<f64>)| {
-                a.0[axis].total_cmp(&b.0[axis])
+            if t.x.total_cmp(&lo_x.0.x).is_lt() {
+                lo_x = (t, point);
             }
-        };
-        let first = &table_points[0];
-        let (lo_x, hi_x, hi_y) = (
-            table_points.iter().min_by(by_axis(0)).unwrap_or(first),
-            table_points.iter().max_by(by_axis(0)).unwrap_or(first),
-            table_points.iter().max_by(by_axis(1)).unwrap_or(first),
-        );
-        let lo_y = table_points.iter().min_by(by_axis(1)).unwrap_or(first);
-        let lo_z = table_points.iter().min_by(by_axis(2)).unwrap_or(first).0.z;
-        let mut min = [lo_x.0.x, lo_y.0.y, lo_z];
+            if t.x.total_cmp(&hi_x.0.x).is_ge() {
+                hi_x = (t, point);
+            }
+            if t.y.total_cmp(&hi_y.0.y).is_ge() {
+                hi_y = (t, point);
+            }
+            if t.y.total_cmp(&lo_y.y).is_lt() {
+                lo_y = t;
+            }
+            if t.z.total_cmp(&lo_z).is_lt() {
+                lo_z = t.z;
+            }
+            heights.push(t.z);
+            let rgb = photo.as_ref().map_or([128, 128, 128], |p| p.rgb(pixel));
+            ply.push([t[0] as f32, t[1] as f32, t[2] as f32], rgb);
+        }
+        let top_trim = ((heights.len() as f64 * config.top_trim).floor() as usize)
+            .min((heights.len() - 1) / 2);
+        let mut min = [lo_x.0.x, lo_y.y, lo_z];
         let mut max = [hi_x.0.x, hi_y.0.y, 0.0];
         let edges = [lo_x.1, hi_x.1, hi_y.1];
-        let rank = table_points.len() - 1 - top_trim;
-        let (_, top, _) = table_points.select_nth_unstable_by(rank, |a, b| a.0.z.total_cmp(&b.0.z));
-        max[2] = top.0.z;
+        let rank = heights.len() - 1 - top_trim;
+        let (_, top, _) = heights.select_nth_unstable_by(rank, f64::total_cmp);
+        max[2] = *top;
         if eroded_px < valid.len() {
             // The image's x is the table's x: a pixel there is depth / fx wide.
             min[0] -= config.restore_px * edges[0].z / k.fx;
@@ -418,14 +435,7 @@ pub fn lift_scene(
         let size_cm = SizeCm(std::array::from_fn(|a| {
             ((max[a] - min[a]) * 100.0).max(0.1)
         }));
-        let points_file = format!("coarse/points/{instance}.ply");
-        clouds.push((
-            instance.clone(),
-            ply::write_ply(
-                &ply_points,
-                &format!("mesa lift: {scene_id} {instance}, table frame, metres"),
-            ),
-        ));
+        clouds.push((instance.clone(), ply.finish()));
         lifted.push(LiftedInstance {
             instance,
             mask_id: entry.id,
