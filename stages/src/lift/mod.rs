@@ -1927,6 +1927,55 @@ mod tests {
         assert!(several > 200, "{several}");
     }
 
+    /// [`erode`] against its definition, pixel by pixel: random masks (blobs, noise, lines
+    /// one pixel wide, masks at the image's border) and radii from 0 to 4.
+    #[test]
+    fn erosion_keeps_the_pixels_whose_whole_window_is_in_the_mask() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        for case in 0..300 {
+            let (w, h) = (rng.random_range(1..40usize), rng.random_range(1..40usize));
+            let density = [0.3, 0.7, 0.95, 1.0][case % 4];
+            let (cu, cv) = (rng.random_range(0..w) as f64, rng.random_range(0..h) as f64);
+            let r2 = rng.random_range(1.0..400.0);
+            let set: Vec<bool> = (0..w * h)
+                .map(|p| {
+                    let (u, v) = ((p % w) as f64, (p / w) as f64);
+                    let blob = (u - cu).powi(2) + (v - cv).powi(2) <= r2;
+                    match case % 3 {
+                        0 => blob && rng.random_bool(density),
+                        1 => rng.random_bool(density),
+                        _ => blob || (p / w) % 7 == 3,
+                    }
+                })
+                .collect();
+            let pixels: Vec<u32> = (0..w * h).filter(|&p| set[p]).map(|p| p as u32).collect();
+            let radius = rng.random_range(0..5usize);
+            let expected: Vec<u32> = pixels
+                .iter()
+                .copied()
+                .filter(|&p| {
+                    let (u, v) = ((p as usize % w) as i64, (p as usize / w) as i64);
+                    let r = radius as i64;
+                    (-r..=r).all(|dv| {
+                        (-r..=r).all(|du| {
+                            let (x, y) = (u + du, v + dv);
+                            x >= 0
+                                && y >= 0
+                                && (x as usize) < w
+                                && (y as usize) < h
+                                && set[y as usize * w + x as usize]
+                        })
+                    })
+                })
+                .collect();
+            assert_eq!(
+                erode(&pixels, w, h, radius),
+                expected,
+                "case {case}: {w}×{h}, radius {radius}"
+            );
+        }
+    }
+
     #[test]
     fn erosion_removes_a_border_of_radius_pixels() {
         let (w, h) = (20, 12);
