@@ -304,6 +304,10 @@ pub fn lift_scene(
     let mut clouds = Vec::new();
     let mut label_counts = std::collections::BTreeMap::<String, usize>::new();
     let masks_file = PathBuf::from(&masks.source);
+    // What lift.json and the warnings say of the masks names them within the scene folder
+    // (`input/masks.png`): the same bytes wherever the dataset is (a copy, another node's mount).
+    let scene_dir = input_dir.parent().unwrap_or(input_dir);
+    let masks_in_scene = masks_file.strip_prefix(scene_dir).unwrap_or(&masks_file);
     for entry in instances.iter().filter(|i| !i.support) {
         let label = sanitize_label(&entry.label);
         let index = label_counts.entry(label.clone()).or_insert(0);
@@ -352,7 +356,7 @@ pub fn lift_scene(
                  mask and depth in {}, or lower [lift] min_points to keep it)",
                 points.len(),
                 config.min_points,
-                masks_file.display()
+                masks_in_scene.display()
             );
             warnings.push(format!(
                 "{instance} (instance id {}, \"{}\") dropped: {reason}",
