@@ -540,8 +540,16 @@ fn an_object_with_too_few_points_is_dropped_with_a_warning_and_the_scene_goes_on
     // the dataset is: a copy elsewhere (another node's mount) writes the same bytes.
     let location = scene.dir.path().to_string_lossy().into_owned();
     assert!(!warning.contains(&location), "{warning}");
-    assert!(!dropped[0].reason.contains(&location), "{}", dropped[0].reason);
-    assert!(dropped[0].reason.contains("input/masks.png"), "{}", dropped[0].reason);
+    assert!(
+        !dropped[0].reason.contains(&location),
+        "{}",
+        dropped[0].reason
+    );
+    assert!(
+        dropped[0].reason.contains("input/masks.png"),
+        "{}",
+        dropped[0].reason
+    );
     // The controls: the scene without the thin mask keeps both boxes and drops nothing, and a
     // solid mask of the pen over the same pixels keeps enough points to be lifted (so it is
     // the thinness that drops it, not the place or the label).

@@ -1509,7 +1509,11 @@ mod tests {
     fn columns_split_indices_as_division_does() {
         let check = |width: u32, p: u32| {
             let expected = ((p % width) as usize, (p / width) as usize);
-            assert_eq!(Columns::new(width as usize).uv(p), expected, "{p} in width {width}");
+            assert_eq!(
+                Columns::new(width as usize).uv(p),
+                expected,
+                "{p} in width {width}"
+            );
         };
         let mut widths = vec![1, 2, 3, 640, 1023, 1024, 1025, 1280, u32::MAX - 1, u32::MAX];
         widths.extend((1..32).flat_map(|b| [(1u32 << b) - 1, 1 << b, (1u32 << b) + 1]));
