@@ -1614,21 +1614,33 @@ mod photo_tests {
     use png::{BitDepth, ColorType, Filter};
     use rand::{Rng, SeedableRng};
 
-    /// A PNG of `data` (rows of the colour type's samples), every row filtered with `filter`.
+    /// A kind of PNG the photo reader is given: the colour type and bit depth, the samples,
+    /// the `tRNS` chunk if any, and whether the fast path reads it.
+    type Kind<'a> = ((ColorType, BitDepth), &'a [u8], Option<&'a [u8]>, bool);
+
+    /// The palette of the indexed PNGs: black, red, green and a grey.
+    const PALETTE: [u8; 12] = [0, 0, 0, 255, 0, 0, 0, 255, 0, 9, 8, 7];
+
+    /// A PNG of `data` (rows of the colour type's samples), every row filtered with `filter`;
+    /// an indexed one with [`PALETTE`]; with a `tRNS` chunk when `trns` is given.
     fn encode(
         (width, height): (u32, u32),
-        color: ColorType,
-        depth: BitDepth,
+        (color, depth): (ColorType, BitDepth),
         data: &[u8],
         filter: Filter,
-        setup: impl FnOnce(&mut png::Encoder<&mut Vec<u8>>),
+        trns: Option<&[u8]>,
     ) -> Vec<u8> {
         let mut out = Vec::new();
         let mut encoder = png::Encoder::new(&mut out, width, height);
         encoder.set_color(color);
         encoder.set_depth(depth);
         encoder.set_filter(filter);
-        setup(&mut encoder);
+        if color == ColorType::Indexed {
+            encoder.set_palette(PALETTE.to_vec());
+        }
+        if let Some(trns) = trns {
+            encoder.set_trns(trns.to_vec());
+        }
         let mut writer = encoder.write_header().expect("header");
         writer.write_image_data(data).expect("data");
         writer.finish().expect("end");
@@ -1675,102 +1687,33 @@ mod photo_tests {
             let rgba: Vec<u8> = (0..4 * pixels).map(|_| rng.random()).collect();
             let grey16: Vec<u8> = (0..2 * pixels).map(|_| rng.random()).collect();
             for filter in filters {
-                let kinds: [(Vec<u8>, bool); 7] = [
-                    (
-                        encode(
-                            (width, height),
-                            ColorType::Rgb,
-                            BitDepth::Eight,
-                            &noise,
-                            filter,
-                            |_| {},
-                        ),
-                        true,
-                    ),
-                    (
-                        encode(
-                            (width, height),
-                            ColorType::Rgb,
-                            BitDepth::Eight,
-                            &smooth,
-                            filter,
-                            |_| {},
-                        ),
-                        true,
-                    ),
+                const RGB8: (ColorType, BitDepth) = (ColorType::Rgb, BitDepth::Eight);
+                const INDEXED: (ColorType, BitDepth) = (ColorType::Indexed, BitDepth::Eight);
+                let kinds: [Kind; 7] = [
+                    (RGB8, &noise, None, true),
+                    (RGB8, &smooth, None, true),
                     // A palette without transparency expands to RGB; with it, to RGBA.
+                    (INDEXED, &palette, None, true),
+                    (INDEXED, &palette, Some(&[0, 128]), false),
+                    ((ColorType::Rgba, BitDepth::Eight), &rgba, None, false),
                     (
-                        encode(
-                            (width, height),
-                            ColorType::Indexed,
-                            BitDepth::Eight,
-                            &palette,
-                            filter,
-                            |e| {
-                                e.set_palette(vec![0, 0, 0, 255, 0, 0, 0, 255, 0, 9, 8, 7]);
-                            },
-                        ),
-                        true,
-                    ),
-                    (
-                        encode(
-                            (width, height),
-                            ColorType::Indexed,
-                            BitDepth::Eight,
-                            &palette,
-                            filter,
-                            |e| {
-                                e.set_palette(vec![0, 0, 0, 255, 0, 0, 0, 255, 0, 9, 8, 7]);
-                                e.set_trns(vec![0, 128]);
-                            },
-                        ),
+                        (ColorType::Grayscale, BitDepth::Sixteen),
+                        &grey16,
+                        None,
                         false,
                     ),
-                    (
-                        encode(
-                            (width, height),
-                            ColorType::Rgba,
-                            BitDepth::Eight,
-                            &rgba,
-                            filter,
-                            |_| {},
-                        ),
-                        false,
-                    ),
-                    (
-                        encode(
-                            (width, height),
-                            ColorType::Grayscale,
-                            BitDepth::Sixteen,
-                            &grey16,
-                            filter,
-                            |_| {},
-                        ),
-                        false,
-                    ),
-                    (
-                        encode(
-                            (width, height),
-                            ColorType::Rgb,
-                            BitDepth::Eight,
-                            &noise,
-                            filter,
-                            |e| {
-                                e.set_trns(vec![0, 1, 0, 2, 0, 3]);
-                            },
-                        ),
-                        false,
-                    ),
+                    (RGB8, &noise, Some(&[0, 1, 0, 2, 0, 3]), false),
                 ];
-                for (k, (file, rgb8)) in kinds.iter().enumerate() {
-                    std::fs::write(&path, file).expect("write");
+                for (k, &(kind, data, trns, rgb8)) in kinds.iter().enumerate() {
+                    let file = encode((width, height), kind, data, filter, trns);
+                    std::fs::write(&path, &file).expect("write");
                     let expected = through_image(&path, size).expect("image reads it");
                     assert_eq!(
                         rgb8_png(&path, size.0, size.1).is_some(),
-                        *rgb8,
+                        rgb8,
                         "kind {k}, {filter:?}, {size:?}: which reader"
                     );
-                    fast += usize::from(*rgb8);
+                    fast += usize::from(rgb8);
                     assert_eq!(
                         photo_bytes(&path, size),
                         Ok(expected),
@@ -1791,14 +1734,8 @@ mod photo_tests {
         let data: Vec<u8> = (0..3 * size.0 * size.1)
             .map(|i| (i * 7 % 251) as u8)
             .collect();
-        let file = encode(
-            (40, 30),
-            ColorType::Rgb,
-            BitDepth::Eight,
-            &data,
-            Filter::Paeth,
-            |_| {},
-        );
+        let rgb8 = (ColorType::Rgb, BitDepth::Eight);
+        let file = encode((40, 30), rgb8, &data, Filter::Paeth, None);
         std::fs::write(&path, &file).expect("write");
         assert!(
             rgb8_png(&path, size.0, size.1).is_some(),
