@@ -373,48 +373,32 @@ pub fn lift_scene(
         }
         // One pass over the points: each in the table frame, its bytes in the point file, and
         // the sides of the box at the extremes of the axes (the top at a quantile), each with
-        // the camera-frame point there. `Iterator::min_by` keeps the first of equal minima and
-        // `max_by` the last of equal maxima, and so does this pass (a minimum is replaced by a
-        // smaller value only, a maximum by one not smaller). The trimmed top is selected among
-        // the heights alone: the value at a rank of a total order is the same whatever else
-        // the items hold.
+        // the camera-frame point there ([`Extremes`]). The trimmed top is selected among the
+        // heights alone: the value at a rank of a total order is the same whatever else the
+        // items hold.
         let points_file = format!("coarse/points/{instance}.ply");
         let mut ply = ply::PlyWriter::new(
             points.len(),
             &format!("mesa lift: {scene_id} {instance}, table frame, metres"),
         );
         let mut heights = Vec::with_capacity(points.len());
-        let first = frame.to_table(points[0].1);
-        let (mut lo_x, mut hi_x, mut hi_y, mut lo_y) = (
-            (first, points[0].1),
-            (first, points[0].1),
-            (first, points[0].1),
-            first,
-        );
-        let mut lo_z = first.z;
+        let mut extremes = Extremes::new(frame.to_table(points[0].1), points[0].1);
         for &(pixel, point) in &points {
             let t = frame.to_table(point);
-            if t.x.total_cmp(&lo_x.0.x).is_lt() {
-                lo_x = (t, point);
-            }
-            if t.x.total_cmp(&hi_x.0.x).is_ge() {
-                hi_x = (t, point);
-            }
-            if t.y.total_cmp(&hi_y.0.y).is_ge() {
-                hi_y = (t, point);
-            }
-            if t.y.total_cmp(&lo_y.y).is_lt() {
-                lo_y = t;
-            }
-            if t.z.total_cmp(&lo_z).is_lt() {
-                lo_z = t.z;
-            }
+            extremes.take(t, point);
             heights.push(t.z);
             let rgb = photo.as_ref().map_or([128, 128, 128], |p| p.rgb(pixel));
             ply.push([t[0] as f32, t[1] as f32, t[2] as f32], rgb);
         }
         let top_trim = ((heights.len() as f64 * config.top_trim).floor() as usize)
             .min((heights.len() - 1) / 2);
+        let Extremes {
+            lo_x,
+            hi_x,
+            hi_y,
+            lo_y,
+            lo_z,
+        } = extremes;
         let mut min = [lo_x.0.x, lo_y.y, lo_z];
         let mut max = [hi_x.0.x, hi_y.0.y, 0.0];
         let edges = [lo_x.1, hi_x.1, hi_y.1];
@@ -552,6 +536,57 @@ fn back_project_at(
         (v as f64 - k.cy) * d / k.fy,
         d,
     ))
+}
+
+/// A table-frame point with the camera-frame point it came from.
+type FramedPoint = (Vector3<f64>, Vector3<f64>);
+
+/// The sides of an object's box, taken point by point: the least and greatest table x and the
+/// greatest table y, each with its camera-frame point (the box is widened there by the
+/// restored pixels), and the least table y and z. Equal values are chosen as
+/// `Iterator::min_by` and `max_by` by `total_cmp` choose them (what this replaced): the first
+/// of equal minima, the last of equal maxima.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Extremes {
+    lo_x: FramedPoint,
+    hi_x: FramedPoint,
+    hi_y: FramedPoint,
+    lo_y: Vector3<f64>,
+    lo_z: f64,
+}
+
+impl Extremes {
+    /// The extremes of one point.
+    fn new(t: Vector3<f64>, point: Vector3<f64>) -> Self {
+        Self {
+            lo_x: (t, point),
+            hi_x: (t, point),
+            hi_y: (t, point),
+            lo_y: t,
+            lo_z: t.z,
+        }
+    }
+
+    /// Takes in the next point: a minimum is replaced by a smaller value only, a maximum by
+    /// one not smaller.
+    #[inline]
+    fn take(&mut self, t: Vector3<f64>, point: Vector3<f64>) {
+        if t.x.total_cmp(&self.lo_x.0.x).is_lt() {
+            self.lo_x = (t, point);
+        }
+        if t.x.total_cmp(&self.hi_x.0.x).is_ge() {
+            self.hi_x = (t, point);
+        }
+        if t.y.total_cmp(&self.hi_y.0.y).is_ge() {
+            self.hi_y = (t, point);
+        }
+        if t.y.total_cmp(&self.lo_y.y).is_lt() {
+            self.lo_y = t;
+        }
+        if t.z.total_cmp(&self.lo_z).is_lt() {
+            self.lo_z = t.z;
+        }
+    }
 }
 
 /// The column and row of row-major pixel indices of an image `width` pixels wide, by a
@@ -1501,6 +1536,55 @@ impl<'a> WeightedQuantiles<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`Extremes`] chooses what `min_by` and `max_by` by `total_cmp` chose over the whole
+    /// list (the code it replaced, kept here word for word), on lists whose coordinates tie
+    /// often (five values, both zeros among them) and whose camera-frame points all differ.
+    #[test]
+    fn extremes_are_those_of_min_by_and_max_by() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(23);
+        let values = [-1.0, -0.0, 0.0, 1.0, 2.0];
+        for case in 0..5_000 {
+            let len = rng.random_range(1..24);
+            let table_points: Vec<FramedPoint> = (0..len)
+                .map(|i| {
+                    let mut pick = || values[rng.random_range(0..values.len())];
+                    let t = Vector3::new(pick(), pick(), pick());
+                    (t, Vector3::new(i as f64, 0.0, 1.0 + i as f64))
+                })
+                .collect();
+            let by_axis = |axis: usize| {
+                move |a: &&FramedPoint, b: &&FramedPoint| a.0[axis].total_cmp(&b.0[axis])
+            };
+            let first = &table_points[0];
+            let expected = Extremes {
+                lo_x: *table_points.iter().min_by(by_axis(0)).unwrap_or(first),
+                hi_x: *table_points.iter().max_by(by_axis(0)).unwrap_or(first),
+                hi_y: *table_points.iter().max_by(by_axis(1)).unwrap_or(first),
+                lo_y: table_points.iter().min_by(by_axis(1)).unwrap_or(first).0,
+                lo_z: table_points.iter().min_by(by_axis(2)).unwrap_or(first).0.z,
+            };
+            let mut extremes = Extremes::new(first.0, first.1);
+            for &(t, point) in &table_points {
+                extremes.take(t, point);
+            }
+            // Bits, not values: -0.0 and 0.0 are told apart.
+            let bits = |e: &Extremes| {
+                [
+                    e.lo_x.0, e.lo_x.1, e.hi_x.0, e.hi_x.1, e.hi_y.0, e.hi_y.1, e.lo_y,
+                ]
+                .iter()
+                .flat_map(|v| v.iter().map(|c| c.to_bits()).collect::<Vec<_>>())
+                .chain([e.lo_z.to_bits()])
+                .collect::<Vec<_>>()
+            };
+            assert_eq!(
+                bits(&extremes),
+                bits(&expected),
+                "case {case}: {table_points:?}"
+            );
+        }
+    }
 
     /// `Columns::uv` is the division's quotient and remainder: widths at the edges (1, powers
     /// of two and their neighbours, the largest) with indices at the ends of rows, and random
