@@ -71,6 +71,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::annotations::Annotations;
+use crate::pieces::{Fixed, Pieces, Text};
 
 // ---------------------------------------------------------------------------------------------
 // Thresholds (SCENE_GRAPH.md). They are fixed: the published records were made with them.
@@ -648,17 +649,34 @@ impl GridCell {
 
     /// What follows the subject in its `is at` line: `, is at, <label>)`.
     fn is_at_tail(self) -> &'static str {
-        match (self.y, self.x) {
-            (YBand::Front, XBand::Left) => ", is at, front_left)",
-            (YBand::Front, XBand::Middle) => ", is at, front_middle)",
-            (YBand::Front, XBand::Right) => ", is at, front_right)",
-            (YBand::Middle, XBand::Left) => ", is at, middle_left)",
-            (YBand::Middle, XBand::Middle) => ", is at, center)",
-            (YBand::Middle, XBand::Right) => ", is at, middle_right)",
-            (YBand::Back, XBand::Left) => ", is at, back_left)",
-            (YBand::Back, XBand::Middle) => ", is at, back_middle)",
-            (YBand::Back, XBand::Right) => ", is at, back_right)",
-        }
+        let end = self.is_at_line_end().text();
+        &end[..end.len() - 1]
+    }
+
+    /// What follows the subject in its line of `graph.txt`: `, is at, <label>)\n`.
+    fn is_at_line_end(self) -> &'static Fixed {
+        const ENDS: [Fixed; 9] = [
+            Fixed::new(", is at, front_left)\n"),
+            Fixed::new(", is at, front_middle)\n"),
+            Fixed::new(", is at, front_right)\n"),
+            Fixed::new(", is at, middle_left)\n"),
+            Fixed::new(", is at, center)\n"),
+            Fixed::new(", is at, middle_right)\n"),
+            Fixed::new(", is at, back_left)\n"),
+            Fixed::new(", is at, back_middle)\n"),
+            Fixed::new(", is at, back_right)\n"),
+        ];
+        let row = match self.y {
+            YBand::Front => 0,
+            YBand::Middle => 3,
+            YBand::Back => 6,
+        };
+        let column = match self.x {
+            XBand::Left => 0,
+            XBand::Middle => 1,
+            XBand::Right => 2,
+        };
+        &ENDS[row + column]
     }
 
     /// `<y band>_<x band>`, or `center` for the middle cell.
@@ -749,16 +767,23 @@ impl Facing {
 
     /// What follows the subject in its `face to` line: `, face to, <label>)`.
     fn face_to_tail(self) -> &'static str {
-        match self {
-            Self::Front => ", face to, front)",
-            Self::FrontRight => ", face to, front_right)",
-            Self::Right => ", face to, right)",
-            Self::BackRight => ", face to, back_right)",
-            Self::Back => ", face to, back)",
-            Self::BackLeft => ", face to, back_left)",
-            Self::Left => ", face to, left)",
-            Self::FrontLeft => ", face to, front_left)",
-        }
+        let end = self.face_to_line_end().text();
+        &end[..end.len() - 1]
+    }
+
+    /// What follows the subject in its line of `graph.txt`: `, face to, <label>)\n`.
+    fn face_to_line_end(self) -> &'static Fixed {
+        const ENDS: [Fixed; 8] = [
+            Fixed::new(", face to, front)\n"),
+            Fixed::new(", face to, front_right)\n"),
+            Fixed::new(", face to, right)\n"),
+            Fixed::new(", face to, back_right)\n"),
+            Fixed::new(", face to, back)\n"),
+            Fixed::new(", face to, back_left)\n"),
+            Fixed::new(", face to, left)\n"),
+            Fixed::new(", face to, front_left)\n"),
+        ];
+        &ENDS[self as usize]
     }
 
     /// The label, like `front_right`.
@@ -810,6 +835,19 @@ impl Relation {
             Self::InFrontOf => "in front of",
             Self::Behind => "behind",
         }
+    }
+
+    /// What stands between the subject and the object in a line: `, <label>, `.
+    fn between(self) -> &'static Fixed {
+        const BETWEEN: [Fixed; 6] = [
+            Fixed::new(", in, "),
+            Fixed::new(", above, "),
+            Fixed::new(", left of, "),
+            Fixed::new(", right of, "),
+            Fixed::new(", in front of, "),
+            Fixed::new(", behind, "),
+        ];
+        &BETWEEN[self as usize]
     }
 
     /// The horizontal relation of a subject to an object from their centre offsets
@@ -965,6 +1003,9 @@ pub struct Edge<'a> {
     pub object: &'a str,
     /// The numbers that decided it.
     pub evidence: Evidence,
+    /// The layout indices of the subject and the object: where [`SceneGraph::to_text`] finds
+    /// their names among the nodes' (it checks that they are the same).
+    indices: [usize; 2],
 }
 
 impl Edge<'_> {
@@ -1109,12 +1150,51 @@ impl SceneGraph<'_> {
     }
 
     /// `graph.txt`: the triplet lines, each ending with a newline.
+    ///
+    /// The lines of [`Self::triplet_lines`], written by fixed-width copies (see
+    /// [`crate::pieces`]): each node's name, behind its `(`, is kept once, and an edge's names
+    /// are found by its layout indices. An edge whose names are not those of the nodes at its
+    /// indices (a graph edited by hand), and the equally-spaced triples, are written piece by
+    /// piece instead.
     pub fn to_text(&self) -> String {
+        const LINE_END: Fixed = Fixed::new(")\n");
+        let names = Pieces::new("(", self.nodes.iter().map(|node| node.instance));
         // About 40 bytes a line; one growth at most for long names.
         let lines = 2 * self.nodes.len() + self.edges.len() + self.equally_spaced.len();
-        let mut text = String::with_capacity(40 * lines);
-        self.write_lines(&mut text, |text| text.push('\n'));
-        text
+        let mut text = Text::with_capacity(40 * lines);
+        for (i, node) in self.nodes.iter().enumerate() {
+            text.prefixed(&names, i);
+            text.fixed(node.is_at.is_at_line_end());
+            text.prefixed(&names, i);
+            text.fixed(node.face_to.face_to_line_end());
+        }
+        let mut line = String::new();
+        for edge in &self.edges {
+            let [s, o] = edge.indices;
+            let named = |i: usize, name: &str| {
+                self.nodes
+                    .get(i)
+                    .is_some_and(|node| std::ptr::eq(node.instance, name))
+            };
+            if named(s, edge.subject) && named(o, edge.object) {
+                text.prefixed(&names, s);
+                text.fixed(edge.relation.between());
+                text.bare(&names, o);
+                text.fixed(&LINE_END);
+            } else {
+                line.clear();
+                edge.push_triplet(&mut line);
+                line.push('\n');
+                text.str(&line);
+            }
+        }
+        for spacing in &self.equally_spaced {
+            line.clear();
+            spacing.push_triplet(&mut line);
+            line.push('\n');
+            text.str(&line);
+        }
+        text.into_string()
     }
 
     /// The bytes of `graph.json` (`mesa.graph/1`) of a scene: those of
@@ -1564,6 +1644,7 @@ fn extract<'a>(
                 relation: Relation::In,
                 object: name(*c),
                 evidence: *evidence,
+                indices: [s, *c],
             });
         }
     }
@@ -1590,6 +1671,7 @@ fn extract<'a>(
                 relation: Relation::Above,
                 object: name(o),
                 evidence,
+                indices: [s, o],
             });
         }
     }
@@ -1607,6 +1689,7 @@ fn extract<'a>(
             relation,
             object: name(o),
             evidence,
+            indices: [s, o],
         }
     }));
     let equally_spaced = if options.equally_spaced {
@@ -3434,13 +3517,18 @@ mod tests {
         }
     }
 
-    /// A node's line is written with its tail in one piece: the tails are the labels'.
+    /// A node's line is written with its tail in one piece, and an edge's relation with its
+    /// separators: the pieces are the labels'.
     #[test]
-    fn node_line_tails_are_the_labels() {
+    fn line_pieces_are_the_labels() {
         for y in [YBand::Front, YBand::Middle, YBand::Back] {
             for x in [XBand::Left, XBand::Middle, XBand::Right] {
                 let cell = GridCell { y, x };
                 assert_eq!(cell.is_at_tail(), format!(", is at, {})", cell.label()));
+                assert_eq!(
+                    cell.is_at_line_end().text(),
+                    format!(", is at, {})\n", cell.label())
+                );
             }
         }
         for facing in Facing::ALL {
@@ -3448,6 +3536,67 @@ mod tests {
                 facing.face_to_tail(),
                 format!(", face to, {})", facing.label())
             );
+            assert_eq!(
+                facing.face_to_line_end().text(),
+                format!(", face to, {})\n", facing.label())
+            );
+        }
+        for relation in [
+            Relation::In,
+            Relation::Above,
+            Relation::LeftOf,
+            Relation::RightOf,
+            Relation::InFrontOf,
+            Relation::Behind,
+        ] {
+            assert_eq!(
+                relation.between().text(),
+                format!(", {}, ", relation.label())
+            );
+        }
+    }
+
+    /// The triplet lines, each ending with a newline: what `to_text` writes, piece by piece.
+    fn text_of_lines(graph: &SceneGraph) -> String {
+        graph
+            .triplet_lines()
+            .into_iter()
+            .map(|line| line + "\n")
+            .collect()
+    }
+
+    proptest! {
+        /// `to_text` is the triplet lines, each ending with a newline, whatever the names:
+        /// empty of letters, a few bytes, around and beyond the 32-byte copies, not ASCII. A
+        /// graph whose edges were edited to name other strings (or names of other nodes)
+        /// than those at their indices is written as edited.
+        #[test]
+        fn text_is_the_triplet_lines(
+            s in arb_scene(),
+            names in prop::collection::vec("[a-zé_ 0-9(),]{0,70}", 14),
+            equally_spaced in any::<bool>(),
+            edit in any::<prop::sample::Index>(),
+        ) {
+            let mut s = s;
+            for (i, object) in s.objects.iter_mut().enumerate() {
+                // Unique, and never blank (the check refuses blank names).
+                object.instance = format!("{}#{i}", names[i]);
+            }
+            let options = GraphOptions::default().with_equally_spaced(equally_spaced);
+            let flags = keyword_containers(&s, &options);
+            let graph = extract_graph(&s, &flags, &options).expect("valid");
+            prop_assert_eq!(graph.to_text(), text_of_lines(&graph));
+            if !graph.edges.is_empty() {
+                let edited_name = "edited, by hand".to_owned();
+                let mut edited = graph.clone();
+                let i = edit.index(edited.edges.len());
+                edited.edges[i].subject = &edited_name;
+                let other = edited.nodes[edit.index(edited.nodes.len())].instance;
+                edited.edges[i].object = other;
+                let text = edited.to_text();
+                prop_assert_eq!(&text, &text_of_lines(&edited));
+                prop_assert!(text.contains("(edited, by hand, "));
+            }
         }
     }
 

@@ -49,6 +49,7 @@ pub mod mesh;
 pub mod pack;
 pub mod paths;
 pub mod pickle;
+mod pieces;
 pub mod place;
 pub mod raster;
 pub mod records;
