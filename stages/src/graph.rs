@@ -56,7 +56,7 @@
 //! along` (off by default) is about triples: its output alone can grow with n², and its
 //! search stays quadratic in n.
 
-use std::cell::OnceCell;
+use std::cell::{OnceCell, RefCell};
 use std::collections::BTreeMap;
 use std::fmt;
 
@@ -1511,12 +1511,73 @@ pub fn extract_graph<'a>(
     containers: &[bool],
     options: &GraphOptions,
 ) -> Result<SceneGraph<'a>, GraphError> {
-    let search = if scene.objects.len() <= ALL_PAIRS_UP_TO_OBJECTS {
-        PairSearch::AllPairs
-    } else {
-        PairSearch::Grid
-    };
-    extract(scene, containers, options, search)
+    if scene.objects.len() > ALL_PAIRS_UP_TO_OBJECTS {
+        // Lists as large as this scene's are not kept for the next one.
+        return extract(
+            scene,
+            containers,
+            options,
+            PairSearch::Grid,
+            &mut Scratch::default(),
+        );
+    }
+    SCRATCH.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut scratch) => extract(
+            scene,
+            containers,
+            options,
+            PairSearch::AllPairs,
+            &mut scratch,
+        ),
+        // Never, as `extract` calls no one who extracts, but a fresh set of lists would do.
+        Err(_) => extract(
+            scene,
+            containers,
+            options,
+            PairSearch::AllPairs,
+            &mut Scratch::default(),
+        ),
+    })
+}
+
+thread_local! {
+    /// The lists of the last table-sized scene extracted on this thread, for the next one.
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+/// The working lists of an extraction, kept from one table-sized scene to the next on a
+/// thread ([`extract_graph`]): a table's graph takes a dozen lists of a few dozen items, and
+/// allocating and freeing them took a tenth of its time (2026-12-07). Each user clears what it
+/// takes; nothing is read that the same extraction did not write.
+#[derive(Default)]
+struct Scratch {
+    solids: Vec<Solid>,
+    /// The candidates of one subject (`Overlaps`).
+    near: Vec<usize>,
+    /// The containers, in layout order.
+    listed: Vec<usize>,
+    container_of: Vec<Option<(usize, Evidence)>>,
+    free: Vec<usize>,
+    is_free: Vec<bool>,
+    pairs: PairScratch,
+}
+
+/// The working lists of the horizontal pairs' search.
+#[derive(Default)]
+struct PairScratch {
+    /// The subjects in visiting order, and the raised flag of every object
+    /// ([`visiting_order`]).
+    visit: Vec<usize>,
+    raised: Vec<bool>,
+    /// Whether a pair was written, either way round (n × n).
+    emitted: Vec<bool>,
+    /// The free objects' centres.
+    centres: Vec<[f64; 3]>,
+    /// A subject's candidates near enough in space, with their plane distance.
+    near: Vec<(f64, usize)>,
+    /// The pairs in visiting order, then grouped by subject ([`group_by_subject`]).
+    pairs: Vec<Pair>,
+    grouped: Vec<Pair>,
 }
 
 /// How the pairs that may be related are found.
@@ -1598,6 +1659,7 @@ fn extract<'a>(
     containers: &[bool],
     options: &GraphOptions,
     search: PairSearch,
+    scratch: &mut Scratch,
 ) -> Result<SceneGraph<'a>, GraphError> {
     scene.check()?;
     if containers.len() != scene.objects.len() {
@@ -1606,7 +1668,18 @@ fn extract<'a>(
             objects: scene.objects.len(),
         });
     }
-    let solids: Vec<Solid> = scene.objects.iter().map(Solid::new).collect();
+    let Scratch {
+        solids,
+        near,
+        listed,
+        container_of,
+        free,
+        is_free,
+        pairs: pair_scratch,
+    } = scratch;
+    solids.clear();
+    solids.extend(scene.objects.iter().map(Solid::new));
+    let solids = &solids[..];
     let name = |i: usize| scene.objects[i].instance.as_str();
     let [x_min, x_max, y_min, y_max] = scene.zone_cm;
     let (width, depth) = (x_max - x_min, y_max - y_min);
@@ -1629,13 +1702,12 @@ fn extract<'a>(
         .collect();
 
     let overlaps = match search {
-        PairSearch::Grid => Overlaps::Grid(BoxGrid::new(&solids)),
+        PairSearch::Grid => Overlaps::Grid(BoxGrid::new(solids)),
         PairSearch::AllPairs => Overlaps::All,
         #[cfg(test)]
         PairSearch::Literal => Overlaps::All,
     };
-    let mut near = Vec::with_capacity(solids.len());
-    let container_of = containment(&solids, containers, &overlaps, &mut near);
+    containment(solids, containers, &overlaps, near, listed, container_of);
     let mut edges = Vec::with_capacity((NEIGHBOURS_PER_SUBJECT + 1) * solids.len());
     for (s, found) in container_of.iter().enumerate() {
         if let Some((c, evidence)) = found {
@@ -1649,10 +1721,11 @@ fn extract<'a>(
         }
     }
     // Objects that take part in the other relations, in layout order.
-    let free: Vec<usize> = (0..solids.len())
-        .filter(|&i| container_of[i].is_none())
-        .collect();
-    let is_free: Vec<bool> = container_of.iter().map(Option::is_none).collect();
+    free.clear();
+    free.extend((0..solids.len()).filter(|&i| container_of[i].is_none()));
+    is_free.clear();
+    is_free.extend(container_of.iter().map(Option::is_none));
+    let (free, is_free) = (&free[..], &is_free[..]);
     // The lowest `z_max - ABOVE_Z_TOLERANCE_CM` of the free objects, as `support_of` computes
     // it: an object whose bottom is not above it would have every candidate rejected there,
     // so it is not searched (most objects stand on the table).
@@ -1660,12 +1733,12 @@ fn extract<'a>(
         .iter()
         .map(|&o| solids[o].z_max - ABOVE_Z_TOLERANCE_CM)
         .fold(f64::INFINITY, f64::min);
-    for &s in &free {
+    for &s in free {
         if solids[s].z_min <= lowest_reach && !search.is_literal() {
             continue;
         }
-        let near = overlaps.free_of(&solids, s, &free, &is_free, &mut near);
-        if let Some((o, evidence)) = support_of(s, &solids, near) {
+        let near = overlaps.free_of(solids, s, free, is_free, near);
+        if let Some((o, evidence)) = support_of(s, solids, near) {
             edges.push(Edge {
                 subject: name(s),
                 relation: Relation::Above,
@@ -1677,13 +1750,16 @@ fn extract<'a>(
     }
     let max_distance_cm = NEIGHBOUR_MAX_DISTANCE_SHARE * width.max(depth);
     let pairs = match search {
-        PairSearch::Grid => nearest_pairs(&solids, &free, max_distance_cm),
-        PairSearch::AllPairs => horizontal_pairs(&solids, &free, max_distance_cm),
+        PairSearch::Grid => nearest_pairs(solids, free, max_distance_cm, pair_scratch),
+        PairSearch::AllPairs => horizontal_pairs(solids, free, max_distance_cm, pair_scratch),
         #[cfg(test)]
-        PairSearch::Literal => literal_pairs(&solids, &free, max_distance_cm),
+        PairSearch::Literal => {
+            pair_scratch.grouped = literal_pairs(solids, free, max_distance_cm);
+            &pair_scratch.grouped
+        }
     };
-    edges.extend(pairs.into_iter().map(|(s, o, rank)| {
-        let (relation, evidence) = proximity(s, o, &solids, max_distance_cm, rank);
+    edges.extend(pairs.iter().map(|&(s, o, rank)| {
+        let (relation, evidence) = proximity(s, o, solids, max_distance_cm, rank);
         Edge {
             subject: name(s),
             relation,
@@ -1693,7 +1769,7 @@ fn extract<'a>(
         }
     }));
     let equally_spaced = if options.equally_spaced {
-        spacings(&solids, &free, &scene.objects)
+        spacings(solids, free, &scene.objects)
     } else {
         Vec::new()
     };
@@ -1746,27 +1822,29 @@ fn containment(
     containers: &[bool],
     overlaps: &Overlaps,
     near: &mut Vec<usize>,
-) -> Vec<Option<(usize, Evidence)>> {
-    let listed: Vec<usize> = (0..solids.len()).filter(|&c| containers[c]).collect();
-    (0..solids.len())
-        .map(|s| {
-            let mut best: Option<(usize, Evidence)> = None;
-            for &c in overlaps.containers_of(solids, s, &listed, near) {
-                let Some(evidence) = containment_evidence(s, c, solids, containers) else {
-                    continue;
-                };
-                let s_is_lower = (solids[s].z, s) < (solids[c].z, c);
-                if s_is_lower && containment_evidence(c, s, solids, containers).is_some() {
-                    continue;
-                }
-                // Strictly smaller wins, so the earliest of equal areas stays.
-                if best.is_none_or(|(b, _)| solids[c].area() < solids[b].area()) {
-                    best = Some((c, evidence));
-                }
+    listed: &mut Vec<usize>,
+    container_of: &mut Vec<Option<(usize, Evidence)>>,
+) {
+    listed.clear();
+    listed.extend((0..solids.len()).filter(|&c| containers[c]));
+    container_of.clear();
+    container_of.extend((0..solids.len()).map(|s| {
+        let mut best: Option<(usize, Evidence)> = None;
+        for &c in overlaps.containers_of(solids, s, listed, near) {
+            let Some(evidence) = containment_evidence(s, c, solids, containers) else {
+                continue;
+            };
+            let s_is_lower = (solids[s].z, s) < (solids[c].z, c);
+            if s_is_lower && containment_evidence(c, s, solids, containers).is_some() {
+                continue;
             }
-            best
-        })
-        .collect()
+            // Strictly smaller wins, so the earliest of equal areas stays.
+            if best.is_none_or(|(b, _)| solids[c].area() < solids[b].area()) {
+                best = Some((c, evidence));
+            }
+        }
+        best
+    }));
 }
 
 /// What `s` is above, if anything: of the qualifying objects, the one with the highest top
@@ -1803,15 +1881,20 @@ type Pair = (usize, usize, usize);
 
 /// The subjects in the order the horizontal rule visits them: the free objects that are not
 /// raised in layout order, then the raised ones; with the raised flag of every object.
-fn visiting_order(solids: &[Solid], free: &[usize]) -> (Vec<usize>, Vec<bool>) {
-    let raised: Vec<bool> = solids.iter().map(|s| s.z_min > RAISED_Z_MIN_CM).collect();
-    let visit = free
-        .iter()
-        .filter(|&&i| !raised[i])
-        .chain(free.iter().filter(|&&i| raised[i]))
-        .copied()
-        .collect();
-    (visit, raised)
+fn visiting_order(
+    solids: &[Solid],
+    free: &[usize],
+    visit: &mut Vec<usize>,
+    raised: &mut Vec<bool>,
+) {
+    raised.clear();
+    raised.extend(solids.iter().map(|s| s.z_min > RAISED_Z_MIN_CM));
+    visit.clear();
+    visit.extend(
+        free.iter()
+            .filter(|&&i| !raised[i])
+            .chain(free.iter().filter(|&&i| raised[i])),
+    );
 }
 
 /// The relation of the pair (s, o), of rank `rank` (from 0) among the kept neighbours of
@@ -1846,23 +1929,40 @@ fn proximity(
 /// The rules rank all objects by plane distance, drop those too far in space and keep the
 /// first 5: the same as keeping the 5 nearest of those near enough in space, which is what is
 /// done here, by insertion into a list of 5 (ties: layout order, as a stable ranking gives).
-fn horizontal_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> Vec<Pair> {
+fn horizontal_pairs<'p>(
+    solids: &[Solid],
+    free: &[usize],
+    max_distance_cm: f64,
+    scratch: &'p mut PairScratch,
+) -> &'p [Pair] {
     let n = solids.len();
-    let (visit, raised) = visiting_order(solids, free);
-    let mut emitted = vec![false; n * n];
-    let mut pairs: Vec<Pair> = Vec::with_capacity(NEIGHBOURS_PER_SUBJECT * free.len());
+    let PairScratch {
+        visit,
+        raised,
+        emitted,
+        centres,
+        near,
+        pairs,
+        grouped,
+    } = scratch;
+    visiting_order(solids, free, visit, raised);
+    emitted.clear();
+    emitted.resize(n * n, false);
+    pairs.clear();
     let within = Within::new(max_distance_cm);
-    let centres: Vec<[f64; 3]> = free
-        .iter()
-        .map(|&o| [solids[o].x, solids[o].y, solids[o].z])
-        .collect();
+    centres.clear();
+    centres.extend(
+        free.iter()
+            .map(|&o| [solids[o].x, solids[o].y, solids[o].z]),
+    );
     // The candidates near enough in space, in layout order, with their plane distance: on
     // the demo's tables, 7.4 of a subject's 13 others, so the ranking below looks at about
     // half as many as it would over every free object.
-    let mut near = vec![(f64::INFINITY, 0usize); free.len()];
+    near.clear();
+    near.resize(free.len(), (f64::INFINITY, 0usize));
     // Where the pairs of the raised subjects begin.
     let mut raised_from = 0;
-    for s in visit {
+    for &s in visit.iter() {
         let ss = &solids[s];
         // Without a jump per candidate: whether a pair is near enough is no better than a coin
         // toss for the branch predictor. Each candidate is written to the next free place, which
@@ -1912,7 +2012,7 @@ fn horizontal_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> V
             raised_from = pairs.len();
         }
     }
-    group_by_subject(pairs, raised_from)
+    group_by_subject(pairs, raised_from, grouped)
 }
 
 /// The pairs grouped by subject in layout order, each group in the order its pairs were
@@ -1920,12 +2020,16 @@ fn horizontal_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> V
 /// the subjects: those of the subjects that are not raised, in layout order, then from
 /// `raised_from` on those of the raised ones, in layout order. A merge of the two runs is what
 /// a stable sort by subject gives, without sorting.
-fn group_by_subject(pairs: Vec<Pair>, raised_from: usize) -> Vec<Pair> {
+fn group_by_subject<'p>(
+    pairs: &'p [Pair],
+    raised_from: usize,
+    grouped: &'p mut Vec<Pair>,
+) -> &'p [Pair] {
     if raised_from == 0 || raised_from == pairs.len() {
         return pairs;
     }
     let (low, high) = pairs.split_at(raised_from);
-    let mut grouped = Vec::with_capacity(pairs.len());
+    grouped.clear();
     let (mut i, mut j) = (0, 0);
     while i < low.len() && j < high.len() {
         // A subject is raised or not: its pairs are all in one run.
@@ -2001,14 +2105,26 @@ fn literal_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> Vec<
 /// [`horizontal_pairs`] without ranking every object: each subject's neighbours are searched
 /// ring by ring outward in a grid of the centres until the 5 nearest within the distance limit
 /// are certain (no unseen centre can come before them), or the rings pass the limit.
-fn nearest_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> Vec<Pair> {
-    let (visit, raised) = visiting_order(solids, free);
+fn nearest_pairs<'p>(
+    solids: &[Solid],
+    free: &[usize],
+    max_distance_cm: f64,
+    scratch: &'p mut PairScratch,
+) -> &'p [Pair] {
+    let PairScratch {
+        visit,
+        raised,
+        near: found,
+        pairs,
+        grouped,
+        ..
+    } = scratch;
+    visiting_order(solids, free, visit, raised);
     let grid = CentreGrid::new(solids, free);
     let mut emitted: std::collections::HashSet<(usize, usize)> = std::collections::HashSet::new();
-    let mut pairs: Vec<Pair> = Vec::with_capacity(NEIGHBOURS_PER_SUBJECT * free.len());
-    let mut found: Vec<(f64, usize)> = Vec::new();
+    pairs.clear();
     let mut raised_from = 0;
-    for s in visit {
+    for &s in visit.iter() {
         let ss = &solids[s];
         found.clear();
         let (cx, cy) = grid.cell_of(ss.x, ss.y);
@@ -2044,7 +2160,7 @@ fn nearest_pairs(solids: &[Solid], free: &[usize], max_distance_cm: f64) -> Vec<
             raised_from = pairs.len();
         }
     }
-    group_by_subject(pairs, raised_from)
+    group_by_subject(pairs, raised_from, grouped)
 }
 
 /// The bounds of a set of 2-D boxes and a uniform grid over them of about `cells_per_item`
@@ -2537,7 +2653,7 @@ mod tests {
             let pairs: Vec<Pair> = low.iter().chain(high).copied().collect();
             let mut sorted = pairs.clone();
             sorted.sort_by_key(|pair| pair.0);
-            assert_eq!(group_by_subject(pairs.clone(), low.len()), sorted);
+            assert_eq!(group_by_subject(&pairs, low.len(), &mut Vec::new()), sorted);
             if !low.is_empty() && !high.is_empty() {
                 assert_ne!(pairs, sorted, "the control: the runs need merging");
             }
@@ -3388,13 +3504,34 @@ mod tests {
         let s = scene([0.0, width, 0.0, depth], objects);
         let options = GraphOptions::default();
         let flags = keyword_containers(&s, &options);
-        let fast = extract(&s, &flags, &options, PairSearch::Grid).expect("valid");
-        let oracle = extract(&s, &flags, &options, PairSearch::Literal).expect("valid");
+        let fast = extract(
+            &s,
+            &flags,
+            &options,
+            PairSearch::Grid,
+            &mut Scratch::default(),
+        )
+        .expect("valid");
+        let oracle = extract(
+            &s,
+            &flags,
+            &options,
+            PairSearch::Literal,
+            &mut Scratch::default(),
+        )
+        .expect("valid");
         assert!(fast.edges.len() > count, "{}", fast.edges.len());
         assert!(fast.edges.iter().any(|e| e.relation == Relation::In));
         assert!(fast.edges.iter().any(|e| e.relation == Relation::Above));
         assert_eq!(fast, oracle);
-        let all_pairs = extract(&s, &flags, &options, PairSearch::AllPairs).expect("valid");
+        let all_pairs = extract(
+            &s,
+            &flags,
+            &options,
+            PairSearch::AllPairs,
+            &mut Scratch::default(),
+        )
+        .expect("valid");
         assert_eq!(all_pairs, oracle);
     }
 
@@ -3553,6 +3690,31 @@ mod tests {
                 relation.between().text(),
                 format!(", {}, ", relation.label())
             );
+        }
+    }
+
+    proptest! {
+        /// An extraction's lists kept from scene to scene change nothing: two scenes extracted
+        /// one after the other with the same lists, each both ways round (the larger first,
+        /// then the smaller, which finds longer lists than it fills), give what fresh lists
+        /// give, with every kind of search.
+        #[test]
+        fn kept_lists_change_nothing(
+            a in arb_scene(),
+            b in arb_scene(),
+            equally_spaced in any::<bool>(),
+        ) {
+            let options = GraphOptions::default().with_equally_spaced(equally_spaced);
+            let searches = [PairSearch::AllPairs, PairSearch::Grid, PairSearch::Literal];
+            for search in searches {
+                let mut kept = Scratch::default();
+                for s in [&a, &b, &a] {
+                    let flags = keyword_containers(s, &options);
+                    let fresh = extract(s, &flags, &options, search, &mut Scratch::default());
+                    let reused = extract(s, &flags, &options, search, &mut kept);
+                    prop_assert_eq!(reused, fresh);
+                }
+            }
         }
     }
 
@@ -3844,10 +4006,10 @@ mod tests {
         ) {
             let options = GraphOptions::default().with_equally_spaced(equally_spaced);
             let flags = keyword_containers(&s, &options);
-            let oracle = extract(&s, &flags, &options, PairSearch::Literal).expect("valid");
-            let fast = extract(&s, &flags, &options, PairSearch::Grid).expect("valid");
+            let oracle = extract(&s, &flags, &options, PairSearch::Literal, &mut Scratch::default()).expect("valid");
+            let fast = extract(&s, &flags, &options, PairSearch::Grid, &mut Scratch::default()).expect("valid");
             prop_assert_eq!(&fast, &oracle);
-            let all_pairs = extract(&s, &flags, &options, PairSearch::AllPairs).expect("valid");
+            let all_pairs = extract(&s, &flags, &options, PairSearch::AllPairs, &mut Scratch::default()).expect("valid");
             prop_assert_eq!(&all_pairs, &oracle);
             // What callers get: the all-pairs search for a table's few objects, else the grids.
             let chosen = extract_graph(&s, &flags, &options).expect("valid");
@@ -3861,7 +4023,7 @@ mod tests {
         ) {
             let options = GraphOptions::default().with_equally_spaced(equally_spaced);
             let flags = keyword_containers(&s, &options);
-            let oracle = extract(&s, &flags, &options, PairSearch::Literal).expect("valid");
+            let oracle = extract(&s, &flags, &options, PairSearch::Literal, &mut Scratch::default()).expect("valid");
             prop_assert_eq!(extract_graph(&s, &flags, &options).expect("valid"), oracle);
         }
 
