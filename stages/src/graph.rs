@@ -71,7 +71,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::annotations::Annotations;
-use crate::pieces::{Fixed, Pieces, Text};
+use crate::pieces::{Fixed, Text};
 
 // ---------------------------------------------------------------------------------------------
 // Thresholds (SCENE_GRAPH.md). They are fixed: the published records were made with them.
@@ -1152,21 +1152,27 @@ impl SceneGraph<'_> {
     /// `graph.txt`: the triplet lines, each ending with a newline.
     ///
     /// The lines of [`Self::triplet_lines`], written by fixed-width copies (see
-    /// [`crate::pieces`]): each node's name, behind its `(`, is kept once, and an edge's names
-    /// are found by its layout indices. An edge whose names are not those of the nodes at its
-    /// indices (a graph edited by hand), and the equally-spaced triples, are written piece by
-    /// piece instead.
+    /// [`crate::pieces`]): each node's name, behind its `(`, is written in full once, in its
+    /// `is at` line, and copied from there after; an edge's names are found by its layout
+    /// indices. An edge whose names are not those of the nodes at its indices (a graph edited
+    /// by hand), and the equally-spaced triples, are written piece by piece instead.
     pub fn to_text(&self) -> String {
+        const LINE_START: Fixed = Fixed::new("(");
         const LINE_END: Fixed = Fixed::new(")\n");
-        let names = Pieces::new("(", self.nodes.iter().map(|node| node.instance));
         // About 40 bytes a line; one growth at most for long names.
         let lines = 2 * self.nodes.len() + self.edges.len() + self.equally_spaced.len();
         let mut text = Text::with_capacity(40 * lines);
-        for (i, node) in self.nodes.iter().enumerate() {
-            text.prefixed(&names, i);
+        // Where each node's `(` and name lie in the text, after their first line's start.
+        let mut names = Vec::with_capacity(self.nodes.len());
+        for node in &self.nodes {
+            let mark = text.mark();
+            text.fixed(&LINE_START);
+            text.str(node.instance);
+            let name = text.since(mark);
             text.fixed(node.is_at.is_at_line_end());
-            text.prefixed(&names, i);
+            text.repeat(name);
             text.fixed(node.face_to.face_to_line_end());
+            names.push(name);
         }
         let mut line = String::new();
         for edge in &self.edges {
@@ -1177,9 +1183,9 @@ impl SceneGraph<'_> {
                     .is_some_and(|node| std::ptr::eq(node.instance, name))
             };
             if named(s, edge.subject) && named(o, edge.object) {
-                text.prefixed(&names, s);
+                text.repeat(names[s]);
                 text.fixed(edge.relation.between());
-                text.bare(&names, o);
+                text.repeat(names[o].skip(LINE_START.text().len()));
                 text.fixed(&LINE_END);
             } else {
                 line.clear();

@@ -6,16 +6,20 @@
 //! ten bytes; that was a fifth of a scene graph's time (extraction and text, on 2026-12-07).
 //!
 //! Here a piece is copied as whole [`WINDOW`]-byte blocks, which compile to a pair of vector
-//! moves without a call. Every source holds [`WINDOW`] bytes of slack after its pieces
-//! ([`Fixed`] is padded to a window; [`Pieces`] ends with the slack), and [`Text`] keeps
-//! [`WINDOW`] bytes of room past its end: the bytes a copy writes past its piece are
-//! overwritten by the next piece, or cut off at the end. A piece longer than a window takes
-//! one block per started window.
+//! moves without a call, and the text moves on by the piece's length: the bytes a copy writes
+//! past its piece are overwritten by the next piece, or cut off at the end. A piece comes
+//! from one of two places, each with a window of bytes readable past it:
+//! - a [`Fixed`] piece, known when the program is built, is padded to a window;
+//! - a piece the text already holds (a name, written once in full, then repeated by
+//!   [`Text::repeat`]) is read from the text itself, which keeps a window of room past its
+//!   end. The copy goes forward, one window after another, to the end of the text: what it
+//!   writes never reaches the part of the piece still to be read.
 //!
-//! The workspace forbids `unsafe`, so the copies are of bounds-checked slices of a constant
-//! length, and the text is checked as UTF-8 once, when it becomes a `String` (every piece is a
-//! whole `str`, so the check cannot fail). Neither the standard library nor the string-builder
-//! crates copy this way: they copy the piece's exact length, with `memcpy`.
+//! A piece longer than a window takes one block per started window. The workspace forbids
+//! `unsafe`, so the copies are of bounds-checked slices of a constant length, and the text is
+//! checked as UTF-8 once, when it becomes a `String` (every piece is a whole `str`, so the
+//! check cannot fail). Neither the standard library nor the string-builder crates copy this
+//! way: they copy a piece's exact length, with `memcpy`.
 
 /// The width of every copy, in bytes: a name or a label of a graph line fits in one.
 pub(crate) const WINDOW: usize = 32;
@@ -56,32 +60,21 @@ impl Fixed {
     }
 }
 
-/// Strings kept one after another, each behind the same prefix, with a window of slack after
-/// the last: the pieces a text repeats (the names of a graph's objects).
-pub(crate) struct Pieces {
-    bytes: Vec<u8>,
-    /// Where each piece (its prefix included) starts in `bytes`, and its length.
-    spans: Vec<(usize, usize)>,
-    /// The prefix's length.
-    prefix: usize,
+/// Where a piece of a [`Text`] lies in it: its start and its length in bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Span {
+    start: usize,
+    len: usize,
 }
 
-impl Pieces {
-    /// `prefix` followed by each of `strings`, in order.
-    pub(crate) fn new<'s>(prefix: &str, strings: impl ExactSizeIterator<Item = &'s str>) -> Self {
-        let mut spans = Vec::with_capacity(strings.len());
-        let mut bytes = Vec::with_capacity(strings.len() * (prefix.len() + 16) + WINDOW);
-        for string in strings {
-            let start = bytes.len();
-            bytes.extend_from_slice(prefix.as_bytes());
-            bytes.extend_from_slice(string.as_bytes());
-            spans.push((start, bytes.len() - start));
-        }
-        bytes.resize(bytes.len() + WINDOW, 0);
+impl Span {
+    /// The span without its first `bytes` bytes (at most its length), which must end a
+    /// character.
+    pub(crate) fn skip(self, bytes: usize) -> Self {
+        let bytes = bytes.min(self.len);
         Self {
-            bytes,
-            spans,
-            prefix: prefix.len(),
+            start: self.start + bytes,
+            len: self.len - bytes,
         }
     }
 }
@@ -115,23 +108,6 @@ impl Text {
         self.bytes.resize(needed.max(2 * self.bytes.len()), 0);
     }
 
-    /// Appends `source[start..start + len]`, where `source` holds at least a window of bytes
-    /// after it, one window at a time.
-    #[inline(always)]
-    fn copy(&mut self, source: &[u8], start: usize, len: usize) {
-        self.reserve(len);
-        let mut done = 0;
-        loop {
-            let (from, to) = (start + done, self.len + done);
-            self.bytes[to..to + WINDOW].copy_from_slice(&source[from..from + WINDOW]);
-            done += WINDOW;
-            if done >= len {
-                break;
-            }
-        }
-        self.len += len;
-    }
-
     /// Appends a fixed piece.
     #[inline(always)]
     pub(crate) fn fixed(&mut self, piece: &Fixed) {
@@ -140,25 +116,50 @@ impl Text {
         self.len += piece.len;
     }
 
-    /// Appends string `i` of `pieces` behind its prefix.
-    #[inline(always)]
-    pub(crate) fn prefixed(&mut self, pieces: &Pieces, i: usize) {
-        let (start, len) = pieces.spans[i];
-        self.copy(&pieces.bytes, start, len);
+    /// Where the text ends now: the start of a span [`Self::since`] returns.
+    pub(crate) fn mark(&self) -> usize {
+        self.len
     }
 
-    /// Appends string `i` of `pieces` without its prefix.
-    #[inline(always)]
-    pub(crate) fn bare(&mut self, pieces: &Pieces, i: usize) {
-        let (start, len) = pieces.spans[i];
-        self.copy(&pieces.bytes, start + pieces.prefix, len - pieces.prefix);
+    /// The span from `mark` (of [`Self::mark`], on a character boundary) to the end.
+    pub(crate) fn since(&self, mark: usize) -> Span {
+        let start = mark.min(self.len);
+        Span {
+            start,
+            len: self.len - start,
+        }
     }
 
-    /// Appends any string, by its exact length.
-    pub(crate) fn str(&mut self, text: &str) {
+    /// Appends any string, by its exact length; returns where it lies, for [`Self::repeat`].
+    pub(crate) fn str(&mut self, text: &str) -> Span {
         self.reserve(text.len());
-        self.bytes[self.len..self.len + text.len()].copy_from_slice(text.as_bytes());
+        let start = self.len;
+        self.bytes[start..start + text.len()].copy_from_slice(text.as_bytes());
         self.len += text.len();
+        Span {
+            start,
+            len: text.len(),
+        }
+    }
+
+    /// Appends again a piece the text holds (a span [`Self::str`] returned, or part of one
+    /// that starts and ends on characters), one window at a time.
+    #[inline(always)]
+    pub(crate) fn repeat(&mut self, span: Span) {
+        let Span { start, len } = span;
+        assert!(start + len <= self.len, "a span of the text so far");
+        self.reserve(len);
+        // Every window read lies before the text's end plus a window: inside `bytes`.
+        let mut done = 0;
+        loop {
+            let from = start + done;
+            self.bytes.copy_within(from..from + WINDOW, self.len + done);
+            done += WINDOW;
+            if done >= len {
+                break;
+            }
+        }
+        self.len += len;
     }
 
     /// The text.
@@ -173,16 +174,6 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    /// What one appended: a fixed piece, a string of the pieces with or without its prefix,
-    /// or any string.
-    #[derive(Debug, Clone)]
-    enum Step {
-        Fixed(usize),
-        Prefixed(usize),
-        Bare(usize),
-        Str(String),
-    }
-
     const FIXED: [&str; 4] = [
         "",
         ")\n",
@@ -190,52 +181,49 @@ mod tests {
         "0123456789abcdef0123456789abcdef",
     ];
 
-    fn strings() -> impl Strategy<Value = Vec<String>> {
-        // Empty, short, a window long and longer, and not ASCII.
-        prop::collection::vec("[a-zé_ 0-9]{0,70}", 1..6)
-    }
-
     proptest! {
-        /// Any sequence of appends gives the same text as `push_str` of the same pieces, over
-        /// strings of every length around the window's (0 to 70 bytes, some of two-byte
-        /// characters) and a text that starts too small and grows.
+        /// Any sequence of appends gives the same text as `push_str` of the same pieces: fixed
+        /// pieces, strings of every length around the window's (0 to 70 bytes, some of
+        /// two-byte characters), and repeats of any earlier string, whole or without its
+        /// first character, into a text that starts too small and grows.
         #[test]
         fn appends_as_push_str(
-            strings in strings(),
-            picks in prop::collection::vec((0usize..4, 0usize..64, "[a-zé]{0,40}"), 0..40),
+            steps in prop::collection::vec((0usize..4, 0usize..64, "[a-zé_ 0-9]{0,70}"), 0..40),
             capacity in 0usize..64,
         ) {
             let fixed = FIXED.map(Fixed::new);
-            let pieces = Pieces::new("(", strings.iter().map(String::as_str));
-            let steps: Vec<Step> = picks
-                .into_iter()
-                .map(|(kind, i, s)| match kind {
-                    0 => Step::Fixed(i % FIXED.len()),
-                    1 => Step::Prefixed(i % strings.len()),
-                    2 => Step::Bare(i % strings.len()),
-                    _ => Step::Str(s),
-                })
-                .collect();
             let mut text = Text::with_capacity(capacity);
             let mut expected = String::new();
-            for step in &steps {
-                match step {
-                    Step::Fixed(i) => {
-                        text.fixed(&fixed[*i]);
-                        expected.push_str(FIXED[*i]);
+            let mut written: Vec<(Span, String)> = Vec::new();
+            for (kind, i, s) in steps {
+                match kind {
+                    0 => {
+                        text.fixed(&fixed[i % FIXED.len()]);
+                        expected.push_str(FIXED[i % FIXED.len()]);
                     }
-                    Step::Prefixed(i) => {
-                        text.prefixed(&pieces, *i);
-                        expected.push('(');
-                        expected.push_str(&strings[*i]);
+                    1 | 2 if !written.is_empty() => {
+                        let (span, s) = &written[i % written.len()];
+                        if kind == 1 {
+                            text.repeat(*span);
+                            expected.push_str(s);
+                        } else {
+                            let first = s.chars().next().map_or(0, char::len_utf8);
+                            text.repeat(span.skip(first));
+                            expected.push_str(&s[first..]);
+                        }
                     }
-                    Step::Bare(i) => {
-                        text.bare(&pieces, *i);
-                        expected.push_str(&strings[*i]);
+                    _ if i % 2 == 0 => {
+                        written.push((text.str(&s), s.clone()));
+                        expected.push_str(&s);
                     }
-                    Step::Str(s) => {
-                        text.str(s);
-                        expected.push_str(s);
+                    _ => {
+                        // A fixed piece and a string, marked as one span.
+                        let mark = text.mark();
+                        text.fixed(&fixed[2]);
+                        text.str(&s);
+                        written.push((text.since(mark), format!("{}{s}", FIXED[2])));
+                        expected.push_str(FIXED[2]);
+                        expected.push_str(&s);
                     }
                 }
             }
@@ -243,16 +231,26 @@ mod tests {
         }
     }
 
-    /// Pieces longer than a window, between short ones, are copied whole, the later pieces
-    /// written over the earlier ones' windows.
+    /// A piece longer than a window, repeated right behind itself and again later, is
+    /// copied whole: the copy's own writes never reach the part still to be read.
     #[test]
-    fn long_pieces_are_copied_whole() {
+    fn long_pieces_repeat_whole() {
         let long = "a".repeat(WINDOW) + "tail-of-a-long-name-" + &"b".repeat(WINDOW + 3);
-        let pieces = Pieces::new("(", [long.as_str(), "x"].into_iter());
         let mut text = Text::with_capacity(0);
-        text.prefixed(&pieces, 0);
-        text.bare(&pieces, 1);
-        text.bare(&pieces, 0);
-        assert_eq!(text.into_string(), format!("({long}x{long}"));
+        let span = text.str(&long);
+        text.repeat(span);
+        text.fixed(&Fixed::new(")"));
+        text.repeat(span.skip(1));
+        assert_eq!(text.into_string(), format!("{long}{long}){}", &long[1..]));
+    }
+
+    /// A span that is not of the text so far is refused, not read past the text.
+    #[test]
+    #[should_panic(expected = "a span of the text so far")]
+    fn a_span_past_the_text_is_refused() {
+        let mut text = Text::with_capacity(0);
+        let span = text.str("name");
+        let mut other = Text::with_capacity(0);
+        other.repeat(span);
     }
 }
