@@ -50,11 +50,13 @@
 //! subject keeps its 5 nearest by insertion, and the distance limit is decided on squared
 //! distances (`Within`). A footprint's corners (a sine and a cosine) are made only for an
 //! object whose circle around its footprint meets another's in a pair the rules test for `in`
-//! or `above`. The graph borrows the scene's names, so it allocates no strings,
-//! and its text is written in one buffer. A word-for-word version of the rules is kept as the
-//! test oracle (property tests check both searches give its output). `are equally spaced
-//! along` (off by default) is about triples: its output alone can grow with n², and its
-//! search stays quadratic in n.
+//! or `above`, and two footprints are clipped only when the boxes around them overlap by the
+//! rule's threshold. The graph borrows the scene's names, so it allocates no strings; a
+//! table's working lists are kept from one scene to the next on a thread (`Scratch`); its
+//! text is written in one buffer by fixed-width copies (`crate::pieces`). A word-for-word
+//! version of the rules is kept as the test oracle (property tests check both searches give
+//! its output). `are equally spaced along` (off by default) is about triples: its output
+//! alone can grow with n², and its search stays quadratic in n.
 
 use std::cell::{OnceCell, RefCell};
 use std::collections::BTreeMap;
@@ -1497,12 +1499,10 @@ impl Solid {
     ///   still, and it is not clipped (on the demo's tables, half of the pairs whose circles
     ///   meet).
     fn footprint_share_in(&self, other: &Solid, least: f64) -> Option<f64> {
-        let offset_cm = [other.x - self.x, other.y - self.y];
-        let reach = self.half_diagonal_cm + other.half_diagonal_cm;
-        let squared = offset_cm[0] * offset_cm[0] + offset_cm[1] * offset_cm[1];
-        if squared > reach * reach * (1.0 + 1e-9) {
+        if !self.circles_meet(other) {
             return None;
         }
+        let offset_cm = [other.x - self.x, other.y - self.y];
         let (a, b) = (self.footprint(), other.footprint());
         let floor = least * self.area() * (1.0 - 1e-9);
         if !(a.axis_aligned && b.axis_aligned) && box_overlap_area(a, b, offset_cm) < floor {
@@ -1510,6 +1510,15 @@ impl Solid {
         }
         let share = intersection_area_footprints(a, b, offset_cm) / self.area();
         (share >= least).then_some(share)
+    }
+
+    /// Whether the circles around the two footprints meet, or are apart by a relative 1e-9 at
+    /// most (far more than the corners' rounding): if not, the footprints cannot meet.
+    #[inline(always)]
+    fn circles_meet(&self, other: &Solid) -> bool {
+        let (dx, dy) = (other.x - self.x, other.y - self.y);
+        let reach = self.half_diagonal_cm + other.half_diagonal_cm;
+        dx * dx + dy * dy <= reach * reach * (1.0 + 1e-9)
     }
 
     fn z_overlap(&self, other: &Solid) -> f64 {
@@ -1806,6 +1815,7 @@ fn extract<'a>(
 }
 
 /// Whether `c` may contain `s` by the thresholds alone; with the numbers when it may.
+#[inline(always)]
 fn containment_evidence(
     s: usize,
     c: usize,
@@ -1813,7 +1823,16 @@ fn containment_evidence(
     containers: &[bool],
 ) -> Option<Evidence> {
     let (ss, sc) = (&solids[s], &solids[c]);
-    if s == c || !containers[c] || sc.area() < ss.area() || ss.z <= sc.z_min {
+    // The cheap conditions at once, without a jump for each (each one alone is a coin toss
+    // for the branch predictor): with the circles around the footprints, which meet for few
+    // pairs, the one jump left is nearly always the same way. Sizes and positions are finite
+    // (`GraphScene::check`), so each comparison is the negation of the rule's.
+    let plausible = (s != c)
+        & containers[c]
+        & (sc.area() >= ss.area())
+        & (ss.z > sc.z_min)
+        & ss.circles_meet(sc);
+    if !plausible {
         return None;
     }
     let z_share = ss.z_overlap(sc) / ss.height.min(sc.height);
