@@ -1154,7 +1154,7 @@ impl SceneGraph<'_> {
     /// `graph.txt`: the triplet lines, each ending with a newline.
     ///
     /// The lines of [`Self::triplet_lines`], written by fixed-width copies (see
-    /// [`crate::pieces`]): each node's name, behind its `(`, is written in full once, in its
+    /// `crate::pieces`): each node's name, behind its `(`, is written in full once, in its
     /// `is at` line, and copied from there after; an edge's names are found by its layout
     /// indices. An edge whose names are not those of the nodes at its indices (a graph edited
     /// by hand), and the equally-spaced triples, are written piece by piece instead.
