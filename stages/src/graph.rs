@@ -1019,22 +1019,8 @@ impl Edge<'_> {
     }
 
     fn push_triplet(&self, out: &mut String) {
-        push_triple(out, self.subject, self.relation.label(), self.object);
+        push_fields(out, &[self.subject, self.relation.label(), self.object]);
     }
-}
-
-/// [`push_fields`] of three fields, inlined where it is called: the separators are copied as
-/// constants, without a call to `memcpy`, which costs more than the copy for a few bytes (a
-/// triplet line has only a few bytes per field).
-#[inline(always)]
-fn push_triple(out: &mut String, a: &str, b: &str, c: &str) {
-    out.push('(');
-    out.push_str(a);
-    out.push_str(", ");
-    out.push_str(b);
-    out.push_str(", ");
-    out.push_str(c);
-    out.push(')');
 }
 
 /// Appends `(a, b, …)`: the fields between parentheses, separated by a comma and a space.
@@ -1119,35 +1105,16 @@ pub struct SceneGraph<'a> {
 }
 
 impl SceneGraph<'_> {
-    /// Writes each triplet line in order into `out`, calling `end(out)` after each: per node
-    /// `is at` then `face to`, then the edges, then the equally-spaced triples.
-    fn write_lines(&self, out: &mut String, mut end: impl FnMut(&mut String)) {
-        for node in &self.nodes {
-            out.push('(');
-            out.push_str(node.instance);
-            out.push_str(node.is_at.is_at_tail());
-            end(out);
-            out.push('(');
-            out.push_str(node.instance);
-            out.push_str(node.face_to.face_to_tail());
-            end(out);
-        }
-        for edge in &self.edges {
-            edge.push_triplet(out);
-            end(out);
-        }
-        for spacing in &self.equally_spaced {
-            spacing.push_triplet(out);
-            end(out);
-        }
-    }
-
     /// The triplet lines: per node `is at` then `face to`, then the edges, then the
     /// equally-spaced triples.
     pub fn triplet_lines(&self) -> Vec<String> {
         let mut lines = Vec::with_capacity(2 * self.nodes.len() + self.edges.len());
-        let mut buffer = String::with_capacity(128);
-        self.write_lines(&mut buffer, |line| lines.push(std::mem::take(line)));
+        for node in &self.nodes {
+            lines.push(format!("({}{}", node.instance, node.is_at.is_at_tail()));
+            lines.push(format!("({}{}", node.instance, node.face_to.face_to_tail()));
+        }
+        lines.extend(self.edges.iter().map(Edge::triplet));
+        lines.extend(self.equally_spaced.iter().map(EquallySpaced::triplet));
         lines
     }
 
