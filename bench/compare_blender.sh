@@ -7,10 +7,13 @@
 # compiles its shaders), with one OpenMP and one llvmpipe thread. Blender's picture is written
 # beside mesa's for comparison.
 #
-# Both sides are timed the same way: one warm-up render, then REPEAT (default 5) renders timed
-# one by one; mesa by stages/examples/render_timing.rs (each view with its scene's shadow map,
-# PNG encoded, on one thread). The script prints min and median of each side, the ratio of
-# each, the load average and the CPU.
+# Both sides are timed the same way: one warm-up render each, then REPEAT (default 5) turns,
+# each running Blender untimed for 0.3 s at least (one render) and then one timed render, then
+# the same of mesa's (stages/examples/render_timing.rs --serve: some thirty untimed views, then
+# one timed; each view with its scene's shadow map, PNG encoded, on one thread). Taking turns,
+# both sides see the same moments of the machine, whose speed moves for seconds at a time; the
+# untimed runs put each back in its steady state after the other's turn (bench/timing.py). The
+# script prints min and median of each side, the ratio of each, the load average and the CPU.
 #
 #   bench/compare_blender.sh [OUT_DIR]
 #   RENDER_TIMING=/path/to/render_timing bench/compare_blender.sh [OUT_DIR]   (another build's)
@@ -42,23 +45,24 @@ if [ -z "$timing" ]; then
   timing="$root/target/release/examples/render_timing"
 fi
 load_before="$(cut -d' ' -f1 /proc/loadavg)"
-RAYON_NUM_THREADS=1 "$timing" --repeat "$repeat" > "$out/mesa.json"
-OMP_NUM_THREADS=1 LP_NUM_THREADS=1 "$python" "$root/bench/render_blender.py" "$ws/$scene_rel" \
-  "$ws/assets/library" truth/layout.json "$out/blender_front.png" --engine "$engine" \
-  --repeat "$repeat" 2>/dev/null | grep '^{' > "$out/blender.json"
+# The two sides take turns (render_blender.py --alternate), REPEAT times.
+RAYON_NUM_THREADS=1 OMP_NUM_THREADS=1 LP_NUM_THREADS=1 "$python" "$root/bench/render_blender.py" \
+  "$ws/$scene_rel" "$ws/assets/library" truth/layout.json "$out/blender_front.png" \
+  --engine "$engine" --repeat "$repeat" --alternate "'$timing' --serve" 2>/dev/null \
+  | grep '^{' > "$out/blender.json"
 load_after="$(cut -d' ' -f1 /proc/loadavg)"
-python3 - "$out/mesa.json" "$out/blender.json" "$engine" "$load_before" "$load_after" <<'PY'
+python3 - "$out/blender.json" "$engine" "$load_before" "$load_after" <<'PY'
 import json, os, statistics, sys
-mesa = json.load(open(sys.argv[1]))["runs_s"]
-blender = json.load(open(sys.argv[2]))
+blender = json.load(open(sys.argv[1]))
+mesa = blender["alternate_runs_s"]
 # Blender's first render compiles its shaders: the warm-up, as mesa's untimed first view.
 b = blender["renders_s"][1:]
 cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo")
             if l.startswith("model name")), "unknown CPU")
-print(f"{cpu}, {os.cpu_count()} CPUs, load average {sys.argv[4]} before, {sys.argv[5]} after; "
-      f"{len(mesa)} timed renders a side after one warm-up, one thread")
+print(f"{cpu}, {os.cpu_count()} CPUs, load average {sys.argv[3]} before, {sys.argv[4]} after; "
+      f"{len(mesa)} timed renders a side in turns, each after 0.3 s of untimed ones, one thread")
 print(f"mesa:    min {min(mesa) * 1e3:.1f} ms, median {statistics.median(mesa) * 1e3:.1f} ms")
-print(f"Blender ({sys.argv[3]}): min {min(b) * 1e3:.0f} ms, median {statistics.median(b) * 1e3:.0f} ms "
+print(f"Blender ({sys.argv[2]}): min {min(b) * 1e3:.0f} ms, median {statistics.median(b) * 1e3:.0f} ms "
       f"(CPU, median {blender['median_render_cpu_s'] * 1e3:.0f} ms)")
 print(f"ratio (Blender / mesa): {min(b) / min(mesa):.0f}x on the minima, "
       f"{statistics.median(b) / statistics.median(mesa):.0f}x on the medians")

@@ -8,12 +8,15 @@ graph.txt from Python is checked against mesa's, byte for byte (graph.json too: 
 else the same structure with numbers equal within 1e-9).
 
 Three comparisons, every side timed the same way: a warm-up, then `--repeat` timed runs; the
-min and the median over the runs, in ms per scene, and the ratio python / mesa of each:
+min and the median over the runs, in ms per scene, and the ratio python / mesa of each. The
+sides of a comparison take turns run by run (a Python pass, a mesa pass, ...; in b and c one
+process of each in turn), so that both see the same moments of the machine, whose speed moves
+for seconds at a time:
 
   a. in process: the layouts already parsed and the container flags decided, the graph of
      every scene extracted and its text produced, no file I/O. mesa: the example
-     stages/examples/graph_timing.rs (extract_graph + to_text; mimalloc, the mesa executable's
-     allocator), built here if missing. Python:
+     stages/examples/graph_timing.rs --serve (extract_graph + to_text; mimalloc, the mesa
+     executable's allocator), built here if missing. Python:
      graph_rules.extract_graph + graph_text.
   b. as a dataset stage, whole processes timed from outside: `mesa graph DATASET --force
      --jobs 1` (reads every layout and the annotations, writes graph.json, graph.txt and the
@@ -61,7 +64,7 @@ for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 sys.dont_write_bytecode = True  # no __pycache__ left in bench/
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import graph_rules  # noqa: E402
-from timing import best_median_ms, timed  # noqa: E402
+from timing import Served, alternated, best_median_ms, timed  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "target/release/examples/graph_timing"
@@ -137,24 +140,28 @@ def check_outputs(dataset, out):
     return len(scenes), txt_same, json_same, json_close, differing
 
 
-def timed_process(cmd, repeat, prepare=None):
-    """A warm-up run of a command, then `repeat` timed runs: the wall seconds and the CPU
-    seconds (user + system, of the process and its children) of each. `prepare`, if given,
-    runs before each run, untimed (removing the outputs of the last one)."""
-    if prepare:
-        prepare()
-    run_quietly(cmd)
-    walls, cpus = [], []
-    for _ in range(repeat):
+def timed_processes(commands, repeat):
+    """Commands timed in turns: a warm-up run of each, then `repeat` rounds, each a timed run
+    of every command in order, so that all of them see the same moments of the machine.
+    `commands` holds (command, prepare) pairs; `prepare`, if not None, runs before each run of
+    its command, untimed (removing the outputs of the last one). For each command, the wall
+    seconds and the CPU seconds (user + system, of the process and its children) of its runs."""
+    for cmd, prepare in commands:
         if prepare:
             prepare()
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        start = time.perf_counter()
         run_quietly(cmd)
-        walls.append(time.perf_counter() - start)
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpus.append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
-    return walls, cpus
+    timings = [([], []) for _ in commands]
+    for _ in range(repeat):
+        for (cmd, prepare), (walls, cpus) in zip(commands, timings):
+            if prepare:
+                prepare()
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            start = time.perf_counter()
+            run_quietly(cmd)
+            walls.append(time.perf_counter() - start)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpus.append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
+    return timings
 
 
 def report(label, python_runs, mesa_runs, what, names=("python", "mesa")):
@@ -222,21 +229,24 @@ def main():
             for scene, flags in parsed:
                 graph_rules.graph_text(graph_rules.extract_graph(scene, flags))
 
-        python_runs = [t / n for t in timed(python_pass, args.repeat)]
-        result = run([example, dataset, "--repeat", args.repeat], stdout=subprocess.PIPE, text=True)
-        timing = json.loads(result.stdout)
+        # The two sides alternate pass by pass (bench/timing.py's `alternated`), so both see
+        # the same moments of the machine.
+        served = Served([example, dataset, "--repeat", args.repeat, "--serve"], "runs_s_per_scene")
+        python_runs, mesa_runs = alternated(python_pass, served, args.repeat)
+        python_runs = [t / n for t in python_runs]
+        timing = served.finish()
         assert timing["scenes"] == n, f"graph_timing found {timing['scenes']} scenes, not {n}"
-        mesa_runs = timing["runs_s_per_scene"]
 
         # b. As a dataset stage (whole processes).
         stage_out = tmp / "python_stage_out"
         python_cmd = [sys.executable, Path(__file__).resolve().parent / "graph_rules.py", "dataset", dataset,
                       "--out", stage_out]
-        python_wall, python_cpu = timed_process(python_cmd, args.repeat)
-        mesa_wall, mesa_cpu = timed_process(quiet(mesa, "graph", dataset, "--force"), args.repeat)
-        # c. The stage's work in a bare Rust loop, without the runner: the floor under b (timed
-        # right after mesa's side of b, which it is compared with).
-        bare_compare_wall, bare_compare_cpu = timed_process([bare, dataset, "--compare"], args.repeat)
+        mesa_cmd = quiet(mesa, "graph", dataset, "--force")
+        # c. The stage's work in a bare Rust loop, without the runner: the floor under b, in
+        # the same turns.
+        bare_compare_cmd = [bare, dataset, "--compare"]
+        (python_wall, python_cpu), (mesa_wall, mesa_cpu), (bare_compare_wall, bare_compare_cpu) = \
+            timed_processes([(python_cmd, None), (mesa_cmd, None), (bare_compare_cmd, None)], args.repeat)
 
         # b'. The same with fresh outputs: before each run, both sides' graph files (and
         # mesa's graph markers) are removed, so each run creates every file (a forced rerun
@@ -249,10 +259,10 @@ def main():
             for table, scene_id, _ in scenes:
                 shutil.rmtree(dataset / "scenes" / table / scene_id / "graph", ignore_errors=True)
 
-        python_fresh_wall, python_fresh_cpu = timed_process(python_cmd, args.repeat, clear_python)
-        mesa_fresh_wall, mesa_fresh_cpu = timed_process(quiet(mesa, "graph", dataset), args.repeat, clear_mesa)
         bare_out = tmp / "bare_out"
-        bare_write_wall, bare_write_cpu = timed_process([bare, dataset, "--out", bare_out], args.repeat)
+        (python_fresh_wall, python_fresh_cpu), (mesa_fresh_wall, mesa_fresh_cpu), (bare_write_wall, bare_write_cpu) = \
+            timed_processes([(python_cmd, clear_python), (quiet(mesa, "graph", dataset), clear_mesa),
+                             ([bare, dataset, "--out", bare_out], None)], args.repeat)
         # What process start-up alone costs (included in b).
         python_start = min(timed(lambda: run_quietly([sys.executable, "-c", "import numpy, shapely"]), args.repeat))
         mesa_start = min(timed(lambda: run_quietly([mesa, "--version"]), args.repeat))

@@ -14,10 +14,19 @@ turned into Blender's (looking along -z, y up); one sun light where mesa's main 
 grey world for ambient light. Timing: the first render (shaders compiled) and the median of
 `--repeat` more, each `bpy.ops.render.render` alone (import and scene set-up not counted), wall
 and CPU time (all threads of the process). Prints one JSON line.
+
+With `--alternate COMMAND`, COMMAND (mesa's stages/examples/render_timing.rs with `--serve`,
+as bench/compare_blender.sh gives it) is started beside Blender, and the two take turns: each
+turn runs each side untimed for 0.3 s at least (one render of Blender's, some thirty of
+mesa's) and then once timed (bench/timing.py's `alternated`), so both sides see the same
+moments of the machine. The JSON line
+then also holds mesa's timed runs (`alternate_runs_s`) and the seconds of each of Blender's
+timed renders are those of the turns.
 """
 import argparse
 import json
 import math
+import shlex
 import statistics
 import sys
 import time
@@ -36,6 +45,8 @@ def parse():
     p.add_argument("out", type=Path)
     p.add_argument("--engine", default="WORKBENCH", choices=["WORKBENCH", "EEVEE", "CYCLES"])
     p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--alternate", metavar="COMMAND",
+                   help="a timing example run with --serve, to take turns with (see above)")
     return p.parse_args(argv)
 
 
@@ -146,11 +157,29 @@ def main():
     setup = time.perf_counter() - setup
     times = []
     cpu = []
-    for _ in range(1 + args.repeat):
+
+    def render():
         t, c = time.perf_counter(), time.process_time()
         bpy.ops.render.render(write_still=True)
         times.append(time.perf_counter() - t)
         cpu.append(time.process_time() - c)
+
+    render()  # the first render compiles the shaders
+    alternate = None
+    if args.alternate:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from timing import Served, alternated
+        served = Served(shlex.split(args.alternate), "runs_s")
+        # One untimed render a turn (a render is longer than the warm-up time), taken out of
+        # the lists after.
+        _, alternate = alternated(render, served, args.repeat)
+        served.finish()
+        times = times[:1] + times[2::2]
+        cpu = cpu[:1] + cpu[2::2]
+        assert len(times) == 1 + args.repeat, "a turn rendered more than twice with Blender"
+    else:
+        for _ in range(args.repeat):
+            render()
     triangles = sum(len(p.vertices) - 2 for o in scene.objects if o.type == "MESH" for p in o.data.polygons)
     print(json.dumps({
         "engine": scene.render.engine,
@@ -163,6 +192,7 @@ def main():
         "median_render_s": round(statistics.median(times[1:]), 4) if args.repeat else None,
         "renders_s": [round(t, 4) for t in times],
         "median_render_cpu_s": round(statistics.median(cpu[1:]), 4) if args.repeat else None,
+        **({"alternate_runs_s": alternate} if alternate is not None else {}),
     }))
 
 

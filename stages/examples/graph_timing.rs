@@ -8,9 +8,20 @@
 //! (`read_layout_text`), and of writing `graph.json` (`to_json`): the other parts of the
 //! `graph` stage's work, for where its time goes.
 //!
+//! With `--serve`, the timed passes are asked for on standard input instead, so that a
+//! comparison script can alternate them with its own (`bench/compare_graph.py`): after the
+//! warm-up, each line read, `N [WARM_SECONDS]`, asks for untimed passes for WARM_SECONDS (at
+//! least one: the caches and the core's speed back to their steady state after the other
+//! side's turn), then N timed passes, printed as one JSON line, `{"runs_s_per_scene":
+//! [...]}`. At the end of the input, the report above is printed as the last line, its runs
+//! those served.
+//!
 //! It allocates through mimalloc, as the `mesa` executable does (pipeline/src/main.rs).
 //!
-//! `cargo run --release -p mesa-stages --example graph_timing -- DATASET [--repeat 5]`
+//! `cargo run --release -p mesa-stages --example graph_timing -- DATASET [--repeat 5] [--serve]`
+
+#[path = "support/serve.rs"]
+mod serve;
 
 use std::error::Error;
 use std::hint::black_box;
@@ -29,7 +40,7 @@ use mesa_stages::paths::scene::LAYOUT_CANDIDATES;
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-const USAGE: &str = "usage: graph_timing DATASET [--repeat N]";
+const USAGE: &str = "usage: graph_timing DATASET [--repeat N] [--serve]";
 
 /// The sub-folders of `path`, hidden ones left out, sorted (as mesa lists scenes).
 fn sorted_dirs(path: &Path) -> Result<Vec<PathBuf>, Box<dyn Error>> {
@@ -136,9 +147,12 @@ fn main() -> Result<(), Box<dyn Error>> {
     let mut args = std::env::args().skip(1);
     let mut dataset: Option<PathBuf> = None;
     let mut repeat = 5usize;
+    let mut serving = false;
     while let Some(arg) = args.next() {
         if arg == "--repeat" {
             repeat = args.next().and_then(|v| v.parse().ok()).ok_or(USAGE)?;
+        } else if arg == "--serve" {
+            serving = true;
         } else {
             dataset = Some(PathBuf::from(arg));
         }
@@ -149,9 +163,13 @@ fn main() -> Result<(), Box<dyn Error>> {
     let (scenes, texts) = read_scenes(&dataset)?;
     let options = GraphOptions::default();
     pass(&scenes, &options, true)?; // warm-up
-    let runs = (0..repeat)
-        .map(|_| pass(&scenes, &options, true))
-        .collect::<Result<Vec<f64>, _>>()?;
+    let runs = if serving {
+        serve::served("runs_s_per_scene", || pass(&scenes, &options, true))?
+    } else {
+        (0..repeat)
+            .map(|_| pass(&scenes, &options, true))
+            .collect::<Result<Vec<f64>, _>>()?
+    };
     let (min, median) = min_median(&runs);
     // The same passes without the text, for where the time goes.
     let bare = (0..repeat)

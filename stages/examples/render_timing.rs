@@ -9,9 +9,20 @@
 //! shadow map, one visibility pass, the picture with the shadow map built beforehand, the
 //! PNG (a profiling aid).
 //!
-//! `cargo run --release -p mesa-stages --example render_timing -- [--repeat 20] [--parts]`
+//! With `--serve`, the timed views are asked for on standard input instead, so that a
+//! comparison script can alternate them with its own (`bench/render_blender.py --alternate`):
+//! after the warm-up, each line read, `N [WARM_SECONDS]`, asks for untimed views for
+//! WARM_SECONDS (at least one: the caches and the core's speed back to their steady state
+//! after the other side's turn), then N timed views, printed as one JSON line, `{"runs_s":
+//! [...]}`. At the end of the input, the usual line is printed, its runs those served.
+//!
+//! `cargo run --release -p mesa-stages --example render_timing -- [--repeat 20] [--parts | --serve]`
+
+#[path = "support/serve.rs"]
+mod serve;
 
 use std::collections::BTreeMap;
+use std::convert::Infallible;
 use std::error::Error;
 use std::hint::black_box;
 use std::time::Instant;
@@ -42,12 +53,13 @@ fn min_ms(repeat: usize, mut f: impl FnMut()) -> f64 {
 
 fn main() -> Result<(), Box<dyn Error>> {
     let mut args = std::env::args().skip(1);
-    let (mut repeat, mut parts) = (20, false);
+    let (mut repeat, mut parts, mut serving) = (20, false, false);
     while let Some(arg) = args.next() {
         match arg.as_str() {
             "--repeat" => repeat = args.next().ok_or("--repeat N")?.parse()?,
             "--parts" => parts = true,
-            _ => return Err("usage: render_timing [--repeat N] [--parts]".into()),
+            "--serve" => serving = true,
+            _ => return Err("usage: render_timing [--repeat N] [--parts | --serve]".into()),
         }
     }
     let dir = tempfile::tempdir()?;
@@ -77,13 +89,16 @@ fn main() -> Result<(), Box<dyn Error>> {
     };
     if !parts {
         black_box(view_once());
-        let runs: Vec<f64> = (0..repeat)
-            .map(|_| {
-                let start = Instant::now();
-                black_box(view_once());
-                start.elapsed().as_secs_f64()
-            })
-            .collect();
+        let timed_view = || {
+            let start = Instant::now();
+            black_box(view_once());
+            start.elapsed().as_secs_f64()
+        };
+        let runs: Vec<f64> = if serving {
+            serve::served("runs_s", || Ok::<_, Infallible>(timed_view()))?
+        } else {
+            (0..repeat).map(|_| timed_view()).collect()
+        };
         let triangles: usize = placed.iter().map(|p| p.asset.triangles).sum();
         println!(
             "{}",
