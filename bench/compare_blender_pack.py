@@ -10,10 +10,12 @@ steps with bpy (Blender 4.3, the version MesaTask pins) for the bench scene of
 first 15 objects. Draco compression, which MesaTask turns on, is off: the bpy wheel has no
 Draco library (and mesa packs without Draco too).
 
-mesa is timed the same way, by `stages/examples/pack_timing.rs` (`pack_scene` on the same scene,
-the assets' GLBs in memory, snapshots and README included): one warm-up run, then `--repeat`
-runs timed one by one on one thread. Both sides print their min and median, and the ratio of
-each, with the load average and the CPU.
+mesa is timed the same way, by `stages/examples/pack_timing.rs --serve` (`pack_scene` on the
+same scene, the assets' GLBs in memory, snapshots and README included, on one thread): one
+warm-up run each, then `--repeat` turns, each running Blender's reconstruction untimed for 0.3 s
+at least (one run) and then once timed, then the same of mesa's (bench/timing.py's
+`alternated`), so both sides see the same moments of the machine. Both sides print their min
+and median, and the ratio of each, with the load average and the CPU.
 
 Needs a Python with bpy 4.3 and numpy<2: the one scripts/test.sh installs into .venv-blender
 (`python3 -m venv .venv-blender && .venv-blender/bin/pip install "bpy==4.3.0" "numpy<2"`):
@@ -28,11 +30,14 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import bpy
 from mathutils import Quaternion, Vector
+
+sys.dont_write_bytecode = True  # no __pycache__ left in bench/
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from timing import Served, alternated  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENE = "scenes/office_table/office_table_0003"
@@ -117,22 +122,19 @@ def main():
         layout["objects"] = layout["objects"][:15]
         library = work / "demo/assets/library"
         assets = len({o["retrieved_uid"] for o in layout["objects"]})
-        # A warm-up run, as on mesa's side.
+        # A warm-up run, as on mesa's side (the example warms up before it serves).
         reconstruct(layout, library, work / "scene.glb")
-        times = []
-        for _ in range(args.repeat):
-            start = time.perf_counter()
-            reconstruct(layout, library, work / "scene.glb")
-            times.append(time.perf_counter() - start)
+        served = Served([target / "release/examples/pack_timing", "--serve"], "runs_s")
+        times, mesa_times = alternated(lambda: reconstruct(layout, library, work / "scene.glb"),
+                                       served, args.repeat)
+        served.finish()
         size = (work / "scene.glb").stat().st_size
-    mesa_out = subprocess.run([str(target / "release/examples/pack_timing"), "--repeat",
-                               str(args.repeat)], check=True, capture_output=True, text=True)
-    mesa_times = json.loads(mesa_out.stdout.strip().splitlines()[-1])["runs_s"]
     load_after = os.getloadavg()[0]
     cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo")
                 if line.startswith("model name")), "unknown CPU")
     print(f"{cpu}, {os.cpu_count()} CPUs, load average {load_before:.2f} before, "
-          f"{load_after:.2f} after; {args.repeat} timed runs a side after one warm-up")
+          f"{load_after:.2f} after; {args.repeat} timed runs a side in turns, each after 0.3 s of "
+          f"untimed ones")
     print(f"Blender (bpy {bpy.app.version_string}), MesaTask's reconstruction, 15 objects "
           f"({assets} assets), GLB {size / 1e6:.2f} MB: min {min(times) * 1000:.1f} ms, "
           f"median {statistics.median(times) * 1000:.1f} ms")

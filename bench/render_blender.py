@@ -167,6 +167,7 @@ def main():
     render()  # the first render compiles the shaders
     alternate = None
     if args.alternate:
+        sys.dont_write_bytecode = True  # no __pycache__ left in bench/
         sys.path.insert(0, str(Path(__file__).resolve().parent))
         from timing import Served, alternated
         served = Served(shlex.split(args.alternate), "runs_s")
