@@ -21,7 +21,7 @@ Before 2026-11-30 14:15 the Open3D side fitted no plane for such a frame, and th
 
     pip install open3d numpy pillow
     python bench/compare_open3d.py [--copies 20] [--repeat 5] [--m2t2 FRAME]
-    (both sides: best and median of the runs)
+    (both sides: best and median of the runs, taken in turns)
 """
 import argparse, json, os, shutil, subprocess, sys, tempfile
 from pathlib import Path
@@ -33,7 +33,7 @@ from PIL import Image  # noqa: E402
 
 sys.dont_write_bytecode = True  # no __pycache__ left in bench/
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from timing import best_median_ms, timed  # noqa: E402
+from timing import best_median_ms, in_turns  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -136,15 +136,16 @@ def main():
         for k in range(1, args.copies):
             shutil.copytree(first, dataset / f"scenes/office_table/office_table_{k:04d}/input")
 
-        # Both sides the same way: a warm-up, then `--repeat` timed runs; best and median.
-        open3d_ms, open3d_median = best_median_ms(timed(lambda: open3d_lift(first), args.repeat))
-        # The same, the plane fitted on the pixels mesa fits it on (a second figure).
-        sampled_ms, sampled_median = best_median_ms(
-            timed(lambda: open3d_lift(first, plane_sample=True), args.repeat))
+        # Both sides the same way: a warm-up, then `--repeat` timed runs in turns (one of each side
+        # a round, so all see the same moments of the machine); best and median.
+        # The second Open3D side fits the plane on the pixels mesa fits it on (a second figure).
         cmd = [args.mesa, "lift", str(dataset), "--jobs", "1", "--force", "--progress", "off", "-q"]
-        mesa_ms, mesa_median = (
-            t / args.copies
-            for t in best_median_ms(timed(lambda: subprocess.run(cmd, check=True), args.repeat)))
+        open3d_runs, sampled_runs, mesa_runs = in_turns(
+            [lambda: open3d_lift(first), lambda: open3d_lift(first, plane_sample=True),
+             lambda: subprocess.run(cmd, check=True)], args.repeat)
+        open3d_ms, open3d_median = best_median_ms(open3d_runs)
+        sampled_ms, sampled_median = best_median_ms(sampled_runs)
+        mesa_ms, mesa_median = (t / args.copies for t in best_median_ms(mesa_runs))
 
     load = os.getloadavg()
     print(f"input: {what}; Open3D {o3d.__version__}, single-threaded; load average "

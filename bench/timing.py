@@ -16,6 +16,23 @@ def timed(function, repeat):
     return runs
 
 
+def in_turns(functions, repeat):
+    """A warm-up call of each function, then `repeat` rounds, each a timed call of every
+    function in order, so that all of them see the same moments of the machine: the seconds
+    of each function's calls, a list per function. For functions whose calls each take a
+    tenth of a second or more (a short one timed in a block of its own is what `Served` and
+    `alternated` are for)."""
+    for function in functions:
+        function()
+    runs = [[] for _ in functions]
+    for _ in range(repeat):
+        for function, times in zip(functions, runs):
+            start = time.perf_counter()
+            function()
+            times.append(time.perf_counter() - start)
+    return runs
+
+
 def best_median_ms(runs):
     """The best and the median of some runs in seconds, in ms."""
     return 1000 * min(runs), 1000 * statistics.median(runs)
