@@ -2,7 +2,9 @@
 """The table of one sitting of bench/sitting.sh: for each target of issue #23, each run's ratio
 (peer time / mesa time) on the minima and, in brackets, on the medians, the target, and whether
 every run meets it (on the minima). A run whose output lacks the line the table needs shows
-"missing" and counts as not met: a failed script is never read as a pass.
+"missing" and counts as not met: a failed script is never read as a pass. The two secondary
+lift figures (Open3D's plane fitted on mesa's sample of the pixels, the same work as mesa's
+instead of what a user would write) are shown without a goal, with how many runs reach 10×.
 
 Each row also gives mesa's and the peer's minimum of each run. The hosts these sittings run on
 have two speeds: a process runs at one of them for its whole life, the slow one about 1.5 times
@@ -42,6 +44,10 @@ def runs(out: Path, stem: str):
     return sorted(out.glob(f"{stem}_*.txt"), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
 
 
+# The secondary lift figures (Open3D's plane fitted on mesa's sample of the pixels) are no
+# target; how many runs reach the lift's goal is shown beside them.
+SECONDARY_REFERENCE = 10.0
+
 # A run of mesa at least this many times its best of the sitting is at the host's slow speed...
 SLOW_RUN = 1.25
 # ... when the peer's run is within this factor of the peer's best.
@@ -74,16 +80,19 @@ def times(text: str, kind: str):
 
 
 def targets(out: Path):
-    """(what, [(ratio on the minima, ratio on the medians or None) or None per run], goal,
-    [(mesa's minimum, the peer's minimum) in ms or None per run])."""
+    """(what, [(ratio on the minima, ratio on the medians or None) or None per run], goal (None
+    for a secondary figure, which is no target), [(mesa's minimum, the peer's minimum) in ms or
+    None per run])."""
     rows = []
     for stem, what in (("open3d_syn", "lift, 1024² synthetic, as a stage"),
                        ("open3d_m2t2", "lift, real M2T2 frame, as a stage")):
         texts = [read(p) for p in runs(out, stem)]
         rows.append((what, [find(t, RATIO["open3d"]) for t in texts], 10.0,
                      [times(t, "open3d") for t in texts]))
+        # A secondary figure, not a target of issue #23 (whose peer is the pipeline a user
+        # would write, the plane fitted on every pixel): Open3D doing the same work as mesa.
         rows.append((f"{what} (Open3D's plane on mesa's sample of the pixels)",
-                     [find(t, RATIO["open3d_sampled"]) for t in texts], 10.0,
+                     [find(t, RATIO["open3d_sampled"]) for t in texts], None,
                      [times(t, "open3d_sampled") for t in texts]))
     for stem, what, kind in (("blender", "render, 512² view, one thread", "render"),
                              ("pack", "pack, 15 objects", "pack")):
@@ -151,11 +160,16 @@ def main():
     unmet = 0
     slow = []
     for what, ratios, goal, timings in targets(out):
-        met = bool(ratios) and all(r is not None and r[0] >= goal for r in ratios)
-        unmet += not met
         shown = ", ".join(cell(r) for r in ratios) or "missing"
         sides = ", ".join(f"{ms(t[0])} / {ms(t[1])}" if t else "missing" for t in timings) or "—"
-        print(f"| {what} | {shown} | {sides} | ≥ {goal:g}× | {'yes' if met else 'no'} |")
+        if goal is None:
+            over = sum(r is not None and r[0] >= SECONDARY_REFERENCE for r in ratios)
+            print(f"| {what} | {shown} | {sides} | none (a secondary figure) | — ({over} of "
+                  f"{len(ratios)} runs ≥ {SECONDARY_REFERENCE:g}×) |")
+        else:
+            met = bool(ratios) and all(r is not None and r[0] >= goal for r in ratios)
+            unmet += not met
+            print(f"| {what} | {shown} | {sides} | ≥ {goal:g}× | {'yes' if met else 'no'} |")
         slow += [(what, *run) for run in slow_runs(timings)]
     runs_s, reruns_s = mesa_run(out)
     per_scene = [s / 100 for s in runs_s]
@@ -166,7 +180,7 @@ def main():
              + ", ".join(f"{s:.2f}" for s in reruns_s) + " s") if runs_s else "missing"
     print(f"| `mesa run`, 100 demo scenes | {shown} | — | ≤ 0.15 s a scene, rerun < 1 s | "
           f"{'yes' if met else 'no'} |")
-    print(f"\n{unmet} target(s) not met in every run.")
+    print(f"\n{unmet} target(s) of issue #23 not met in every run (secondary figures not counted).")
     for what, run, mesa, best in slow:
         print(f"{what}: run {run} at the host's slow speed (mesa {ms(mesa)} ms against its best "
               f"{ms(best)} ms of the sitting, {mesa / best:.2f} times; the peer within "
