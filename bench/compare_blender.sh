@@ -9,7 +9,7 @@
 #
 # Both sides are timed the same way: one warm-up render each, then REPEAT (default 5) turns,
 # each running Blender untimed for 0.3 s at least (one render) and then one timed render, then
-# the same of mesa's (stages/examples/render_timing.rs --serve: some thirty untimed views, then
+# the same of mesa's (stages/examples/render_timing.rs --serve: about 36 untimed views, then
 # one timed; each view with its scene's shadow map, PNG encoded, on one thread). Taking turns,
 # both sides see the same moments of the machine, whose speed moves for seconds at a time; the
 # untimed runs put each back in its steady state after the other's turn (bench/timing.py). The

@@ -1,6 +1,8 @@
 """Timing shared by the comparison scripts of bench/: both sides of a comparison are timed by
 the same function, so they are timed the same way."""
+import json
 import statistics
+import subprocess
 import time
 
 
@@ -40,16 +42,13 @@ def best_median_ms(runs):
 
 class Served:
     """A mesa timing example run with `--serve` (stages/examples/graph_timing.rs,
-    render_timing.rs): it sets up and warms up once, then times as many runs as it is asked for
+    render_timing.rs, pack_timing.rs): it sets up and warms up once, then times as many runs as it is asked for
     at a time, so that a comparison can alternate its two sides run by run. Both sides then
     see the same moments of the machine: the hosts these comparisons run on change speed for
     seconds at a time, and a side timed in one block of a few milliseconds can fall entirely
     into a slow moment that the other side, timed over seconds, only grazes."""
 
     def __init__(self, command, key):
-        import json
-        import subprocess
-        self._json = json
         self._key = key
         self._process = subprocess.Popen([str(c) for c in command], stdin=subprocess.PIPE,
                                          stdout=subprocess.PIPE, text=True)
@@ -62,14 +61,14 @@ class Served:
         line = self._process.stdout.readline()
         if not line:
             raise RuntimeError(f"the timing example stopped (exit {self._process.wait()})")
-        return self._json.loads(line)[self._key]
+        return json.loads(line)[self._key]
 
     def finish(self):
         """Ends the input; the example's last line (its report), parsed."""
         out, _ = self._process.communicate()
         if self._process.returncode != 0:
             raise RuntimeError(f"the timing example failed (exit {self._process.returncode})")
-        return self._json.loads(out.strip().splitlines()[-1])
+        return json.loads(out.strip().splitlines()[-1])
 
 
 # How long each side of an alternated comparison runs untimed before its timed run.
@@ -82,7 +81,8 @@ def alternated(python_function, served, repeat, warm_s=WARM_S):
     least one): the seconds of each side's timed runs. The untimed runs put each side back in
     its steady state after the other's turn: its data in the caches, and the core at the speed
     a long run sees (on these hosts a core takes a few tenths of a second of work to reach it:
-    a burst of mesa's renders after a pause gets 25 % faster over its first 20, 0.2 s)."""
+    in a burst of mesa's renders after a pause of a second, the first took a quarter longer
+    than the twentieth)."""
     python_runs, served_runs = [], []
     for _ in range(repeat):
         start = time.perf_counter()

@@ -62,6 +62,9 @@ fn main() -> Result<(), Box<dyn Error>> {
             _ => return Err("usage: render_timing [--repeat N] [--parts | --serve]".into()),
         }
     }
+    if parts && serving {
+        return Err("render_timing: --parts and --serve exclude each other".into());
+    }
     let dir = tempfile::tempdir()?;
     write_demo(
         dir.path(),
