@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # One sitting of issue #23's speed comparisons: every script of bench/ that compares mesa with
 # the tool a user would otherwise run, ROUNDS times in a row (default 3: each round runs every
-# script once, so the rounds interleave with whatever else the machine does), then `mesa run`
+# script once, so the rounds interleave with whatever else the machine does; within a script,
+# the two sides take turns run by run: bench/timing.py), then `mesa run`
 # over 100 demo scenes and a rerun ROUNDS times, then bench/check_vs_fcl.sh once. Each
 # script's output is kept in OUT_DIR; bench/sitting_summary.py reads them and prints one table:
 # each target, each run's ratio (minima, and medians), the load averages, and whether the
