@@ -11,7 +11,9 @@ Three comparisons, every side timed the same way: a warm-up, then `--repeat` tim
 min and the median over the runs, in ms per scene, and the ratio python / mesa of each. The
 sides of a comparison take turns run by run (a Python pass, a mesa pass, ...; in b and c one
 process of each in turn), so that both see the same moments of the machine, whose speed moves
-for seconds at a time:
+for seconds at a time, and each timed run comes after untimed runs of its own side for 0.3 s
+(bench/timing.py; in b', whose runs create every file, after one untimed run of each side at
+the start only):
 
   a. in process: the layouts already parsed and the container flags decided, the graph of
      every scene extracted and its text produced, no file I/O. mesa: the example
@@ -64,7 +66,7 @@ for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 sys.dont_write_bytecode = True  # no __pycache__ left in bench/
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import graph_rules  # noqa: E402
-from timing import Served, alternated, best_median_ms, timed  # noqa: E402
+from timing import WARM_S, Served, alternated, best_median_ms, timed  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "target/release/examples/graph_timing"
@@ -140,19 +142,35 @@ def check_outputs(dataset, out):
     return len(scenes), txt_same, json_same, json_close, differing
 
 
-def timed_processes(commands, repeat):
-    """Commands timed in turns: a warm-up run of each, then `repeat` rounds, each a timed run
-    of every command in order, so that all of them see the same moments of the machine.
+def timed_processes(commands, repeat, warm_s=WARM_S):
+    """Commands timed in turns: `repeat` rounds, each a timed run of every command in order, so
+    that all of them see the same moments of the machine. Before each timed run, its command
+    runs untimed for `warm_s` seconds (at least once), as `timing.alternated` does in process:
+    a short run right after a long one of another command would otherwise start with the
+    caches and the core as the other one left them. With `warm_s` None, each command runs
+    untimed once before the first round only (for commands whose runs create many files: more
+    runs a turn would leave the writing of their files to the disk to the timed run).
     `commands` holds (command, prepare) pairs; `prepare`, if not None, runs before each run of
     its command, untimed (removing the outputs of the last one). For each command, the wall
-    seconds and the CPU seconds (user + system, of the process and its children) of its runs."""
-    for cmd, prepare in commands:
-        if prepare:
-            prepare()
-        run_quietly(cmd)
+    seconds and the CPU seconds (user + system, of the process and its children) of its timed
+    runs."""
+    def untimed(cmd, prepare, seconds):
+        start = time.perf_counter()
+        while True:
+            if prepare:
+                prepare()
+            run_quietly(cmd)
+            if time.perf_counter() - start >= seconds:
+                return
+
+    if warm_s is None:
+        for cmd, prepare in commands:
+            untimed(cmd, prepare, 0.0)
     timings = [([], []) for _ in commands]
     for _ in range(repeat):
         for (cmd, prepare), (walls, cpus) in zip(commands, timings):
+            if warm_s is not None:
+                untimed(cmd, prepare, warm_s)
             if prepare:
                 prepare()
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -260,9 +278,12 @@ def main():
                 shutil.rmtree(dataset / "scenes" / table / scene_id / "graph", ignore_errors=True)
 
         bare_out = tmp / "bare_out"
+        # b's runs left files to be written to the disk (Python's side rewrites its 2,000 each
+        # run): written now, before b' times the creating of files.
+        os.sync()
         (python_fresh_wall, python_fresh_cpu), (mesa_fresh_wall, mesa_fresh_cpu), (bare_write_wall, bare_write_cpu) = \
             timed_processes([(python_cmd, clear_python), (quiet(mesa, "graph", dataset), clear_mesa),
-                             ([bare, dataset, "--out", bare_out], None)], args.repeat)
+                             ([bare, dataset, "--out", bare_out], None)], args.repeat, warm_s=None)
         # What process start-up alone costs (included in b).
         python_start = min(timed(lambda: run_quietly([sys.executable, "-c", "import numpy, shapely"]), args.repeat))
         mesa_start = min(timed(lambda: run_quietly([mesa, "--version"]), args.repeat))
