@@ -66,7 +66,7 @@ for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 sys.dont_write_bytecode = True  # no __pycache__ left in bench/
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import graph_rules  # noqa: E402
-from timing import WARM_S, Served, alternated, best_median_ms, timed  # noqa: E402
+from timing import WARM_S, Served, alternated, best_median_ms, run_for, timed  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "target/release/examples/graph_timing"
@@ -155,13 +155,11 @@ def timed_processes(commands, repeat, warm_s=WARM_S):
     seconds and the CPU seconds (user + system, of the process and its children) of its timed
     runs."""
     def untimed(cmd, prepare, seconds):
-        start = time.perf_counter()
-        while True:
+        def once():
             if prepare:
                 prepare()
             run_quietly(cmd)
-            if time.perf_counter() - start >= seconds:
-                return
+        run_for(once, seconds)
 
     if warm_s is None:
         for cmd, prepare in commands:

@@ -75,6 +75,14 @@ class Served:
 WARM_S = 0.3
 
 
+def run_for(function, seconds):
+    """Calls `function` untimed until `seconds` have passed, at least once."""
+    start = time.perf_counter()
+    function()
+    while time.perf_counter() - start < seconds:
+        function()
+
+
 def alternated(python_function, served, repeat, warm_s=WARM_S):
     """`repeat` turns, each a run of `python_function` and a run of `served` (a Served
     example), each timed run after untimed runs of its own side for `warm_s` seconds (at
@@ -85,10 +93,7 @@ def alternated(python_function, served, repeat, warm_s=WARM_S):
     than the twentieth)."""
     python_runs, served_runs = [], []
     for _ in range(repeat):
-        start = time.perf_counter()
-        python_function()
-        while time.perf_counter() - start < warm_s:
-            python_function()
+        run_for(python_function, warm_s)
         start = time.perf_counter()
         python_function()
         python_runs.append(time.perf_counter() - start)
